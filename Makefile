@@ -1,0 +1,12 @@
+# Convenience aliases; the README's two commands are scripts/run_main.sh and scripts/run_tests.sh.
+.PHONY: run test setup bench clean
+run:
+	bash scripts/run_main.sh
+test:
+	bash scripts/run_tests.sh
+setup:
+	bash scripts/setup.sh
+bench: setup
+	bash scripts/run_benchmarks.sh
+clean:
+	rm -rf build .stamps out

@@ -1,0 +1,257 @@
+"""Typed, validated robot model parameters loaded from ``config/robot.yaml``.
+
+Every quantity of the paper's model (section "Mathematical Modeling") that is a number lives here:
+five-bar link lengths (eq. fk_EFG), hip offsets l_y, l_z (eq. fk_T), leg-frame origins o_i and
+mirroring matrices M_i (eq. M_legs, ee_body), paw drag constant k = 1/2 rho C_D A (eq. drag),
+paw buoyancy (eq. buoy_force), body mass and inertia (eq. trans, rot, inertia_box).
+
+Loading never returns a half-valid object: a missing key or an out-of-range value raises
+:class:`ParameterError` naming the key and the reason.
+"""
+from __future__ import annotations
+
+import math
+import os
+from dataclasses import dataclass, field
+from typing import Any, Dict, Mapping, Optional, Sequence, Tuple
+
+import numpy as np
+import yaml
+
+LEGS: Tuple[int, ...] = (1, 2, 3, 4)
+"""Leg numbers as in the paper."""
+
+#: Mirroring matrices M_i of eq. (M_legs): leg frame -> body frame orientation, per leg.
+MIRROR_DIAG: Dict[int, Tuple[float, float, float]] = {
+    1: (-1.0, 1.0, 1.0),
+    2: (-1.0, -1.0, 1.0),
+    3: (1.0, -1.0, 1.0),
+    4: (1.0, 1.0, 1.0),
+}
+
+#: Where the package keeps its configuration (the catkin package root's ``config/``).
+CONFIG_DIR = os.path.join(os.path.dirname(os.path.dirname(os.path.abspath(__file__))), "config")
+
+
+class ParameterError(ValueError):
+    """A configuration value is missing, malformed or physically impossible."""
+
+
+def config_path(name: str) -> str:
+    """Absolute path of a file in the package's ``config/`` folder."""
+    return os.path.join(CONFIG_DIR, name)
+
+
+def load_yaml(path: str) -> Dict[str, Any]:
+    """Read a YAML mapping, with a clear error for a missing file or a non-mapping document."""
+    try:
+        with open(path) as stream:
+            data = yaml.safe_load(stream)
+    except OSError as exc:
+        raise ParameterError("cannot read %s: %s" % (path, exc)) from exc
+    except yaml.YAMLError as exc:
+        raise ParameterError("%s is not valid YAML: %s" % (path, exc)) from exc
+    if not isinstance(data, dict):
+        raise ParameterError("%s must contain a mapping at the top level" % path)
+    return data
+
+
+def _get(tree: Mapping[str, Any], dotted: str) -> Any:
+    node: Any = tree
+    for part in dotted.split("."):
+        if not isinstance(node, Mapping) or part not in node:
+            raise ParameterError("missing parameter '%s'" % dotted)
+        node = node[part]
+    return node
+
+
+def _number(tree: Mapping[str, Any], dotted: str, low: float = -math.inf, high: float = math.inf,
+            low_open: bool = False) -> float:
+    value = _get(tree, dotted)
+    if isinstance(value, bool) or not isinstance(value, (int, float)):
+        raise ParameterError("parameter '%s' must be a number, got %r" % (dotted, value))
+    value = float(value)
+    if not math.isfinite(value):
+        raise ParameterError("parameter '%s' must be finite, got %r" % (dotted, value))
+    too_low = value <= low if low_open else value < low
+    if too_low or value > high:
+        bracket = "(" if low_open else "["
+        raise ParameterError("parameter '%s' = %g is outside %s%g, %g]" % (dotted, value, bracket, low, high))
+    return value
+
+
+def _vector(tree: Mapping[str, Any], dotted: str, length: int) -> np.ndarray:
+    value = _get(tree, dotted)
+    if not isinstance(value, Sequence) or isinstance(value, str) or len(value) != length:
+        raise ParameterError("parameter '%s' must be a list of %d numbers, got %r" % (dotted, length, value))
+    out = []
+    for index, item in enumerate(value):
+        if isinstance(item, bool) or not isinstance(item, (int, float)) or not math.isfinite(float(item)):
+            raise ParameterError("parameter '%s'[%d] must be a finite number, got %r" % (dotted, index, item))
+        out.append(float(item))
+    return np.array(out)
+
+
+@dataclass(frozen=True)
+class FiveBar:
+    """Planar five-bar linkage of one leg (Fig. 3b): actuated links a1, a2, passive a3, a4, motor spacing c."""
+
+    a1: float
+    a2: float
+    a3: float
+    a4: float
+    c: float
+
+
+@dataclass(frozen=True)
+class JointLimits:
+    """Servo ranges [low, high] in radians for theta1, theta2 (five-bar) and theta3 (hip)."""
+
+    theta1: Tuple[float, float]
+    theta2: Tuple[float, float]
+    theta3: Tuple[float, float]
+
+    def as_array(self) -> np.ndarray:
+        """3x2 array: rows theta1, theta2, theta3; columns low, high."""
+        return np.array([self.theta1, self.theta2, self.theta3])
+
+
+@dataclass(frozen=True)
+class RobotParams:
+    """All parameters of the paper's robot model. Build with :func:`load_robot_params`.
+
+    Attributes use the paper's symbols: ``m``, ``inertia`` (I), ``rho``, ``beta`` (viscosity),
+    ``paw_mass`` (m_s), ``paw_volume`` (V_s), ``l_y``, ``l_z``, ``leg_origins[i]`` (o_i^B),
+    ``mirror[i]`` (M_i).
+    """
+
+    mass: float
+    inertia: np.ndarray  # 3x3, body frame, principal axes
+    body_dimensions: np.ndarray
+    rho: float
+    beta: float
+    gravity: float
+    paw_diameter: float
+    drag_coefficient: float
+    paw_mass: float
+    paw_volume: float
+    five_bar: FiveBar
+    l_y: float
+    l_z: float
+    leg_origins: Dict[int, np.ndarray]
+    joint_limits: JointLimits
+    nominal_foot_leg: np.ndarray
+    servo_stall_torque: float
+    servo_no_load_speed: float  # rad/s
+    mirror: Dict[int, np.ndarray] = field(default_factory=lambda: {
+        leg: np.diag(diag) for leg, diag in MIRROR_DIAG.items()})
+
+    @property
+    def paw_area(self) -> float:
+        """Cross-sectional area A of the spherical paw, m^2 (eq. drag)."""
+        return math.pi * (0.5 * self.paw_diameter) ** 2
+
+    @property
+    def drag_constant(self) -> float:
+        """k = 1/2 rho C_D A of eq. (force_leg), N s^2 / m^2."""
+        return 0.5 * self.rho * self.drag_coefficient * self.paw_area
+
+    @property
+    def paw_net_buoyancy(self) -> float:
+        """Net upward force on one submerged paw, g rho V_s - m_s g (eq. buoy_force), N."""
+        return self.gravity * (self.rho * self.paw_volume - self.paw_mass)
+
+    def nominal_foot_body(self, leg: int) -> np.ndarray:
+        """Nominal foot position of ``leg`` in the body frame, o_i + M_i p_nominal (eq. ee_body)."""
+        return self.leg_origins[leg] + self.mirror[leg] @ self.nominal_foot_leg
+
+
+def robot_params_from_dict(tree: Mapping[str, Any]) -> RobotParams:
+    """Validate a parsed ``robot.yaml`` mapping and build :class:`RobotParams`."""
+    inertia_diag = _vector(tree, "body.inertia_diag", 3)
+    if np.any(inertia_diag <= 0.0):
+        raise ParameterError("parameter 'body.inertia_diag' must be positive, got %s" % inertia_diag)
+    ixx, iyy, izz = inertia_diag
+    # The inertia-box model (eq. inertia_box) takes square roots of I_yy + I_zz - I_xx etc.: a
+    # physical body satisfies the triangle inequality on its principal moments.
+    if ixx > iyy + izz or iyy > izz + ixx or izz > ixx + iyy:
+        raise ParameterError("parameter 'body.inertia_diag' %s violates the triangle inequality of "
+                             "principal moments (no physical body has it)" % inertia_diag)
+    dims = _vector(tree, "body.dimensions", 3)
+    if np.any(dims <= 0.0):
+        raise ParameterError("parameter 'body.dimensions' must be positive, got %s" % dims)
+
+    five_bar = FiveBar(
+        a1=_number(tree, "five_bar.a1", 0.0, 1.0, low_open=True),
+        a2=_number(tree, "five_bar.a2", 0.0, 1.0, low_open=True),
+        a3=_number(tree, "five_bar.a3", 0.0, 1.0, low_open=True),
+        a4=_number(tree, "five_bar.a4", 0.0, 1.0, low_open=True),
+        c=_number(tree, "five_bar.c", 0.0, 1.0),
+    )
+    # The paper's FK (eq. fk_EFG) and IK exploit the symmetric mechanism a1 = a2, a3 = a4.
+    if not (math.isclose(five_bar.a1, five_bar.a2) and math.isclose(five_bar.a3, five_bar.a4)):
+        raise ParameterError("the paper's five-bar kinematics need a1 == a2 and a3 == a4, got %s" % (five_bar,))
+
+    origins_raw = _get(tree, "leg_origins")
+    if not isinstance(origins_raw, Mapping):
+        raise ParameterError("parameter 'leg_origins' must map leg numbers 1..4 to [x, y, z]")
+    leg_origins = {}
+    for leg in LEGS:
+        key = leg if leg in origins_raw else str(leg)
+        if key not in origins_raw:
+            raise ParameterError("missing parameter 'leg_origins.%d'" % leg)
+        leg_origins[leg] = _vector({"o": origins_raw[key]}, "o", 3)
+
+    limits = {}
+    for name in ("theta1", "theta2", "theta3"):
+        low, high = _vector(tree, "joint_limits_deg." + name, 2)
+        if not low < high:
+            raise ParameterError("parameter 'joint_limits_deg.%s' needs low < high, got [%g, %g]" % (name, low, high))
+        if high - low > 360.0:
+            raise ParameterError("parameter 'joint_limits_deg.%s' spans more than 360 degrees" % name)
+        limits[name] = (math.radians(low), math.radians(high))
+
+    return RobotParams(
+        mass=_number(tree, "body.mass", 0.0, 1000.0, low_open=True),
+        inertia=np.diag(inertia_diag),
+        body_dimensions=dims,
+        rho=_number(tree, "fluid.density", 0.0, 2000.0, low_open=True),
+        beta=_number(tree, "fluid.viscosity", 0.0, 1.0),
+        gravity=_number(tree, "fluid.gravity", 0.0, 20.0),
+        paw_diameter=_number(tree, "paw.diameter", 0.0, 1.0, low_open=True),
+        drag_coefficient=_number(tree, "paw.drag_coefficient", 0.0, 10.0, low_open=True),
+        paw_mass=_number(tree, "paw.mass", 0.0, 10.0),
+        paw_volume=_number(tree, "paw.volume", 0.0, 0.01),
+        five_bar=five_bar,
+        l_y=_number(tree, "hip.l_y", -1.0, 1.0),
+        l_z=_number(tree, "hip.l_z", 0.0, 1.0, low_open=True),
+        leg_origins=leg_origins,
+        joint_limits=JointLimits(**limits),
+        nominal_foot_leg=_vector(tree, "nominal_foot_leg", 3),
+        servo_stall_torque=_number(tree, "servo.stall_torque", 0.0, 100.0, low_open=True),
+        servo_no_load_speed=_number(tree, "servo.no_load_speed_rpm", 0.0, 10000.0, low_open=True)
+        * 2.0 * math.pi / 60.0,
+    )
+
+
+def load_robot_params(path: Optional[str] = None) -> RobotParams:
+    """Load and validate ``robot.yaml`` (default: the package's ``config/robot.yaml``)."""
+    path = path or config_path("robot.yaml")
+    try:
+        return robot_params_from_dict(load_yaml(path))
+    except ParameterError as exc:
+        raise ParameterError("%s: %s" % (path, exc)) from None
+
+
+#: Servo / joint order used everywhere (PWM channels, ADC map, /joint_states, /servo_command):
+#: leg 1..4, each (theta1, theta2, theta3) = (five-bar motor 1, five-bar motor 2, hip). Index of leg i,
+#: joint j (1-based) is 3 * (i - 1) + (j - 1).
+JOINT_NAMES: Tuple[str, ...] = tuple(
+    "leg%d_%s" % (leg, joint) for leg in LEGS for joint in ("motor1", "motor2", "hip"))
+
+
+def joint_index(leg: int, joint: int) -> int:
+    """Index of joint ``joint`` (1: theta1, 2: theta2, 3: theta3) of ``leg`` in :data:`JOINT_NAMES`."""
+    if leg not in LEGS or joint not in (1, 2, 3):
+        raise ValueError("no joint %r of leg %r" % (joint, leg))
+    return 3 * (leg - 1) + (joint - 1)

@@ -1,0 +1,85 @@
+#!/usr/bin/env bash
+# Idempotent set-up of everything the stack needs, called by `make run` and `make test`.
+#
+#  1. ROS 1: on the Jetson (Ubuntu 20.04 with /opt/ros/noetic) that installation is used as is;
+#     on Debian 12 the archive's own ROS 1 packages are installed with apt (root).
+#  2. A venv (.venv) from /usr/bin/python3 with --system-site-packages, so Debian's/Noetic's rospy stays
+#     visible, holding the pinned PyPI dependencies (requirements.txt, or requirements-jetson.txt).
+#  3. A catkin workspace in build/ws (ignored by git) whose src/ links to this source tree.
+#
+# Each step records a stamp (hash of its inputs) in .stamps/ and is skipped when nothing changed, so a
+# second run takes about a second.
+set -euo pipefail
+
+ROOT="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"
+STAMPS="$ROOT/.stamps"
+VENV="$ROOT/.venv"
+WS="$ROOT/build/ws"
+mkdir -p "$STAMPS"
+
+log() { printf '[setup] %s\n' "$*" >&2; }
+
+stamp_matches() { [ -f "$STAMPS/$1" ] && [ "$(cat "$STAMPS/$1")" = "$2" ]; }
+hash_of() { cat "$@" 2>/dev/null | sha256sum | cut -d' ' -f1; }
+
+# Debian 12 packages: ROS 1 from the Debian archive, build tools, Python venv support.
+DEBIAN_PACKAGES=(
+  ros-core-dev catkin ros-message-generation ros-message-runtime rosbash
+  python3-rospy python3-rostest python3-roslaunch python3-rosbag python3-rostopic python3-rosunit
+  python3-std-msgs python3-sensor-msgs python3-geometry-msgs python3-std-srvs python3-diagnostic-msgs
+  ros-std-msgs ros-sensor-msgs ros-geometry-msgs ros-std-srvs ros-diagnostic-msgs
+  python3-dynamic-reconfigure libdynamic-reconfigure-config-init-mutex-dev python3-diagnostic-updater
+  ros-robot-state-publisher python3-tf2-ros
+  python3-venv python3-dev build-essential cmake
+)
+
+if [ -f /opt/ros/noetic/setup.bash ]; then
+  ROS_FLAVOUR=noetic
+  REQUIREMENTS="$ROOT/requirements-jetson.txt"
+else
+  ROS_FLAVOUR=debian
+  REQUIREMENTS="$ROOT/requirements.txt"
+  missing=()
+  for pkg in "${DEBIAN_PACKAGES[@]}"; do
+    dpkg-query -W -f='${Status}' "$pkg" 2>/dev/null | grep -q 'install ok installed' || missing+=("$pkg")
+  done
+  if [ "${#missing[@]}" -gt 0 ]; then
+    if [ "$(id -u)" != 0 ]; then
+      log "missing Debian packages (run as root or install them): ${missing[*]}"
+      exit 1
+    fi
+    log "installing ${#missing[@]} Debian packages"
+    export DEBIAN_FRONTEND=noninteractive
+    apt-get update -qq
+    apt-get install -y -qq --no-install-recommends "${missing[@]}" >/dev/null
+  fi
+fi
+
+# The venv. Its python is /usr/bin/python3, the interpreter the ROS packages were built for.
+venv_key="$(hash_of "$REQUIREMENTS")-$(/usr/bin/python3 --version 2>&1)"
+if [ ! -x "$VENV/bin/python" ] || ! stamp_matches venv "$venv_key"; then
+  log "creating venv and installing pinned dependencies from $(basename "$REQUIREMENTS")"
+  rm -rf "$VENV"
+  /usr/bin/python3 -m venv --system-site-packages "$VENV"
+  "$VENV/bin/pip" install -q --disable-pip-version-check -r "$REQUIREMENTS" 2>&1 | grep -v "^WARNING: Location" >&2 || true
+  "$VENV/bin/python" -c "import numpy, yaml" || { log "venv installation failed"; exit 1; }
+  echo "$venv_key" > "$STAMPS/venv"
+fi
+
+# The catkin workspace: message and dynamic_reconfigure generation, Python package relays.
+build_inputs=("$ROOT/CMakeLists.txt" "$ROOT/package.xml" "$ROOT/setup.py" "$ROOT"/quadruped_msgs/msg/*.msg
+              "$ROOT"/cfg/*.cfg)
+build_key="$(hash_of "${build_inputs[@]}")-$( (ls "$ROOT/nodes" "$ROOT/tests/rostest" 2>/dev/null || true) | sha256sum | cut -d' ' -f1)"
+if [ ! -f "$WS/devel/setup.bash" ] || ! stamp_matches catkin "$build_key"; then
+  log "building the catkin workspace in build/ws"
+  mkdir -p "$WS/src"
+  ln -sfn "$ROOT" "$WS/src/underwater_quadruped"
+  (
+    set +u
+    if [ "$ROS_FLAVOUR" = noetic ]; then source /opt/ros/noetic/setup.bash; fi
+    cd "$WS"
+    catkin_make -DPYTHON_EXECUTABLE=/usr/bin/python3 -DCMAKE_BUILD_TYPE=Release >"$WS/catkin_make.log" 2>&1 \
+      || { tail -40 "$WS/catkin_make.log" >&2; exit 1; }
+  )
+  echo "$build_key" > "$STAMPS/catkin"
+fi

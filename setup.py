@@ -1,0 +1,13 @@
+"""Installs the package's Python modules; called by catkin_python_setup() in CMakeLists.txt."""
+from catkin_pkg.python_setup import generate_distutils_setup
+from setuptools import setup
+
+setup(**generate_distutils_setup(
+    packages=[
+        "quadruped_control",
+        "quadruped_drivers",
+        "quadruped_drivers.i2c",
+        "quadruped_drivers.vn100",
+    ],
+    package_dir={"": "."},
+))

@@ -1,0 +1,91 @@
+"""Loading and validation of config/robot.yaml (quadruped_control.params)."""
+import copy
+import math
+
+import numpy as np
+import pytest
+
+from quadruped_control.params import (JOINT_NAMES, LEGS, ParameterError, joint_index, load_robot_params,
+                                      load_yaml, config_path, robot_params_from_dict)
+
+
+@pytest.fixture(scope="module")
+def raw():
+    return load_yaml(config_path("robot.yaml"))
+
+
+def test_paper_values_are_loaded():
+    p = load_robot_params()
+    assert p.mass == 4.9
+    assert p.five_bar.a1 == p.five_bar.a2 == 0.080
+    assert p.five_bar.a3 == p.five_bar.a4 == 0.110
+    assert p.five_bar.c == 0.030
+    assert p.paw_diameter == 0.075 and p.drag_coefficient == 0.64
+    np.testing.assert_allclose(p.body_dimensions, [0.5899, 0.3444, 0.1533])
+    # k = 1/2 rho C_D A with A the sphere's cross-section (eq. drag)
+    assert p.drag_constant == pytest.approx(0.5 * 1000.0 * 0.64 * math.pi * 0.0375 ** 2)
+    assert p.servo_no_load_speed == pytest.approx(95.0 * 2.0 * math.pi / 60.0)
+
+
+def test_mirroring_matrices_are_the_papers():
+    p = load_robot_params()
+    np.testing.assert_array_equal(np.diag(p.mirror[1]), [-1, 1, 1])
+    np.testing.assert_array_equal(np.diag(p.mirror[2]), [-1, -1, 1])
+    np.testing.assert_array_equal(np.diag(p.mirror[3]), [1, -1, 1])
+    np.testing.assert_array_equal(np.diag(p.mirror[4]), [1, 1, 1])
+
+
+def test_leg_origins_follow_the_paper_layout():
+    """Legs 3, 4 at the front, 1, 2 at the back; leg frame y points inwards (so M_i y is inwards)."""
+    p = load_robot_params()
+    for leg in LEGS:
+        origin = p.leg_origins[leg]
+        inward_body = p.mirror[leg] @ np.array([0.0, 1.0, 0.0])
+        assert np.sign(origin[1]) == -np.sign(inward_body[1]), "leg %d y axis must point inwards" % leg
+        assert (origin[0] > 0) == (leg in (3, 4))
+
+
+def test_nominal_foot_is_mirrored_per_leg():
+    p = load_robot_params()
+    for leg in LEGS:
+        np.testing.assert_allclose(p.nominal_foot_body(leg), p.leg_origins[leg] + p.mirror[leg] @ p.nominal_foot_leg)
+
+
+def test_joint_names_and_indices():
+    assert len(JOINT_NAMES) == 12
+    assert JOINT_NAMES[joint_index(3, 2)] == "leg3_motor2"
+    assert JOINT_NAMES[joint_index(1, 3)] == "leg1_hip"
+    with pytest.raises(ValueError):
+        joint_index(5, 1)
+
+
+@pytest.mark.parametrize("mutate, message", [
+    (lambda t: t["body"].pop("mass"), "body.mass"),
+    (lambda t: t["body"].__setitem__("mass", -1.0), "body.mass"),
+    (lambda t: t["body"].__setitem__("mass", "heavy"), "must be a number"),
+    (lambda t: t["body"].__setitem__("inertia_diag", [1.0, 0.1, 0.1]), "triangle inequality"),
+    (lambda t: t["body"].__setitem__("inertia_diag", [0.1, 0.1]), "list of 3"),
+    (lambda t: t["fluid"].__setitem__("density", float("nan")), "finite"),
+    (lambda t: t["five_bar"].__setitem__("a2", 0.09), "a1 == a2"),
+    (lambda t: t["leg_origins"].pop(3), "leg_origins.3"),
+    (lambda t: t["joint_limits_deg"].__setitem__("theta3", [90.0, 0.0]), "low < high"),
+    (lambda t: t["hip"].__setitem__("l_z", 0.0), "hip.l_z"),
+])
+def test_bad_values_give_clear_errors(raw, mutate, message):
+    tree = copy.deepcopy(raw)
+    mutate(tree)
+    with pytest.raises(ParameterError, match=message.replace(".", r"\.").replace("(", r"\(")):
+        robot_params_from_dict(tree)
+
+
+def test_missing_file_and_bad_yaml(tmp_path):
+    with pytest.raises(ParameterError, match="cannot read"):
+        load_robot_params(str(tmp_path / "nope.yaml"))
+    bad = tmp_path / "bad.yaml"
+    bad.write_text("body: [unclosed\n")
+    with pytest.raises(ParameterError, match="not valid YAML"):
+        load_robot_params(str(bad))
+    scalar = tmp_path / "scalar.yaml"
+    scalar.write_text("3\n")
+    with pytest.raises(ParameterError, match="mapping"):
+        load_robot_params(str(scalar))
