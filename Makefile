@@ -9,4 +9,4 @@ setup:
 bench: setup
 	bash scripts/run_benchmarks.sh
 clean:
-	rm -rf build .stamps out
+	rm -rf build .ws .stamps out

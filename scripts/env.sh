@@ -6,7 +6,7 @@ if [ -f /opt/ros/noetic/setup.bash ]; then
   source /opt/ros/noetic/setup.bash
 fi
 # shellcheck disable=SC1091
-source "$_uq_root/build/ws/devel/setup.bash"
+source "$_uq_root/.ws/devel/setup.bash"
 export PATH="$_uq_root/.venv/bin:$PATH"
 export VIRTUAL_ENV="$_uq_root/.venv"
 export UQ_ROOT="$_uq_root"

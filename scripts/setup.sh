@@ -5,7 +5,9 @@
 #     on Debian 12 the archive's own ROS 1 packages are installed with apt (root).
 #  2. A venv (.venv) from /usr/bin/python3 with --system-site-packages, so Debian's/Noetic's rospy stays
 #     visible, holding the pinned PyPI dependencies (requirements.txt, or requirements-jetson.txt).
-#  3. A catkin workspace in build/ws (ignored by git) whose src/ links to this source tree.
+#  3. A catkin workspace in .ws (ignored by git) whose src/ links to this source tree. It is a dot
+#     folder on purpose: roslaunch/roslib prune dot folders when they search a package for a file, so
+#     the link back into the tree does not make every launch file appear twice (or loop).
 #
 # Each step records a stamp (hash of its inputs) in .stamps/ and is skipped when nothing changed, so a
 # second run takes about a second.
@@ -14,7 +16,7 @@ set -euo pipefail
 ROOT="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"
 STAMPS="$ROOT/.stamps"
 VENV="$ROOT/.venv"
-WS="$ROOT/build/ws"
+WS="$ROOT/.ws"
 mkdir -p "$STAMPS"
 
 log() { printf '[setup] %s\n' "$*" >&2; }
@@ -29,7 +31,8 @@ DEBIAN_PACKAGES=(
   python3-std-msgs python3-sensor-msgs python3-geometry-msgs python3-std-srvs python3-diagnostic-msgs
   ros-std-msgs ros-sensor-msgs ros-geometry-msgs ros-std-srvs ros-diagnostic-msgs
   python3-dynamic-reconfigure libdynamic-reconfigure-config-init-mutex-dev python3-diagnostic-updater
-  ros-robot-state-publisher python3-tf2-ros
+  ros-robot-state-publisher python3-tf2-ros python3-visualization-msgs ros-visualization-msgs
+  python3-dynamic-reconfigure python3-rosbag
   python3-venv python3-dev build-essential cmake
 )
 
@@ -71,14 +74,14 @@ build_inputs=("$ROOT/CMakeLists.txt" "$ROOT/package.xml" "$ROOT/setup.py" "$ROOT
               "$ROOT"/cfg/*.cfg)
 build_key="$(hash_of "${build_inputs[@]}")-$( (ls "$ROOT/nodes" "$ROOT/tests/rostest" 2>/dev/null || true) | sha256sum | cut -d' ' -f1)"
 if [ ! -f "$WS/devel/setup.bash" ] || ! stamp_matches catkin "$build_key"; then
-  log "building the catkin workspace in build/ws"
+  log "building the catkin workspace in .ws"
   mkdir -p "$WS/src"
   ln -sfn "$ROOT" "$WS/src/underwater_quadruped"
   (
     set +u
     if [ "$ROS_FLAVOUR" = noetic ]; then source /opt/ros/noetic/setup.bash; fi
     cd "$WS"
-    catkin_make -DPYTHON_EXECUTABLE=/usr/bin/python3 -DCMAKE_BUILD_TYPE=Release >"$WS/catkin_make.log" 2>&1 \
+    catkin_make --force-cmake -DPYTHON_EXECUTABLE=/usr/bin/python3 -DCMAKE_BUILD_TYPE=Release >"$WS/catkin_make.log" 2>&1 \
       || { tail -40 "$WS/catkin_make.log" >&2; exit 1; }
   )
   echo "$build_key" > "$STAMPS/catkin"

@@ -1,0 +1,147 @@
+#!/usr/bin/env python3
+"""rviz glue: full joint state for the URDF, body and setpoint TF, foot-target markers.
+
+Subscribes:
+  joint_states      sensor_msgs/JointState   the 12 actuated angles (paper's theta1..3 per leg)
+  imu/data          sensor_msgs/Imu          body orientation, world ENU <- base_link (REP-145)
+  controller_state  ControllerState          setpoint R_d and foot targets (base_link)
+Publishes:
+  joint_states_visual  sensor_msgs/JointState        actuated + passive five-bar angles, for
+                                                     robot_state_publisher (remapped)
+  foot_target_markers  visualization_msgs/MarkerArray  one sphere per foot target, frame base_link
+  TF  world -> base_link (IMU orientation), world -> setpoint (R_d), both at ~base_position
+Parameters:
+  ~world_frame (world), ~base_frame (base_link), ~setpoint_frame (setpoint),
+  ~base_position ([0, 0, 0], m, where the body is drawn in the world frame: the robot has no position
+  estimate), ~marker_rate (20 Hz, cap on marker updates), ~robot_yaml (package config/robot.yaml).
+
+All maths lives in quadruped_control.visualization; this node only wires messages.
+"""
+from __future__ import annotations
+
+from typing import Sequence
+
+import rospy
+import tf2_ros
+from geometry_msgs.msg import TransformStamped
+from sensor_msgs.msg import Imu, JointState
+from visualization_msgs.msg import Marker, MarkerArray
+
+from quadruped_control.params import ParameterError, config_path, load_robot_params
+from quadruped_control.visualization import (Throttle, VisualizationError, foot_target_spheres,
+                                             imu_orientation, unit_quaternion, visual_joint_state)
+from underwater_quadruped.msg import ControllerState
+
+#: Foot-target markers disappear this long after the controller stops publishing, s.
+MARKER_LIFETIME = 1.0
+
+
+class VisualizationNode:
+    def __init__(self) -> None:
+        self.world_frame = rospy.get_param("~world_frame", "world")
+        self.base_frame = rospy.get_param("~base_frame", "base_link")
+        self.setpoint_frame = rospy.get_param("~setpoint_frame", "setpoint")
+        position = rospy.get_param("~base_position", [0.0, 0.0, 0.0])
+        if len(position) != 3:
+            raise ValueError("~base_position must be [x, y, z], got %r" % (position,))
+        self.base_position = [float(v) for v in position]
+        self.params = load_robot_params(rospy.get_param("~robot_yaml", config_path("robot.yaml")))
+        marker_rate = float(rospy.get_param("~marker_rate", 20.0))
+        if marker_rate <= 0.0:
+            raise ValueError("~marker_rate must be positive, got %r" % marker_rate)
+        self.marker_throttle = Throttle(1.0 / marker_rate)
+
+        self.tf_broadcaster = tf2_ros.TransformBroadcaster()
+        self.joint_pub = rospy.Publisher("joint_states_visual", JointState, queue_size=10)
+        self.marker_pub = rospy.Publisher("foot_target_markers", MarkerArray, queue_size=2)
+        rospy.Subscriber("joint_states", JointState, self.on_joint_states, queue_size=10)
+        rospy.Subscriber("imu/data", Imu, self.on_imu, queue_size=10)
+        rospy.Subscriber("controller_state", ControllerState, self.on_controller_state, queue_size=10)
+
+    def on_joint_states(self, msg: JointState) -> None:
+        try:
+            names, positions = visual_joint_state(msg.name, msg.position, self.params)
+        except VisualizationError as exc:
+            rospy.logwarn_throttle(5.0, "not drawing joint state: %s" % exc)
+            return
+        out = JointState()
+        out.header = msg.header
+        if out.header.stamp.is_zero():  # unstamped (e.g. rostopic pub): robot_state_publisher needs a time
+            out.header.stamp = rospy.Time.now()
+        out.name = names
+        out.position = positions
+        self.joint_pub.publish(out)
+
+    def on_imu(self, msg: Imu) -> None:
+        q = msg.orientation
+        try:
+            orientation = imu_orientation((q.x, q.y, q.z, q.w), msg.orientation_covariance)
+        except VisualizationError as exc:
+            rospy.logwarn_throttle(5.0, "ignoring IMU orientation: %s" % exc)
+            return
+        if orientation is None:
+            rospy.logwarn_throttle(30.0, "IMU message carries no orientation (covariance[0] = -1)")
+            return
+        if msg.header.frame_id and msg.header.frame_id.lstrip("/") != self.base_frame:
+            rospy.logwarn_once("IMU frame '%s' is drawn as '%s' (the IMU is mounted in the body frame)"
+                               % (msg.header.frame_id, self.base_frame))
+        stamp = msg.header.stamp if not msg.header.stamp.is_zero() else rospy.Time.now()
+        self.broadcast(stamp, self.base_frame, orientation)
+
+    def on_controller_state(self, msg: ControllerState) -> None:
+        stamp = msg.header.stamp if not msg.header.stamp.is_zero() else rospy.Time.now()
+        q = msg.setpoint
+        try:
+            self.broadcast(stamp, self.setpoint_frame, unit_quaternion((q.x, q.y, q.z, q.w)))
+        except VisualizationError as exc:
+            rospy.logwarn_throttle(5.0, "ignoring setpoint: %s" % exc)
+        if self.marker_throttle.ready(rospy.get_time()):
+            points = [(p.x, p.y, p.z) for p in msg.foot_targets]
+            try:
+                spheres = foot_target_spheres(points, self.params.paw_diameter)
+            except VisualizationError as exc:
+                rospy.logwarn_throttle(5.0, "not drawing foot targets: %s" % exc)
+                return
+            self.marker_pub.publish(self.markers(stamp, spheres))
+
+    def broadcast(self, stamp: rospy.Time, child: str, xyzw: Sequence[float]) -> None:
+        t = TransformStamped()
+        t.header.stamp = stamp
+        t.header.frame_id = self.world_frame
+        t.child_frame_id = child
+        t.transform.translation.x, t.transform.translation.y, t.transform.translation.z = self.base_position
+        r = t.transform.rotation
+        r.x, r.y, r.z, r.w = (float(v) for v in xyzw)
+        self.tf_broadcaster.sendTransform(t)
+
+    def markers(self, stamp: rospy.Time, spheres) -> MarkerArray:
+        array = MarkerArray()
+        for sphere in spheres:
+            m = Marker()
+            m.header.stamp = stamp
+            m.header.frame_id = self.base_frame
+            m.ns = "foot_targets"
+            m.id = sphere.leg
+            m.type = Marker.SPHERE
+            m.action = Marker.ADD
+            m.pose.position.x, m.pose.position.y, m.pose.position.z = sphere.position
+            m.pose.orientation.w = 1.0
+            m.scale.x = m.scale.y = m.scale.z = sphere.diameter
+            m.color.r, m.color.g, m.color.b, m.color.a = sphere.rgba
+            m.lifetime = rospy.Duration(MARKER_LIFETIME)
+            array.markers.append(m)
+        return array
+
+
+def main() -> None:
+    rospy.init_node("visualization")
+    try:
+        VisualizationNode()
+    except (ParameterError, ValueError) as exc:
+        rospy.logfatal("visualization: %s" % exc)
+        raise SystemExit(1)
+    rospy.spin()
+
+
+if __name__ == "__main__":
+    main()
