@@ -31,16 +31,47 @@ echo "== rostest (node graph) =="
 export ROS_HOME="$RESULTS/ros_home"; mkdir -p "$ROS_HOME"
 export ROS_LOG_DIR="$ROS_HOME/log"
 rostest_passed=0; rostest_failed=0
+# rostest's exit status alone is not trusted: a test node that dies before reporting can still end in
+# "OK". A .test file passes only when every test node wrote its rosunit-*.xml with tests and without
+# failures or errors; the cases in those files are what the summary counts.
+count_rostest_cases() {
+  python - "$@" <<'PYEOF'
+import sys, xml.etree.ElementTree as ET
+tests = bad = 0
+for path in sys.argv[1:]:
+    try:
+        root = ET.parse(path).getroot()
+    except Exception:
+        bad += 1
+        continue
+    suites = [root] if root.tag == "testsuite" else list(root)
+    for suite in suites:
+        tests += int(suite.get("tests", 0))
+        bad += int(suite.get("failures", 0)) + int(suite.get("errors", 0))
+print(tests - bad, bad)
+PYEOF
+}
 for t in tests/rostest/*.test; do
   [ -e "$t" ] || continue
   name="$(basename "$t" .test)"
   echo "-- rostest $name"
-  if timeout 600 rostest --text underwater_quadruped "$name.test" \
-       --results-filename "rostest-$name.xml" >"$RESULTS/rostest-$name.log" 2>&1; then
-    rostest_passed=$((rostest_passed + 1)); echo "   ok"
+  rm -rf "$ROS_HOME/test_results"
+  timeout 900 rostest underwater_quadruped "$name.test" >"$RESULTS/rostest-$name.log" 2>&1
+  rc=$?
+  mapfile -t unit_files < <(find "$ROS_HOME/test_results" -name 'rosunit-*.xml' 2>/dev/null)
+  expected="$(grep -c '<test ' "$t")"
+  if [ "${#unit_files[@]}" -gt 0 ]; then
+    read -r ok bad < <(count_rostest_cases "${unit_files[@]}")
   else
-    rostest_failed=$((rostest_failed + 1)); failures=$((failures + 1))
-    echo "   FAILED, last lines of $RESULTS/rostest-$name.log:"; tail -30 "$RESULTS/rostest-$name.log"
+    ok=0; bad=1
+  fi
+  cp "${unit_files[@]}" "$RESULTS/" 2>/dev/null || true
+  if [ "$rc" -eq 0 ] && [ "$bad" -eq 0 ] && [ "${#unit_files[@]}" -ge "$expected" ] && [ "$ok" -gt 0 ]; then
+    rostest_passed=$((rostest_passed + ok)); echo "   ok ($ok cases)"
+  else
+    rostest_failed=$((rostest_failed + (bad > 0 ? bad : 1))); failures=$((failures + 1))
+    echo "   FAILED (exit $rc, ${#unit_files[@]}/$expected result files, $bad failed cases); last lines of $RESULTS/rostest-$name.log:"
+    tail -40 "$RESULTS/rostest-$name.log"
   fi
 done
 

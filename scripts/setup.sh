@@ -69,10 +69,12 @@ if [ ! -x "$VENV/bin/python" ] || ! stamp_matches venv "$venv_key"; then
   echo "$venv_key" > "$STAMPS/venv"
 fi
 
-# The catkin workspace: message and dynamic_reconfigure generation, Python package relays.
+# The catkin workspace: message and dynamic_reconfigure generation, Python package relays. Built with
+# the venv's python (which is /usr/bin/python3 plus the pinned packages): the node relays in devel/ get
+# it as their interpreter, so nodes started by roslaunch see numpy, scipy and the Adafruit drivers.
 build_inputs=("$ROOT/CMakeLists.txt" "$ROOT/package.xml" "$ROOT/setup.py" "$ROOT"/quadruped_msgs/msg/*.msg
               "$ROOT"/cfg/*.cfg)
-build_key="$(hash_of "${build_inputs[@]}")-$( (ls "$ROOT/nodes" "$ROOT/tests/rostest" 2>/dev/null || true) | sha256sum | cut -d' ' -f1)"
+build_key="$(hash_of "${build_inputs[@]}")-venv-python-$( (ls "$ROOT/nodes" "$ROOT/tests/rostest" 2>/dev/null || true) | sha256sum | cut -d' ' -f1)"
 if [ ! -f "$WS/devel/setup.bash" ] || ! stamp_matches catkin "$build_key"; then
   log "building the catkin workspace in .ws"
   mkdir -p "$WS/src"
@@ -81,7 +83,7 @@ if [ ! -f "$WS/devel/setup.bash" ] || ! stamp_matches catkin "$build_key"; then
     set +u
     if [ "$ROS_FLAVOUR" = noetic ]; then source /opt/ros/noetic/setup.bash; fi
     cd "$WS"
-    catkin_make --force-cmake -DPYTHON_EXECUTABLE=/usr/bin/python3 -DCMAKE_BUILD_TYPE=Release >"$WS/catkin_make.log" 2>&1 \
+    catkin_make --force-cmake -DPYTHON_EXECUTABLE="$VENV/bin/python" -DCMAKE_BUILD_TYPE=Release >"$WS/catkin_make.log" 2>&1 \
       || { tail -40 "$WS/catkin_make.log" >&2; exit 1; }
   )
   echo "$build_key" > "$STAMPS/catkin"

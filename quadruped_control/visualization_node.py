@@ -1,4 +1,3 @@
-#!/usr/bin/env python3
 """rviz glue: full joint state for the URDF, body and setpoint TF, foot-target markers.
 
 Subscribes:
@@ -133,7 +132,7 @@ class VisualizationNode:
         return array
 
 
-def main() -> None:
+def main(argv=None) -> None:
     rospy.init_node("visualization")
     try:
         VisualizationNode()

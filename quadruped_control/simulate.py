@@ -1,0 +1,379 @@
+"""Offline closed-loop simulator CLI (no ROS needed): ``python3 -m quadruped_control.simulate``.
+
+Single trial (defaults: the paper's simulation gains and ideal servos, RK4 at dt = 0.01 s)::
+
+    python3 -m quadruped_control.simulate --rpy 45 45 45 --duration 120 --out /tmp/trial
+
+writes ``DIR/timeseries.csv``, ``DIR/metrics.json`` and ``DIR/attitude.png`` and prints a metrics table.
+
+Studies:
+
+- ``--study paper-sim``: the paper's section "Simulation Validation": setpoints 15, 45 and 75 degrees
+  applied simultaneously to roll, pitch and yaw, simulation gains (K_p = 5, K_i = 0.15, K_d = 1,
+  K_aw = 0.25, t_rec = 1.5 s), RK4 at 0.01 s. The paper gives neither the initial attitude nor the
+  trial length: level at rest and 120 s (``paper_sim`` in config/simulation.yaml). Writes
+  ``DIR/paper_sim.png`` (three trials in one figure), ``DIR/study.json`` and each trial's files in
+  ``DIR/trial_<deg>/``.
+- ``--study robustness``: the same setpoints under +-0.5 degree initial-attitude perturbations
+  (several seeds), with the experiment gains (ideal and rate-limited servos), with the normalised force
+  direction, with the rate-limited servo, and with the estimated robot parameters that matter varied
+  (paw net buoyancy, leg pairing, nominal foot height): ``DIR/robustness.json`` and ``DIR/robustness.md``.
+
+Trials of a study run in parallel worker processes (``--jobs``, default: the number of CPUs, max 2
+here). Progress goes to stderr, throttled.
+"""
+from __future__ import annotations
+
+import argparse
+import dataclasses
+import json
+import math
+import os
+import sys
+import time
+from concurrent.futures import ProcessPoolExecutor
+from typing import Any, Dict, List, Optional, Sequence, Tuple
+
+import numpy as np
+
+from quadruped_control.controller_config import load_controller_config
+from quadruped_control.params import ParameterError, config_path, load_robot_params, load_yaml
+from quadruped_control.servo_model import make_servo_model
+from quadruped_control.simulation import ClosedLoopSimulation, SimulationError, SimulationResult, load_simulation_settings
+from quadruped_control.so3 import rpy_to_rot
+
+GAIN_ALIASES = {"sim": "simulation", "simulation": "simulation", "experiment": "experiment", "exp": "experiment"}
+
+__all__ = ["TrialSpec", "main", "run_trial", "format_metrics_table"]
+
+
+@dataclasses.dataclass(frozen=True)
+class TrialSpec:
+    """Everything one trial needs (picklable, for worker processes). Angles in degrees."""
+
+    label: str
+    setpoint_rpy_deg: Tuple[float, float, float]
+    initial_rpy_deg: Tuple[float, float, float] = (0.0, 0.0, 0.0)
+    duration: float = 120.0
+    gains: str = "simulation"
+    servo_model: str = "ideal"
+    seed: int = 0
+    normalize_force: bool = False
+    restoring_offset: Optional[Tuple[float, float, float]] = None
+    attitude_noise_deg: float = 0.0
+    gyro_noise: float = 0.0
+    out_dir: Optional[str] = None
+    robot_yaml: Optional[str] = None
+    controller_yaml: Optional[str] = None
+    simulation_yaml: Optional[str] = None
+    quiet: bool = False
+    #: (field, value) pairs replaced in RobotParams / ControllerConfig (sensitivity studies).
+    robot_overrides: Tuple[Tuple[str, Any], ...] = ()
+    config_overrides: Tuple[Tuple[str, Any], ...] = ()
+
+
+def _progress_printer(label: str, quiet: bool):
+    if quiet:
+        return None
+    start = time.perf_counter()
+
+    def report(t: float, duration: float) -> None:
+        elapsed = time.perf_counter() - start
+        rate = t / elapsed if elapsed > 0 else 0.0
+        sys.stderr.write("[%s] %6.1f / %.1f s simulated (%.0fx real time)\n" % (label, t, duration, rate))
+        sys.stderr.flush()
+    return report
+
+
+def run_trial(spec: TrialSpec) -> Dict[str, Any]:
+    """Run one trial; writes its files if ``spec.out_dir``; returns a summary with metrics and the
+    traces needed for figures (t, rpy, setpoint, geodesic as lists)."""
+    robot = load_robot_params(spec.robot_yaml)
+    if spec.robot_overrides:
+        robot = dataclasses.replace(robot, **{k: (np.array(v, dtype=float) if isinstance(v, tuple) else v)
+                                              for k, v in spec.robot_overrides})
+    config = load_controller_config(spec.controller_yaml, GAIN_ALIASES.get(spec.gains, spec.gains))
+    if spec.normalize_force:
+        config = dataclasses.replace(config, normalize_force_direction=True)
+    if spec.config_overrides:
+        config = dataclasses.replace(config, **dict(spec.config_overrides))
+    settings = load_simulation_settings(spec.simulation_yaml)
+    if abs(settings.dt - config.dt) > 1e-12:
+        raise ParameterError("simulation dt %g s differs from the controller period %g s" % (settings.dt, config.dt))
+    servo = make_servo_model(spec.servo_model, settings.servo)
+    sim = ClosedLoopSimulation(
+        robot, config, servo,
+        initial_R=rpy_to_rot(*np.radians(spec.initial_rpy_deg)),
+        setpoint_R=rpy_to_rot(*np.radians(spec.setpoint_rpy_deg)),
+        restoring_offset=spec.restoring_offset, seed=spec.seed,
+        attitude_noise=math.radians(spec.attitude_noise_deg), gyro_noise=spec.gyro_noise)
+    result = sim.run(spec.duration, progress=_progress_printer(spec.label, spec.quiet))
+    metrics = result.metrics()
+    summary: Dict[str, Any] = {
+        "label": spec.label,
+        "setpoint_rpy_deg": list(spec.setpoint_rpy_deg),
+        "initial_rpy_deg": list(spec.initial_rpy_deg),
+        "gains": GAIN_ALIASES.get(spec.gains, spec.gains),
+        "metrics": metrics,
+        "info": result.info,
+        "wall_time": result.wall_time,
+        "real_time_factor": result.real_time_factor,
+    }
+    if spec.out_dir:
+        write_trial(result, metrics, spec.out_dir, title=spec.label)
+        summary["out_dir"] = spec.out_dir
+    summary["trace"] = {"t": result.t, "rpy": result.rpy, "setpoint": result.setpoint_rpy,
+                        "geodesic": result.geodesic}
+    return summary
+
+
+def write_trial(result: SimulationResult, metrics: Dict[str, Any], out_dir: str, title: str = "") -> None:
+    """``timeseries.csv``, ``metrics.json`` and ``attitude.png`` of one trial into ``out_dir``."""
+    from quadruped_control.plotting import plot_attitude
+
+    os.makedirs(out_dir, exist_ok=True)
+    result.write_csv(os.path.join(out_dir, "timeseries.csv"))
+    with open(os.path.join(out_dir, "metrics.json"), "w") as stream:
+        json.dump(dict(metrics, info=result.info), stream, indent=2, allow_nan=False)
+    plot_attitude(result.t, result.rpy, result.setpoint_rpy, result.geodesic, os.path.join(out_dir, "attitude.png"),
+                  title=title or None)
+
+
+def _fmt(value: Any, spec: str = "%.2f") -> str:
+    if value is None:
+        return "--"
+    return spec % value
+
+
+def format_metrics_table(metrics: Dict[str, Any], label: str = "") -> str:
+    """The paper's metrics as a short text table."""
+    lines = []
+    if label:
+        lines.append(label)
+    lines.append("theta_init = %.2f deg, settled = %s (smoothed geodesic error, last 30 s max %.2f deg)"
+                 % (metrics["theta_init_deg"], "yes" if metrics["settled"] else "NO",
+                    metrics["geodesic"]["max_smoothed_last_30s_deg"]))
+    lines.append("axis    cmd[deg]   t_r[s]   t_s[s]  e_ss[deg]   M_p[%]")
+    for axis in ("roll", "pitch", "yaw"):
+        m = metrics[axis]
+        lines.append("%-6s %9.1f %8s %8s %10s %8s" % (axis, m["setpoint_deg"], _fmt(m["t_r"]), _fmt(m["t_s"]),
+                                                      _fmt(m["e_ss"]), _fmt(m["M_p"], "%.1f")))
+    return "\n".join(lines)
+
+
+def _run_many(specs: Sequence[TrialSpec], jobs: int) -> List[Dict[str, Any]]:
+    if jobs <= 1 or len(specs) == 1:
+        return [run_trial(spec) for spec in specs]
+    with ProcessPoolExecutor(max_workers=min(jobs, len(specs))) as pool:
+        return list(pool.map(run_trial, specs))
+
+
+def _strip(summary: Dict[str, Any]) -> Dict[str, Any]:
+    return {k: v for k, v in summary.items() if k != "trace"}
+
+
+def _study_config() -> Dict[str, Any]:
+    return load_yaml(config_path("simulation.yaml"))
+
+
+def _paper_sim_specs(args: argparse.Namespace, tree: Dict[str, Any], out: Optional[str],
+                     label_prefix: str = "", **overrides: Any) -> List[TrialSpec]:
+    paper = tree.get("paper_sim", {})
+    setpoints = [float(v) for v in paper.get("setpoints_deg", [15.0, 45.0, 75.0])]
+    initial = tuple(float(v) for v in paper.get("initial_rpy_deg", [0.0, 0.0, 0.0]))
+    duration = args.duration if args.duration_given else float(paper.get("duration", 120.0))
+    specs = []
+    for amplitude in setpoints:
+        fields = dict(label="%s%g deg" % (label_prefix, amplitude), setpoint_rpy_deg=(amplitude,) * 3,
+                      initial_rpy_deg=initial, duration=duration, gains=str(paper.get("gains", "simulation")),
+                      servo_model="ideal", seed=args.seed,
+                      restoring_offset=tuple(args.restoring_offset) if args.restoring_offset else None,
+                      out_dir=os.path.join(out, "trial_%g" % amplitude) if out else None,
+                      quiet=args.quiet)
+        fields.update(overrides)
+        specs.append(TrialSpec(**fields))
+    return specs
+
+
+def study_paper_sim(args: argparse.Namespace) -> int:
+    from quadruped_control.plotting import Trace, plot_trials
+
+    os.makedirs(args.out, exist_ok=True)
+    tree = _study_config()
+    specs = _paper_sim_specs(args, tree, args.out, gains=GAIN_ALIASES[args.gains], servo_model=args.servo_model,
+                             normalize_force=args.normalize_force)
+    start = time.perf_counter()
+    summaries = _run_many(specs, args.jobs)
+    wall = time.perf_counter() - start
+    traces = [Trace(s["trace"]["t"], s["trace"]["rpy"], s["trace"]["setpoint"], s["trace"]["geodesic"],
+                    label=s["label"]) for s in summaries]
+    figure = os.path.join(args.out, "paper_sim.png")
+    plot_trials(traces, figure, title="Closed-loop simulation: setpoints on roll, pitch and yaw (%s gains, %s servos)"
+                % (specs[0].gains, specs[0].servo_model))
+    study = {"study": "paper-sim", "figure": figure, "wall_time": wall,
+             "all_settled": all(s["metrics"]["settled"] for s in summaries),
+             "trials": [_strip(s) for s in summaries]}
+    with open(os.path.join(args.out, "study.json"), "w") as stream:
+        json.dump(study, stream, indent=2, allow_nan=False)
+    for s in summaries:
+        print(format_metrics_table(s["metrics"], "trial %s (%.0fx real time)" % (s["label"], s["real_time_factor"])))
+        print()
+    print("figure: %s\nstudy: %s\nall trials settled: %s (%.1f s wall)"
+          % (figure, os.path.join(args.out, "study.json"), study["all_settled"], wall))
+    return 0 if study["all_settled"] else 2
+
+
+def study_robustness(args: argparse.Namespace) -> int:
+    os.makedirs(args.out, exist_ok=True)
+    tree = _study_config()
+    robust = tree.get("robustness", {})
+    delta = float(robust.get("initial_perturbation_deg", 0.5))
+    seeds = [int(s) for s in robust.get("seeds", [1, 2, 3])]
+    paper = tree.get("paper_sim", {})
+    base_initial = np.array([float(v) for v in paper.get("initial_rpy_deg", [0.0, 0.0, 0.0])])
+    variants: List[Tuple[str, List[TrialSpec]]] = []
+    variants.append(("baseline (sim gains, ideal servos)", _paper_sim_specs(args, tree, None, "base ")))
+    for seed in seeds:
+        rng = np.random.default_rng(seed)
+        initial = tuple((base_initial + rng.uniform(-delta, delta, 3)).tolist())
+        variants.append(("initial +-%g deg, seed %d" % (delta, seed),
+                         _paper_sim_specs(args, tree, None, "seed%d " % seed, initial_rpy_deg=initial, seed=seed)))
+    variants.append(("experiment gains, ideal servos",
+                     _paper_sim_specs(args, tree, None, "exp ", gains="experiment")))
+    variants.append(("experiment gains, rate-limited servos",
+                     _paper_sim_specs(args, tree, None, "exp-servo ", gains="experiment", servo_model="rate-limited")))
+    variants.append(("sim gains, rate-limited servos",
+                     _paper_sim_specs(args, tree, None, "servo ", servo_model="rate-limited")))
+    variants.append(("sim gains, normalised force direction",
+                     _paper_sim_specs(args, tree, None, "norm ", normalize_force=True)))
+    # Sensitivity to the estimated parameters of config/robot.yaml (see docs/simulation_study.md).
+    robot = load_robot_params()
+    neutral_mass = robot.rho * robot.paw_volume
+    nominal = np.asarray(robot.nominal_foot_leg, dtype=float)
+    variants.append(("paws neutrally buoyant (m_s = rho V_s)",
+                     _paper_sim_specs(args, tree, None, "neutral ", robot_overrides=(("paw_mass", neutral_mass),))))
+    variants.append(("paws twice as heavy in water",
+                     _paper_sim_specs(args, tree, None, "heavy ", robot_overrides=(
+                         ("paw_mass", neutral_mass + 2.0 * (robot.paw_mass - neutral_mass)),))))
+    variants.append(("paper's literal pairs (1,2), (3,4)",
+                     _paper_sim_specs(args, tree, None, "pairs12 ", config_overrides=(("pairs", ((1, 2), (3, 4))),))))
+    for dz in (-0.01, 0.01):
+        foot = tuple((nominal + np.array([0.0, 0.0, dz])).tolist())
+        variants.append(("nominal foot %+.0f cm in z" % (100 * dz),
+                         _paper_sim_specs(args, tree, None, "foot%+g " % dz,
+                                          robot_overrides=(("nominal_foot_leg", foot),))))
+    specs = [spec for _, group in variants for spec in group]
+    start = time.perf_counter()
+    summaries = _run_many(specs, args.jobs)
+    wall = time.perf_counter() - start
+    rows = []
+    index = 0
+    for name, group in variants:
+        for spec in group:
+            s = summaries[index]
+            index += 1
+            m = s["metrics"]
+            rows.append({
+                "variant": name, "setpoint_deg": spec.setpoint_rpy_deg[0],
+                "initial_rpy_deg": list(spec.initial_rpy_deg), "settled": m["settled"],
+                "geodesic_max_last_30s_deg": m["geodesic"]["max_smoothed_last_30s_deg"],
+                "geodesic_mean_last_10pct_deg": m["geodesic"]["mean_smoothed_last_10pct_deg"],
+                "t_s_max": None if any(m[a]["t_s"] is None for a in ("roll", "pitch", "yaw"))
+                else max(m[a]["t_s"] for a in ("roll", "pitch", "yaw")),
+                "e_ss_deg": [m[a]["e_ss"] for a in ("roll", "pitch", "yaw")],
+                "M_p": [m[a]["M_p"] for a in ("roll", "pitch", "yaw")],
+                "metrics": m,
+            })
+    table = ["| variant | setpoint [deg] | settled | max smoothed geodesic error, last 30 s [deg] | "
+             "mean, last 10 % [deg] | max t_s [s] | e_ss roll/pitch/yaw [deg] |",
+             "|---|---|---|---|---|---|---|"]
+    for r in rows:
+        table.append("| %s | %g | %s | %.2f | %.2f | %s | %s |" % (
+            r["variant"], r["setpoint_deg"], "yes" if r["settled"] else "no", r["geodesic_max_last_30s_deg"],
+            r["geodesic_mean_last_10pct_deg"], _fmt(r["t_s_max"], "%.1f"),
+            " / ".join(_fmt(v) for v in r["e_ss_deg"])))
+    with open(os.path.join(args.out, "robustness.json"), "w") as stream:
+        json.dump({"study": "robustness", "wall_time": wall, "rows": rows}, stream, indent=2, allow_nan=False)
+    with open(os.path.join(args.out, "robustness.md"), "w") as stream:
+        stream.write("\n".join(table) + "\n")
+    print("\n".join(table))
+    print("\n%d trials in %.1f s wall; results in %s" % (len(rows), wall, args.out))
+    return 0
+
+
+def build_parser() -> argparse.ArgumentParser:
+    parser = argparse.ArgumentParser(prog="python3 -m quadruped_control.simulate",
+                                     description="Offline closed-loop simulation of the underwater quadruped's "
+                                                 "attitude controller (the paper's model, no ROS).")
+    parser.add_argument("--rpy", nargs=3, type=float, metavar=("R", "P", "Y"), default=[45.0, 45.0, 45.0],
+                        help="setpoint roll pitch yaw, degrees (default 45 45 45)")
+    parser.add_argument("--initial-rpy", nargs=3, type=float, metavar=("R", "P", "Y"), default=[0.0, 0.0, 0.0],
+                        help="initial roll pitch yaw, degrees (default level)")
+    parser.add_argument("--duration", type=float, default=None, help="trial length, s (default 120)")
+    parser.add_argument("--gains", choices=("sim", "experiment"), default="sim",
+                        help="paper gain set: sim (K_p 5, K_i 0.15, K_d 1) or experiment (K_p 10, K_i 3, K_d 0.5)")
+    parser.add_argument("--servo-model", choices=("ideal", "rate-limited"), default=None,
+                        help="servo model (default from config/simulation.yaml: ideal, the paper's)")
+    parser.add_argument("--seed", type=int, default=0, help="seed of the IMU noise (default 0)")
+    parser.add_argument("--attitude-noise", type=float, default=None, metavar="DEG",
+                        help="IMU attitude noise std, degrees (default from config: 0)")
+    parser.add_argument("--gyro-noise", type=float, default=None, metavar="RAD_S",
+                        help="gyro noise std per axis, rad/s (default from config: 0)")
+    parser.add_argument("--normalize-force", action="store_true",
+                        help="normalise the allocation's force direction tau_hat x r_hat (not in the paper)")
+    parser.add_argument("--restoring-offset", nargs=3, type=float, metavar=("X", "Y", "Z"), default=None,
+                        help="centre of buoyancy relative to the centre of mass, body frame, m (default: none)")
+    parser.add_argument("--study", choices=("paper-sim", "robustness"), default=None, help="run a study")
+    parser.add_argument("--jobs", type=int, default=min(2, os.cpu_count() or 1),
+                        help="worker processes for studies (default %(default)s)")
+    parser.add_argument("--out", default="simulation_output", help="output directory (default %(default)s)")
+    parser.add_argument("--quiet", action="store_true", help="no progress output")
+    return parser
+
+
+def main(argv: Optional[Sequence[str]] = None) -> int:
+    parser = build_parser()
+    args = parser.parse_args(argv)
+    args.duration_given = args.duration is not None
+    if args.duration is None:
+        args.duration = 120.0
+    if not (math.isfinite(args.duration) and args.duration > 0.0):
+        parser.error("--duration must be a positive number of seconds")
+    if args.jobs < 1:
+        parser.error("--jobs must be at least 1")
+    for name in ("rpy", "initial_rpy", "restoring_offset"):
+        value = getattr(args, name)
+        if value is not None and not all(math.isfinite(v) for v in value):
+            parser.error("--%s needs finite numbers" % name.replace("_", "-"))
+    try:
+        settings = load_simulation_settings()
+        if args.servo_model is None:
+            args.servo_model = settings.servo_model
+        attitude_noise = math.degrees(settings.attitude_noise) if args.attitude_noise is None else args.attitude_noise
+        gyro_noise = settings.gyro_noise if args.gyro_noise is None else args.gyro_noise
+        if attitude_noise < 0.0 or gyro_noise < 0.0 or not (math.isfinite(attitude_noise) and math.isfinite(gyro_noise)):
+            parser.error("noise levels must be finite and non-negative")
+        if args.study == "paper-sim":
+            return study_paper_sim(args)
+        if args.study == "robustness":
+            return study_robustness(args)
+        spec = TrialSpec(label="setpoint %s deg" % " ".join("%g" % v for v in args.rpy),
+                         setpoint_rpy_deg=tuple(args.rpy), initial_rpy_deg=tuple(args.initial_rpy),
+                         duration=args.duration, gains=GAIN_ALIASES[args.gains], servo_model=args.servo_model,
+                         seed=args.seed, normalize_force=args.normalize_force,
+                         restoring_offset=tuple(args.restoring_offset) if args.restoring_offset else None,
+                         attitude_noise_deg=attitude_noise, gyro_noise=gyro_noise, out_dir=args.out,
+                         quiet=args.quiet)
+        summary = run_trial(spec)
+    except (ParameterError, SimulationError, ValueError) as exc:
+        sys.stderr.write("simulate: error: %s\n" % exc)
+        return 1
+    print(format_metrics_table(summary["metrics"], "%s, %s gains, %s servos, %.0f s (%.0fx real time)"
+                               % (spec.label, spec.gains, spec.servo_model, spec.duration,
+                                  summary["real_time_factor"])))
+    print("wrote %s/{timeseries.csv, metrics.json, attitude.png}" % args.out)
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

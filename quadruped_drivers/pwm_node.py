@@ -1,0 +1,172 @@
+"""ROS glue of the PCA9685 servo output: /servo_command -> pulse widths on the chip.
+
+Subscribes
+  servo_command   underwater_quadruped/ServoCommand  12 pulse widths (us) by joint name
+Services
+  ~enable         std_srvs/SetBool  outputs on / off (off = every channel full-off)
+Publishes
+  diagnostics     watchdog state, clamp and write-error counters, command latency
+Parameters
+  ~backend (real | sim)  ~bus_socket (sim: the simulated robot's bus bridge)  ~hardware_yaml
+  ~update_rate (100 Hz: watchdog checks)  ~enable_on_start (true)
+  ~failsafe ("": per channel from hardware_yaml; hold | neutral | off: the same for every channel)
+
+Clamping, the command watchdog and its per-channel failsafe, and ALL_LED full-off on shutdown are
+the driver's (:class:`quadruped_drivers.pwm_output.ServoPwmOutput`); this node only wires them. The
+latency measured here is from the IMU sample that caused a command (its header stamp) to the end of the
+I2C write, the end-to-end latency of the control path.
+"""
+from __future__ import annotations
+
+import threading
+import time
+from typing import List, Optional
+
+import numpy as np
+import rospy
+from diagnostic_msgs.msg import DiagnosticStatus
+from diagnostic_updater import DiagnosticStatusWrapper, Updater
+from std_srvs.srv import SetBool, SetBoolResponse
+
+from quadruped_control.monitoring import RateMonitor, WindowStatistics
+from quadruped_control.params import JOINT_NAMES, ParameterError
+from quadruped_drivers.hardware_config import load_hardware_config
+from quadruped_drivers.node_support import open_bus, with_failsafe
+from quadruped_drivers.pwm_output import ServoPwmOutput
+from underwater_quadruped.msg import ServoCommand
+
+
+class PwmNode:
+    def __init__(self) -> None:
+        self.hardware = with_failsafe(load_hardware_config(rospy.get_param("~hardware_yaml", "") or None),
+                                      rospy.get_param("~failsafe", ""))
+        backend = rospy.get_param("~backend", "real")
+        bus = open_bus(backend, self.hardware.i2c_bus, rospy.get_param("~bus_socket", "/tmp/uq_sim_i2c.sock"))
+        self.lock = threading.Lock()  # one thread at a time owns the bus (DESIGN.md: PCA9685 library)
+        self.output = ServoPwmOutput(bus, self.hardware)
+        self._start_output()
+        if not rospy.get_param("~enable_on_start", True):
+            self.output.disable()
+        self.index = {name: i for i, name in enumerate(JOINT_NAMES)}
+        self.latency = WindowStatistics(2000)
+        self.commands = RateMonitor(2.0)
+        self.rejected = 0
+        self.reported_write_errors = 0
+        self.closed = False
+        self.last_rejection = ""
+        self.diagnostics = Updater()
+        self.diagnostics.setHardwareID("pca9685@0x%02x" % self.hardware.pca_address)
+        self.diagnostics.add("servo output", self._diagnose)
+        rospy.on_shutdown(self._shutdown)
+        rospy.Service("~enable", SetBool, self._on_enable)
+        rospy.Subscriber("servo_command", ServoCommand, self._on_command, queue_size=1, tcp_nodelay=True)
+        period = 1.0 / float(rospy.get_param("~update_rate", 100.0))
+        self.timer = rospy.Timer(rospy.Duration(period), self._on_timer)
+        rospy.loginfo("pwm_node: PCA9685 at 0x%02x on %s bus, %.0f Hz PWM, watchdog %.0f ms",
+                      self.hardware.pca_address, backend, self.hardware.pwm_frequency_hz,
+                      self.hardware.watchdog_timeout * 1e3)
+
+    def _start_output(self) -> None:
+        """Initialise the chip, retrying: the servos stay unpowered (no PWM) until it answers."""
+        while not rospy.is_shutdown():
+            try:
+                with self.lock:
+                    self.output.start()
+                return
+            except OSError as exc:
+                rospy.logerr_throttle(2.0, "pwm_node: PCA9685 does not answer (%s), retrying" % exc)
+                rospy.sleep(0.2)
+
+    def _on_command(self, msg: ServoCommand) -> None:
+        if len(msg.name) != len(msg.pulse_width_us):
+            self._reject("servo_command has %d names but %d pulse widths" % (len(msg.name), len(msg.pulse_width_us)))
+            return
+        widths = np.full(len(JOINT_NAMES), np.nan)
+        for name, width in zip(msg.name, msg.pulse_width_us):
+            i = self.index.get(name)
+            if i is None:
+                self._reject("servo_command names unknown joint %r" % name)
+                return
+            widths[i] = width
+        if not np.all(np.isfinite(widths)):
+            # The driver keeps the last value for a non-finite channel; say so, once per second.
+            rospy.logwarn_throttle(1.0, "pwm_node: servo_command without a finite width for every joint")
+        with self.lock:
+            if self.closed:
+                return
+            self.output.command(widths)
+        now = rospy.get_time()
+        self.commands.tick(time.monotonic())
+        if not msg.header.stamp.is_zero():
+            self.latency.add(now - msg.header.stamp.to_sec())
+
+    def _reject(self, reason: str) -> None:
+        self.rejected += 1
+        self.last_rejection = reason
+        rospy.logerr_throttle(1.0, "pwm_node: command rejected: %s" % reason)
+
+    def _on_timer(self, _event) -> None:
+        if self.closed:
+            return
+        with self.lock:
+            was_tripped = self.output.watchdog_tripped
+            self.output.update()
+            tripped = self.output.watchdog_tripped
+        if tripped and not was_tripped:
+            rospy.logwarn("pwm_node: no servo_command for %.0f ms, outputs in failsafe",
+                          self.hardware.watchdog_timeout * 1e3)
+        self.diagnostics.update()
+
+    def _on_enable(self, request) -> SetBoolResponse:
+        with self.lock:
+            if request.data:
+                self.output.enable()
+            else:
+                self.output.disable()
+        message = "outputs %s" % ("enabled" if request.data else "disabled (all channels off)")
+        rospy.logwarn("pwm_node: %s", message)
+        return SetBoolResponse(success=True, message=message)
+
+    def _diagnose(self, stat: DiagnosticStatusWrapper) -> DiagnosticStatusWrapper:
+        latency = self.latency.summary(1e3)
+        new_errors = self.output.write_errors - self.reported_write_errors
+        self.reported_write_errors = self.output.write_errors
+        if new_errors:
+            stat.summary(DiagnosticStatus.ERROR, "%d I2C write errors since the last report" % new_errors)
+        elif self.output.watchdog_tripped:
+            stat.summary(DiagnosticStatus.WARN, "command watchdog tripped: outputs in failsafe")
+        elif not self.output.enabled:
+            stat.summary(DiagnosticStatus.WARN, "outputs disabled")
+        else:
+            stat.summary(DiagnosticStatus.OK, "driving servos")
+        stat.add("enabled", str(self.output.enabled))
+        stat.add("watchdog tripped", str(self.output.watchdog_tripped))
+        stat.add("command rate [Hz]", "%.1f" % self.commands.rate(time.monotonic()))
+        stat.add("latency p50 [ms]", "%.3f" % latency["p50"])
+        stat.add("latency p99 [ms]", "%.3f" % latency["p99"])
+        stat.add("latency max [ms]", "%.3f" % latency["max"])
+        stat.add("clamped channels", str(self.output.clamp_count))
+        stat.add("write errors", str(self.output.write_errors))
+        stat.add("rejected commands", str(self.rejected))
+        stat.add("last rejection", self.last_rejection)
+        stat.add("applied pulse widths [us]", " ".join("%.0f" % v for v in self.output.applied_us))
+        return stat
+
+    def _shutdown(self) -> None:
+        with self.lock:
+            self.closed = True
+            try:
+                self.output.shutdown()
+                rospy.loginfo("pwm_node: outputs off (ALL_LED full-off)")
+            except OSError as exc:
+                rospy.logerr("pwm_node: could not switch the outputs off on shutdown: %s", exc)
+
+
+def main(argv: Optional[List[str]] = None) -> None:
+    rospy.init_node("pwm_node")
+    try:
+        PwmNode()
+    except (ParameterError, ValueError, OSError) as exc:
+        rospy.logfatal("pwm_node cannot start: %s", exc)
+        raise SystemExit(1)
+    rospy.spin()

@@ -1,0 +1,305 @@
+"""Servo PWM output through a PCA9685: clamping, one-write updates, command watchdog, failsafe.
+
+The paper's control node (section "Electronics and software") sends the twelve servo pulse widths
+computed from the inverse kinematics (eq. ik_theta3, ik_theta1245) every 10 ms. This module is the
+last line of defence before the servos: every pulse is clamped into its channel's configured limits,
+non-finite commands never reach the chip, and a silent controller trips a watchdog that applies each
+channel's failsafe (hold | neutral | off).
+
+Register-level rather than adafruit-circuitpython-pca9685 3.4 (``/work/shared/DESIGN.md``): its
+constructor's ``reset()`` writes MODE1 = 0, which wakes the oscillator with whatever prescale and LED
+registers survived a process restart and clears auto-increment; its ``deinit()`` does not stop the
+outputs; its register buffers are class-level (shared by all instances, not thread-safe); and it
+updates one channel per transaction where one auto-increment write from LED0 carries all twelve.
+The prescale formula is the same as the library's (``int(osc / 4096 / f + 0.5) - 1``; cross-checked
+in the tests by running the library against the fake chip).
+
+pulse (us) -> ticks: ticks = round(us * f_actual * 4096 / 1e6), f_actual = osc / (4096 (prescale + 1)).
+"""
+from __future__ import annotations
+
+import time
+from typing import Any, Callable, List, Optional, Sequence
+
+import numpy as np
+
+from quadruped_drivers.hardware_config import HardwareConfig
+from quadruped_drivers.i2c import bus_locked
+
+MODE1 = 0x00
+MODE2 = 0x01
+LED0_ON_L = 0x06
+ALL_LED_ON_L = 0xFA
+PRE_SCALE = 0xFE
+MODE1_RESTART = 0x80
+MODE1_AI = 0x20
+MODE1_SLEEP = 0x10
+MODE2_OUTDRV = 0x04  # totem-pole outputs (servo signal lines)
+FULL = 0x10
+#: Tick offset between the rising edges of consecutive channels when staggering is enabled.
+STAGGER_TICKS = 256
+#: Oscillator start-up time after clearing SLEEP before RESTART may be written (datasheet: 500 us).
+OSCILLATOR_STARTUP_S = 0.0005
+#: Applied-width marker for a channel whose output is off.
+OFF = 0.0
+
+
+class PwmOutputError(RuntimeError):
+    """The PCA9685 did not come up as configured (read-back mismatch) or is unreachable."""
+
+
+class ServoPwmOutput:
+    """Twelve servo outputs on one PCA9685 (channels and limits from ``hardware_config``).
+
+    ``applied_us`` holds what the chip outputs per joint (0.0 = off). One thread owns the instance.
+    """
+
+    def __init__(self, bus: Any, hardware_config: HardwareConfig, clock: Callable[[], float] = time.monotonic,
+                 sleep: Callable[[float], None] = time.sleep) -> None:
+        self._bus = bus
+        self._config = hardware_config
+        self._clock = clock
+        self._sleep = sleep
+        self._count = len(hardware_config.joints)
+        self._channels = hardware_config.pwm_channels
+        self._min = hardware_config.min_us
+        self._max = hardware_config.max_us
+        self._neutral = hardware_config.neutral_us
+        self._failsafe = [joint.failsafe for joint in hardware_config.joints]
+        self.prescale = hardware_config.prescale
+        self.frequency_hz = hardware_config.actual_pwm_frequency_hz
+        self._ticks_per_us = self.frequency_hz * 4096.0 / 1e6
+        # Tick bounds per joint that keep even the quantised pulse inside [min_us, max_us].
+        self._min_ticks = np.ceil(self._min * self._ticks_per_us - 1e-9).astype(int)
+        self._max_ticks = np.floor(self._max * self._ticks_per_us + 1e-9).astype(int)
+        self._span = int(self._channels.max()) + 1  # LED0 .. highest channel in use: one write
+        self._applied = np.zeros(self._count)
+        self._requested = np.full(self._count, np.nan)
+        self._started = False
+        self._enabled = False
+        self._watchdog_tripped = False
+        self._last_command: Optional[float] = None
+        self._pending_write = False
+        self._pending = np.zeros(self._count)
+        self.write_errors = 0
+        self.clamp_count = 0
+        self.invalid_count = 0
+        self.watchdog_trips = 0
+
+    # --- properties -------------------------------------------------------------------------
+    @property
+    def applied_us(self) -> np.ndarray:
+        """Pulse widths (us) the chip outputs per joint, quantised to its 4096 ticks per period
+        (about 4.9 us at 50 Hz); 0.0 = output off (copy)."""
+        return self._applied.copy()
+
+    @property
+    def requested_us(self) -> np.ndarray:
+        """The last commanded widths after clamping (recorded even while disabled) (copy)."""
+        return self._requested.copy()
+
+    @property
+    def enabled(self) -> bool:
+        """False: outputs are off and commands are recorded but not applied."""
+        return self._enabled
+
+    @property
+    def watchdog_tripped(self) -> bool:
+        """True from a watchdog trip until the next command."""
+        return self._watchdog_tripped
+
+    def ticks(self, pulse_us: float) -> int:
+        """PCA9685 ticks for a pulse of ``pulse_us`` at the actual output frequency (1..4095)."""
+        return int(min(4095, max(1, int(round(pulse_us * self._ticks_per_us)))))
+
+    def quantize(self, widths: np.ndarray) -> np.ndarray:
+        """The widths (us) the chip really produces for per-joint ``widths`` (0 stays 0 = off), with the
+        tick count kept inside each joint's limits (so rounding never leaves [min_us, max_us])."""
+        out = np.zeros(self._count)
+        on = widths > 0.0
+        ticks = np.clip(np.round(widths * self._ticks_per_us), self._min_ticks, self._max_ticks)
+        out[on] = ticks[on] / self._ticks_per_us
+        return out
+
+    # --- bus helpers ------------------------------------------------------------------------
+    def _write(self, data: bytes) -> None:
+        self._bus.writeto(self._config.pca_address, data)
+
+    def _read_register(self, register: int) -> int:
+        buffer = bytearray(1)
+        self._bus.writeto_then_readfrom(self._config.pca_address, bytes([register]), buffer)
+        return buffer[0]
+
+    def _block(self, widths: np.ndarray) -> bytes:
+        """LED0..LED(span-1) registers for per-joint ``widths`` (0 = full off; unused channels off)."""
+        data = bytearray(1 + 4 * self._span)
+        data[0] = LED0_ON_L
+        for channel in range(self._span):
+            data[1 + 4 * channel + 3] = FULL  # unused channel: full off
+        for index, channel in enumerate(self._channels):
+            base = 1 + 4 * int(channel)
+            width = widths[index]
+            if width <= 0.0:
+                data[base:base + 4] = b"\x00\x00\x00" + bytes([FULL])
+                continue
+            on = (int(channel) * STAGGER_TICKS) % 4096 if self._config.pwm_stagger else 0
+            off = (on + int(round(width * self._ticks_per_us))) % 4096
+            data[base:base + 4] = bytes([on & 0xFF, on >> 8, off & 0xFF, off >> 8])
+        return bytes(data)
+
+    def _apply(self, widths: np.ndarray) -> bool:
+        """Write ``widths`` in one auto-increment transaction; on success they become ``applied_us``."""
+        widths = self.quantize(widths)
+        try:
+            with bus_locked(self._bus, self._config.bus_lock_timeout):
+                self._write(self._block(widths))
+        except OSError:
+            self.write_errors += 1
+            self._pending = widths.copy()
+            self._pending_write = True
+            return False
+        self._applied = widths.copy()
+        self._pending_write = False
+        return True
+
+    # --- lifecycle --------------------------------------------------------------------------
+    def start(self, enable: bool = True) -> None:
+        """Bring the chip to a known state and verify it; outputs stay off until the first command.
+
+        Sequence: MODE1 = SLEEP|AI (oscillator off, auto-increment, all-call off), ALL_LED full-off,
+        MODE2 = OUTDRV, PRE_SCALE (only takes while asleep), MODE1 = AI (wake), wait 500 us, write
+        RESTART, read back MODE1/MODE2/PRE_SCALE. Raises :class:`PwmOutputError` on a bus error or a
+        read-back mismatch (the caller must not run the servos then).
+        """
+        try:
+            with bus_locked(self._bus, self._config.bus_lock_timeout):
+                self._write(bytes([MODE1, MODE1_SLEEP | MODE1_AI]))
+                self._write(bytes([ALL_LED_ON_L, 0, 0, 0, FULL]))
+                self._write(bytes([MODE2, MODE2_OUTDRV]))
+                self._write(bytes([PRE_SCALE, self.prescale]))
+                self._write(bytes([MODE1, MODE1_AI]))
+                self._sleep(OSCILLATOR_STARTUP_S)
+                self._write(bytes([MODE1, MODE1_RESTART | MODE1_AI]))
+                mode1 = self._read_register(MODE1)
+                mode2 = self._read_register(MODE2)
+                prescale = self._read_register(PRE_SCALE)
+        except OSError as exc:
+            raise PwmOutputError("PCA9685 at 0x%02x did not answer during start-up: %s"
+                                 % (self._config.pca_address, exc)) from exc
+        problems: List[str] = []
+        if mode1 & (MODE1_SLEEP | MODE1_AI) != MODE1_AI:
+            problems.append("MODE1 = 0x%02x (expected AI set, SLEEP clear)" % mode1)
+        if mode2 != MODE2_OUTDRV:
+            problems.append("MODE2 = 0x%02x (expected 0x%02x)" % (mode2, MODE2_OUTDRV))
+        if prescale != self.prescale:
+            problems.append("PRE_SCALE = %d (expected %d)" % (prescale, self.prescale))
+        if problems:
+            raise PwmOutputError("PCA9685 at 0x%02x read-back mismatch: %s"
+                                 % (self._config.pca_address, "; ".join(problems)))
+        self._applied = np.zeros(self._count)
+        self._started = True
+        self._enabled = enable
+        self._watchdog_tripped = False
+        self._last_command = self._clock()
+
+    def _require_started(self) -> None:
+        if not self._started:
+            raise RuntimeError("ServoPwmOutput used before start()")
+
+    def command(self, pulse_widths_us: Sequence[float]) -> np.ndarray:
+        """Apply twelve pulse widths (us, JOINT_NAMES order); returns the widths applied (0 = off).
+
+        Each width is clamped into its channel's [min_us, max_us] (``clamp_count`` counts clamped
+        channels). A NaN/inf keeps the channel's last applied width, or its failsafe if it has none
+        (``invalid_count``). Feeds the watchdog. While disabled the command is only recorded.
+        """
+        self._require_started()
+        values = np.asarray(pulse_widths_us, dtype=float)
+        if values.shape != (self._count,):
+            raise ValueError("expected %d pulse widths, got shape %s" % (self._count, values.shape))
+        finite = np.isfinite(values)
+        self.invalid_count += int(np.count_nonzero(~finite))
+        target = np.where(finite, values, 0.0)
+        clamped = np.clip(target, self._min, self._max)
+        self.clamp_count += int(np.count_nonzero(finite & (clamped != target)))
+        for index in np.flatnonzero(~finite):
+            clamped[index] = self._fallback(index, self._applied[index])
+        self._requested = clamped
+        self._last_command = self._clock()
+        self._watchdog_tripped = False
+        if not self._enabled:
+            return self.applied_us
+        self._apply(clamped)
+        return self.applied_us
+
+    def _fallback(self, index: int, current: float) -> float:
+        """Width for a channel without a usable command: keep ``current`` if on, else its failsafe."""
+        if current > 0.0:
+            return float(current)
+        return self._failsafe_width(index, current)
+
+    def _failsafe_width(self, index: int, current: float) -> float:
+        action = self._failsafe[index]
+        if action == "neutral":
+            return float(self._neutral[index])
+        if action == "off":
+            return OFF
+        return float(current)  # hold (an output that is off stays off)
+
+    def update(self) -> bool:
+        """Call periodically: trips the watchdog (failsafe once) after ``watchdog_timeout`` without a
+        command, and retries a write that failed. Returns :attr:`watchdog_tripped`."""
+        self._require_started()
+        now = self._clock()
+        if (self._enabled and not self._watchdog_tripped and self._last_command is not None
+                and now - self._last_command > self._config.watchdog_timeout):
+            self._watchdog_tripped = True
+            self.watchdog_trips += 1
+            base = self._pending if self._pending_write else self._applied
+            widths = np.array([self._failsafe_width(index, base[index]) for index in range(self._count)])
+            self._apply(widths)
+        elif self._pending_write and self._enabled:
+            self._apply(self._pending)
+        return self._watchdog_tripped
+
+    def disable(self) -> None:
+        """Outputs off (ALL_LED full-off); later commands are recorded but not applied."""
+        self._require_started()
+        self._enabled = False
+        self._pending_write = False
+        if not self._all_off():
+            raise PwmOutputError("could not switch the PCA9685 outputs off")
+
+    def enable(self) -> None:
+        """Accept commands again; outputs stay off until the next command (no jump to an old one)."""
+        self._require_started()
+        self._enabled = True
+        self._watchdog_tripped = False
+        self._last_command = self._clock()
+
+    def _all_off(self) -> bool:
+        try:
+            with bus_locked(self._bus, self._config.bus_lock_timeout):
+                self._write(bytes([ALL_LED_ON_L, 0, 0, 0, FULL]))
+        except OSError:
+            self.write_errors += 1
+            return False
+        self._applied = np.zeros(self._count)
+        return True
+
+    def shutdown(self) -> bool:
+        """ALL_LED full-off, then sleep (oscillator off). Returns True if both writes succeeded."""
+        self._enabled = False
+        self._pending_write = False
+        ok = self._all_off()
+        try:
+            with bus_locked(self._bus, self._config.bus_lock_timeout):
+                self._write(bytes([MODE1, MODE1_SLEEP | MODE1_AI]))
+        except OSError:
+            self.write_errors += 1
+            ok = False
+        self._started = False
+        return ok
+
+
+__all__ = ["ServoPwmOutput", "PwmOutputError", "STAGGER_TICKS", "OFF"]

@@ -1,0 +1,259 @@
+"""Servo position feedback: twelve ADS1115 behind a TCA9548A, read once per 100 Hz control cycle.
+
+The paper's control node (section "Electronics and software") reads the analog feedback of all twelve
+servos through twelve ADS1115 ADCs every 10 ms; the joint angles feed the joint-velocity filtering
+and the leg torque estimate of eq. (torque_leg). Layout: four ADC addresses (0x48..0x4B) per mux
+channel, three mux channels (``config/hardware.yaml``).
+
+Bus traffic per cycle is kept minimal: each ADC is configured once (continuous conversion on its own
+input at 860 SPS, address pointer left on the conversion register), so a cycle reads only the 2-byte
+conversion registers (one plain read transaction each), and the mux control register is written only
+when the channel changes (a cycle starts on the channel still selected from the previous one).
+
+Why not adafruit-circuitpython-ads1x15 3.0 / -tca9548a 0.7 (``/work/shared/DESIGN.md``):
+
+* ads1x15 3.0 in continuous mode ignores a change of the requested channel once it has read a pin
+  and its "fast" read path reads without setting the pointer, so after a config access (mode switch,
+  its own ``_write_config`` reads the config register) it returns the config register as data. Its
+  constructor writes the config register several times (once per property), single-shot reads
+  busy-wait without timeout, and twelve single-shot reads at 860 SPS take longer than a 10 ms cycle.
+* tca9548a 0.7 writes select + deselect around every transaction (2 extra transactions per read),
+  and its channel ``try_lock``/``unlock`` leave the parent bus locked forever when the select or the
+  deselect write fails. Here the bus lock is always released in ``finally`` and a failed mux write only
+  invalidates the cached channel.
+* ``adafruit_bus_device.I2CDevice`` locks per transaction and spins on ``try_lock`` without bound;
+  a cycle must hold the bus across mux select + reads, with a bounded wait (:func:`bus_locked`).
+"""
+from __future__ import annotations
+
+import errno
+import math
+import time
+from dataclasses import dataclass, field
+from typing import Any, Callable, Dict, List, Optional
+
+import numpy as np
+
+from quadruped_drivers.hardware_config import ADS1115_FSR_PGA, ADS1115_RATES, HardwareConfig
+from quadruped_drivers.i2c import bus_locked
+
+ADS_REG_CONVERSION = 0x00
+ADS_REG_CONFIG = 0x01
+
+
+def ads1115_continuous_config(adc_input: int, full_scale_v: float, data_rate: int) -> int:
+    """ADS1115 config word: single-ended AIN``adc_input`` vs GND (MUX 1xx), PGA for ``full_scale_v``,
+    MODE 0 (continuous), DR for ``data_rate``, comparator disabled (COMP_QUE 11)."""
+    if not 0 <= adc_input <= 3:
+        raise ValueError("ADS1115 input must be 0..3, got %r" % (adc_input,))
+    return ((0x4 | adc_input) << 12) | (ADS1115_FSR_PGA[full_scale_v] << 9) | (ADS1115_RATES[data_rate] << 5) | 0x0003
+
+
+@dataclass
+class FeedbackReading:
+    """One cycle's feedback (arrays in JOINT_NAMES order).
+
+    ``volts``/``angles``: this cycle's samples, NaN where no fresh sample was read (``valid`` False).
+    ``held_angles``: the freshest good angle no older than ``stale_after`` (NaN beyond): a single
+    dropped sample does not blank the joint for a consumer that tolerates ``stale_after`` of latency.
+    ``stale``: joints without a fresh sample whose last good one is at most ``failed_after`` old;
+    ``failed``: joints without a good sample for longer than ``failed_after`` (or never, once
+    ``failed_after`` has passed since :meth:`ServoFeedbackArray.start`). ``age``: seconds since each
+    joint's last good sample (inf if none). ``error_counts``: cumulative failed ADC transactions per
+    joint; ``mux_errors``: cumulative failed mux writes.
+    """
+
+    stamp: float
+    volts: np.ndarray
+    angles: np.ndarray
+    valid: np.ndarray
+    stale: List[int]
+    failed: List[int]
+    error_counts: np.ndarray
+    mux_errors: int
+    held_angles: np.ndarray = field(default_factory=lambda: np.full(12, np.nan))
+    age: np.ndarray = field(default_factory=lambda: np.full(12, np.inf))
+
+
+class ServoFeedbackArray:
+    """Reads the twelve servo feedback voltages and converts them to joint angles.
+
+    ``bus`` is any bus object (fake, bridged or real), ``calibration`` a
+    :class:`~quadruped_drivers.calibration.ServoCalibration` (volts -> angle), ``clock`` the time source
+    (inject one in tests). One thread owns the instance.
+    """
+
+    def __init__(self, bus: Any, hardware_config: HardwareConfig, calibration: Any,
+                 clock: Callable[[], float] = time.monotonic) -> None:
+        self._bus = bus
+        self._config = hardware_config
+        self._calibration = calibration
+        self._clock = clock
+        self._count = len(hardware_config.joints)
+        # ADC devices: (mux channel, address) -> joint indices on it; each joint has its own input.
+        self._configs = {joint.index: ads1115_continuous_config(joint.adc_input, hardware_config.adc_full_scale_v,
+                                                                hardware_config.adc_data_rate)
+                         for joint in hardware_config.joints}
+        self._channels: Dict[int, List[int]] = {}
+        for joint in hardware_config.joints:
+            self._channels.setdefault(joint.mux_channel, []).append(joint.index)
+        # Cached mux state: the selected channel, -1 = known deselected, None = unknown (after an error).
+        self._selected: Optional[int] = None
+        self._configured = np.zeros(self._count, dtype=bool)
+        self._last_good = np.full(self._count, -np.inf)
+        self._last_angle = np.full(self._count, np.nan)
+        self._error_counts = np.zeros(self._count, dtype=int)
+        self._mux_errors = 0
+        self._lock_timeouts = 0
+        self._started_at: Optional[float] = None
+        self._buffer = bytearray(2)
+
+    # --- properties -------------------------------------------------------------------------
+    @property
+    def mux_errors(self) -> int:
+        """Cumulative failed mux control writes."""
+        return self._mux_errors
+
+    @property
+    def lock_timeouts(self) -> int:
+        """Cycles skipped because the bus stayed locked by another user."""
+        return self._lock_timeouts
+
+    @property
+    def error_counts(self) -> np.ndarray:
+        """Cumulative failed ADC transactions per joint (copy)."""
+        return self._error_counts.copy()
+
+    @property
+    def configured(self) -> np.ndarray:
+        """Which joints' ADCs are currently known to be configured (copy)."""
+        return self._configured.copy()
+
+    # --- bus helpers ------------------------------------------------------------------------
+    def _select(self, channel: int) -> bool:
+        """Connect mux ``channel`` (write only if not already selected). False on a bus error."""
+        if self._selected == channel:
+            return True
+        try:
+            self._bus.writeto(self._config.mux_address, bytes([1 << channel]))
+        except OSError:
+            self._selected = None  # the mux may or may not have taken the byte
+            self._mux_errors += 1
+            return False
+        self._selected = channel
+        return True
+
+    def _deselect(self) -> None:
+        try:
+            self._bus.writeto(self._config.mux_address, b"\x00")
+            self._selected = -1
+        except OSError:
+            self._selected = None
+            self._mux_errors += 1
+
+    def _configure(self, index: int) -> None:
+        """Write joint ``index``'s config word, then leave the pointer on the conversion register."""
+        joint = self._config.joints[index]
+        word = self._configs[index]
+        self._bus.writeto(joint.adc_address, bytes([ADS_REG_CONFIG, word >> 8, word & 0xFF]))
+        self._bus.writeto(joint.adc_address, bytes([ADS_REG_CONVERSION]))
+
+    def _read_code(self, index: int) -> int:
+        self._bus.readfrom_into(self._config.joints[index].adc_address, self._buffer)
+        code = (self._buffer[0] << 8) | self._buffer[1]
+        return code - 0x10000 if code & 0x8000 else code
+
+    def _mark_error(self, index: int) -> None:
+        self._error_counts[index] += 1
+        self._configured[index] = False
+        self._selected = None  # a NACK may also mean the mux lost its state (power glitch): re-select
+
+    # --- public API -------------------------------------------------------------------------
+    def start(self) -> List[int]:
+        """Configure every ADC (continuous, its input, 860 SPS). Returns joints that failed (retried by read)."""
+        self._started_at = self._clock()
+        self._selected = None
+        failed: List[int] = []
+        with bus_locked(self._bus, self._config.bus_lock_timeout):
+            try:
+                for channel, indices in self._channels.items():
+                    if not self._select(channel):
+                        failed.extend(indices)
+                        continue
+                    for index in indices:
+                        try:
+                            self._configure(index)
+                            self._configured[index] = True
+                        except OSError:
+                            self._mark_error(index)
+                            failed.append(index)
+            finally:
+                if self._config.mux_deselect_after_read:
+                    self._deselect()
+        return sorted(failed)
+
+    def read(self) -> FeedbackReading:
+        """Read all conversion registers once; never raises for bus errors (they mark joints stale)."""
+        if self._started_at is None:
+            raise RuntimeError("ServoFeedbackArray.read() before start()")
+        codes = np.full(self._count, np.nan)
+        try:
+            with bus_locked(self._bus, self._config.bus_lock_timeout):
+                try:
+                    self._read_cycle(codes)
+                finally:
+                    if self._config.mux_deselect_after_read:
+                        self._deselect()
+        except OSError as exc:
+            if exc.errno != errno.EBUSY:
+                raise
+            self._lock_timeouts += 1
+        return self._assemble(codes)
+
+    def _read_cycle(self, codes: np.ndarray) -> None:
+        order = sorted(self._channels)
+        if self._selected in self._channels:  # start where the mux already points: one switch saved
+            start = order.index(self._selected)
+            order = order[start:] + order[:start]
+        for channel in order:
+            if not self._select(channel):
+                continue
+            for index in self._channels[channel]:
+                try:
+                    if not self._configured[index]:
+                        # Re-configure a device that NACKed: it may have power-cycled back to its
+                        # single-shot default. Its first continuous result is ready 1/DR (1.2 ms) later,
+                        # so this cycle's conversion register is not trusted: the joint stays stale
+                        # for one more cycle.
+                        self._configure(index)
+                        self._configured[index] = True
+                        continue
+                    codes[index] = self._read_code(index)
+                except OSError:
+                    self._mark_error(index)
+
+    def _assemble(self, codes: np.ndarray) -> FeedbackReading:
+        now = self._clock()
+        valid = np.isfinite(codes)
+        volts = np.full(self._count, np.nan)
+        volts[valid] = codes[valid] * (self._config.adc_full_scale_v / 32768.0)
+        angles = np.full(self._count, np.nan)
+        if np.any(valid):
+            all_angles = self._calibration.volts_to_angles(np.where(valid, volts, 0.0))
+            angles[valid] = all_angles[valid]
+        self._last_good[valid] = now
+        self._last_angle[valid] = angles[valid]
+        age = now - self._last_good
+        held = np.where(age <= self._config.stale_after, self._last_angle, np.nan)
+        since_start = now - (self._started_at if self._started_at is not None else now)
+        stale: List[int] = []
+        failed: List[int] = []
+        for index in np.flatnonzero(~valid):
+            reference = age[index] if math.isfinite(age[index]) else since_start
+            (failed if reference > self._config.failed_after else stale).append(int(index))
+        return FeedbackReading(stamp=now, volts=volts, angles=angles, valid=valid, stale=stale, failed=failed,
+                               error_counts=self._error_counts.copy(), mux_errors=self._mux_errors,
+                               held_angles=held, age=age)
+
+
+__all__ = ["FeedbackReading", "ServoFeedbackArray", "ads1115_continuous_config"]

@@ -1,0 +1,545 @@
+"""A byte-level fake VN-100 for tests and simulation, an in-memory serial port and a pty bridge.
+
+:class:`FakeVn100` speaks the subset of the VN-100 serial protocol the driver uses (UM001 Sec. 3.8,
+3.9, 4.2-4.4): ASCII commands ``$VNRRG``, ``$VNWRG`` (registers 1, 5, 6, 7, 75-77), ``$VNASY``, with
+checksum verification (8-bit XOR, 16-bit CRC, or the ``XX`` bypass) and ``$VNERR`` replies; and the
+binary output message of register 75 at 800 Hz / RateDivisor. Like a factory-fresh sensor it starts
+with ASCII asynchronous output on (``$VNYMR`` at 40 Hz) and binary output off, and it returns to
+that state after a power cycle, so the driver's configuration handshake is exercised every time.
+
+The simulator feeds it ROS-frame truth with :meth:`FakeVn100.set_state` (ENU world, FLU body,
+REP-145 specific force); :func:`~quadruped_drivers.vn100.conversions.ros_to_vn` turns that into the
+sensor's NED/FRD conventions, so a correct driver reproduces the truth exactly (up to float32).
+
+:class:`InMemoryPort` makes the fake look like a pyserial port in-process (tests, with an injected
+clock); :class:`PtyFakeVn100` exposes it on a pseudo-terminal so the unchanged driver opens a real
+serial device path through pyserial (simulated robot).
+"""
+from __future__ import annotations
+
+import errno
+import math
+import os
+import select
+import threading
+import time
+import tty
+from dataclasses import dataclass
+from typing import Callable, List, Optional, Sequence, Tuple, Union
+
+import numpy as np
+
+from quadruped_control.so3 import exp_so3, quat_multiply, rot_to_quat
+from quadruped_drivers.vn100 import protocol as vp
+from quadruped_drivers.vn100.conversions import ros_to_vn
+
+GRAVITY = 9.80665
+DEFAULT_MODEL = "VN-100T-CR"
+_DEFAULT_ASCII_RATE_HZ = 40
+_ADOR_YMR = 14  # Async Data Output Type "VNYMR" (factory default)
+
+
+class ManualClock:
+    """A clock for deterministic tests: ``clock()`` returns ``now``; ``sleep(dt)`` advances it."""
+
+    def __init__(self, start: float = 0.0) -> None:
+        self.now = float(start)
+
+    def __call__(self) -> float:
+        return self.now
+
+    def sleep(self, seconds: float) -> None:
+        self.now += max(0.0, float(seconds))
+
+    advance = sleep
+
+
+@dataclass
+class NoiseModel:
+    """Standard deviations of white noise added to each packet: ``attitude`` (rad, small-angle
+    rotation applied to the quaternion), ``angular_rate`` (rad/s), ``acceleration`` (m/s^2)."""
+
+    attitude: float = 0.0
+    angular_rate: float = 0.0
+    acceleration: float = 0.0
+
+
+class FakeVn100:
+    """Fake VN-100 byte stream (thread-safe: the simulator and a pty pump may share it).
+
+    Host side: :meth:`write` (commands in), :meth:`read` / :attr:`in_waiting` (replies and binary
+    packets out). Device side: :meth:`set_state`, :meth:`advance` (generate the output due up to
+    ``now``), :meth:`disconnect` / :meth:`reconnect` (unplug: host I/O raises ``OSError``).
+
+    ``noise_std``: a :class:`NoiseModel` or one number used for all three; ``corrupt_probability``:
+    per binary packet, one byte is flipped; ``drop_probability``: per binary packet, it is lost.
+    ``rng``: a ``numpy.random.Generator`` or a seed (deterministic by default).
+    """
+
+    OUTPUT_LIMIT = 1 << 16  # bytes; like a UART nobody reads, further output is lost
+
+    def __init__(self, model: str = DEFAULT_MODEL,
+                 noise_std: Union[NoiseModel, float] = 0.0,
+                 corrupt_probability: float = 0.0, drop_probability: float = 0.0,
+                 rng: Union[np.random.Generator, int, None] = 0,
+                 boot_time: float = 0.0) -> None:
+        for name, p in (("corrupt_probability", corrupt_probability),
+                        ("drop_probability", drop_probability)):
+            if not 0.0 <= p <= 1.0:
+                raise ValueError("%s must be in [0, 1], got %r" % (name, p))
+        self.model = model
+        self.noise = noise_std if isinstance(noise_std, NoiseModel) else \
+            NoiseModel(float(noise_std), float(noise_std), float(noise_std))
+        self.corrupt_probability = corrupt_probability
+        self.drop_probability = drop_probability
+        self.rng = rng if isinstance(rng, np.random.Generator) else np.random.default_rng(rng)
+        self._lock = threading.RLock()
+        self._out = bytearray()
+        self._in = bytearray()
+        self.connected = True
+        self.commands: List[bytes] = []  # every command line received (for tests / diagnostics)
+        self.packets_sent = 0
+        self.packets_dropped = 0
+        self.packets_corrupted = 0
+        self._now: Optional[float] = None
+        self._q_vn = np.array([0.0, 0.0, 0.0, 1.0])
+        self._rate_vn = np.zeros(3)
+        self._accel_vn = np.array([0.0, 0.0, -GRAVITY])
+        self.set_state([0.0, 0.0, math.sqrt(0.5), math.sqrt(0.5)], [0.0, 0.0, 0.0],
+                       [0.0, 0.0, GRAVITY])  # level, at rest, facing North
+        self._power_on(boot_time)
+
+    # ------------------------------------------------------------------ device state
+    def _power_on(self, now: float) -> None:
+        self.boot_time = float(now)
+        self.async_paused = False
+        self.ascii_output_type = _ADOR_YMR
+        self.ascii_rate_hz = _DEFAULT_ASCII_RATE_HZ
+        self.baud = 115200
+        self.binary_config = {75: (0, 0, {1: vp.DEFAULT_GROUP1_FIELDS}),
+                              76: (0, 0, {1: vp.DEFAULT_GROUP1_FIELDS}),
+                              77: (0, 0, {1: vp.DEFAULT_GROUP1_FIELDS})}
+        self._next_tick = 0  # next 800 Hz IMU tick index to consider for output
+        self._in = bytearray()
+
+    def set_state(self, orientation_xyzw_ros: Sequence[float],
+                  angular_velocity_ros: Sequence[float],
+                  linear_acceleration_ros: Sequence[float]) -> None:
+        """Truth in ROS frames (ENU/FLU, REP-145 specific force); ValueError for invalid input."""
+        q, w, a = ros_to_vn(orientation_xyzw_ros, angular_velocity_ros, linear_acceleration_ros)
+        with self._lock:
+            self._q_vn, self._rate_vn, self._accel_vn = q, w, a
+
+    def power_cycle(self, now: Optional[float] = None) -> None:
+        """Reset to factory output settings (ASCII async on, binary off), clearing queues."""
+        with self._lock:
+            self._out = bytearray()
+            self._power_on(self._now if now is None else now)
+
+    def disconnect(self) -> None:
+        """Unplug: host reads and writes raise ``OSError`` until :meth:`reconnect`."""
+        with self._lock:
+            self.connected = False
+            self._out = bytearray()
+            self._in = bytearray()
+
+    def reconnect(self, power_cycle: bool = True) -> None:
+        """Plug back in; by default the sensor has lost power and forgotten its configuration."""
+        with self._lock:
+            self.connected = True
+            if power_cycle:
+                self.power_cycle()
+
+    # ------------------------------------------------------------------ host side
+    def _check_connected(self) -> None:
+        if not self.connected:
+            raise OSError(errno.EIO, "VN-100 disconnected")
+
+    @property
+    def in_waiting(self) -> int:
+        with self._lock:
+            self._check_connected()
+            return len(self._out)
+
+    def read(self, n: int) -> bytes:
+        """Up to ``n`` queued output bytes (never blocks)."""
+        with self._lock:
+            self._check_connected()
+            data = bytes(self._out[:max(0, n)])
+            del self._out[:len(data)]
+            return data
+
+    def write(self, data: bytes) -> int:
+        """Receive host bytes; complete command lines are answered immediately."""
+        with self._lock:
+            self._check_connected()
+            self._in += data
+            while True:
+                end = self._in.find(b"\n")
+                if end < 0:
+                    break
+                line = bytes(self._in[:end + 1])
+                del self._in[:end + 1]
+                self._handle_line(line)
+            if len(self._in) > 256:  # UM001 Sec. 3.8: 256 character input buffer
+                self._in = bytearray()
+                self._reply("VNERR,02")
+            return len(data)
+
+    def _reply(self, body: str) -> None:
+        self._emit(vp.ascii_command(body))
+
+    def _emit(self, data: bytes) -> None:
+        if len(self._out) + len(data) <= self.OUTPUT_LIMIT:
+            self._out += data
+
+    def _handle_line(self, raw: bytes) -> None:
+        text = raw.strip(b"\r\n")
+        start = text.rfind(b"$")
+        if start < 0:
+            return  # noise without a start character is ignored, like the sensor does
+        text = text[start:]
+        self.commands.append(text)
+        star = text.rfind(b"*")
+        if star < 0:
+            self._reply("VNERR,03")
+            return
+        body, check = text[1:star], text[star + 1:]
+        if check.upper() not in (b"XX", b"XXXX"):
+            try:
+                parse_ok = vp.parse_ascii_response(text) is not None
+            except vp.ProtocolError:
+                parse_ok = False
+            if not parse_ok:
+                self._reply("VNERR,03")
+                return
+        try:
+            body_text = body.decode("ascii")
+        except UnicodeDecodeError:
+            self._reply("VNERR,04")
+            return
+        parts = body_text.split(",")
+        command, args = parts[0], parts[1:]
+        if command == "VNASY":
+            if len(args) != 1 or args[0] not in ("0", "1"):
+                self._reply("VNERR,07")
+                return
+            self.async_paused = args[0] == "0"
+            self._reply("VNASY,%s" % args[0])
+        elif command == "VNRRG":
+            self._read_register(args)
+        elif command == "VNWRG":
+            self._write_register(args)
+        else:
+            self._reply("VNERR,04")
+
+    def _register_values(self, register: int) -> Optional[List[str]]:
+        if register == 1:
+            return [self.model]
+        if register == 5:
+            return [str(self.baud)]
+        if register == 6:
+            return [str(self.ascii_output_type)]
+        if register == 7:
+            return [str(self.ascii_rate_hz)]
+        if register in self.binary_config:
+            mode, divisor, selection = self.binary_config[register]
+            group_byte = 0
+            for group in selection:
+                group_byte |= 1 << (group - 1)
+            return [str(mode), str(divisor), "%02X" % group_byte] + \
+                ["%04X" % selection[g] for g in sorted(selection)]
+        return None
+
+    def _read_register(self, args: List[str]) -> None:
+        if len(args) != 1:
+            self._reply("VNERR,05" if not args else "VNERR,06")
+            return
+        try:
+            register = int(args[0], 10)
+        except ValueError:
+            self._reply("VNERR,07")
+            return
+        values = self._register_values(register)
+        if values is None:
+            self._reply("VNERR,08")
+            return
+        self._reply(",".join(["VNRRG", "%02d" % register] + values))
+
+    def _write_register(self, args: List[str]) -> None:
+        if len(args) < 2:
+            self._reply("VNERR,05")
+            return
+        try:
+            register = int(args[0], 10)
+        except ValueError:
+            self._reply("VNERR,07")
+            return
+        values = args[1:]
+        try:
+            if register == 1:
+                self._reply("VNERR,09")  # model number is read-only
+                return
+            if register == 5:
+                baud = int(values[0])
+                if baud not in (9600, 19200, 38400, 57600, 115200, 128000, 230400, 460800,
+                                921600):
+                    raise ValueError(baud)
+                self.baud = baud  # the pty / in-memory link has no real baud rate
+            elif register == 6:
+                self.ascii_output_type = int(values[0])
+                if not 0 <= self.ascii_output_type <= 30:
+                    raise ValueError(values[0])
+            elif register == 7:
+                rate = int(values[0])
+                if rate not in (1, 2, 4, 5, 10, 20, 25, 40, 50, 100, 200):
+                    raise ValueError(rate)
+                self.ascii_rate_hz = rate
+            elif register in self.binary_config:
+                mode, divisor, selection = vp.parse_binary_output_config(values)
+                if mode not in (0, 1, 2, 3) or not 1 <= divisor <= 0xFFFF:
+                    raise ValueError(values)
+                vp.encode_binary_packet(vp.Vn100Sample(0, (0.0, 0.0, 0.0, 1.0), (0.0,) * 3,
+                                                       (0.0,) * 3), selection)  # validates
+                self.binary_config[register] = (mode, divisor, selection)
+            else:
+                self._reply("VNERR,08")
+                return
+        except (ValueError, IndexError, vp.ProtocolError):
+            self._reply("VNERR,07")
+            return
+        self._reply(",".join(["VNWRG", "%02d" % register] + (self._register_values(register)
+                                                              or [])))
+
+    # ------------------------------------------------------------------ output generation
+    def advance(self, now: float) -> None:
+        """Queue the output due in (last call, ``now``] (at most one second of it after a gap)."""
+        with self._lock:
+            if self._now is not None and now <= self._now:
+                return
+            self._now = now
+            if not self.connected:
+                return
+            tick_now = int(math.floor((now - self.boot_time) * vp.IMU_RATE_HZ + 1e-9))
+            if tick_now < 0:
+                return
+            first = max(self._next_tick, tick_now - int(vp.IMU_RATE_HZ) + 1)
+            self._next_tick = tick_now + 1
+            if self.async_paused:
+                return
+            mode, divisor, selection = self.binary_config[75]
+            binary = mode in (1, 3) and divisor > 0
+            ascii_divisor = int(vp.IMU_RATE_HZ) // self.ascii_rate_hz \
+                if self.ascii_output_type == _ADOR_YMR else 0
+            for tick in range(first, tick_now + 1):
+                if binary and tick % divisor == 0:
+                    self._emit_packet(tick, selection)
+                if ascii_divisor and tick % ascii_divisor == 0:
+                    self._emit_ymr()
+
+    def _noisy_state(self) -> Tuple[np.ndarray, np.ndarray, np.ndarray]:
+        q, w, a = self._q_vn, self._rate_vn, self._accel_vn
+        if self.noise.attitude > 0.0:
+            dq = rot_to_quat(exp_so3(self.rng.normal(0.0, self.noise.attitude, 3)))
+            q = quat_multiply(q, dq)
+        if self.noise.angular_rate > 0.0:
+            w = w + self.rng.normal(0.0, self.noise.angular_rate, 3)
+        if self.noise.acceleration > 0.0:
+            a = a + self.rng.normal(0.0, self.noise.acceleration, 3)
+        return q, w, a
+
+    def _emit_packet(self, tick: int, selection) -> None:
+        if self.drop_probability > 0.0 and self.rng.random() < self.drop_probability:
+            self.packets_dropped += 1
+            return
+        q, w, a = self._noisy_state()
+        sample = vp.Vn100Sample(
+            time_startup_ns=tick * 1250000,  # 1 / 800 Hz = 1.25 ms
+            quaternion_xyzw=tuple(float(v) for v in q),
+            angular_rate=tuple(float(v) for v in w),
+            acceleration=tuple(float(v) for v in a))
+        packet = bytearray(vp.encode_binary_packet(sample, selection))
+        if self.corrupt_probability > 0.0 and self.rng.random() < self.corrupt_probability:
+            index = int(self.rng.integers(0, len(packet)))
+            packet[index] ^= int(self.rng.integers(1, 256))
+            self.packets_corrupted += 1
+        self.packets_sent += 1
+        self._emit(bytes(packet))
+
+    def _emit_ymr(self) -> None:
+        """``$VNYMR``: yaw, pitch, roll (deg), mag (Gauss), accel (m/s^2), rate (rad/s)."""
+        x, y, z, w = self._q_vn
+        yaw = math.degrees(math.atan2(2.0 * (w * z + x * y), 1.0 - 2.0 * (y * y + z * z)))
+        pitch = math.degrees(math.asin(max(-1.0, min(1.0, 2.0 * (w * y - z * x)))))
+        roll = math.degrees(math.atan2(2.0 * (w * x + y * z), 1.0 - 2.0 * (x * x + y * y)))
+        values = [yaw, pitch, roll, 0.25, 0.0, 0.4] + list(self._accel_vn) + list(self._rate_vn)
+        self._reply("VNYMR," + ",".join("%+.4f" % v for v in values))
+
+
+class InMemoryPort:
+    """pyserial-like port onto a :class:`FakeVn100` (``read``, ``write``, ``in_waiting``,
+    ``reset_input_buffer``, ``close``, ``is_open``, ``timeout``).
+
+    Each I/O call first lets the device catch up to ``clock()``. A read that finds fewer bytes than
+    asked "blocks" for ``timeout`` by calling ``sleep`` (with a :class:`ManualClock` this advances
+    simulated time; with ``sleep=None`` reads never block).
+    """
+
+    def __init__(self, device: FakeVn100, clock: Callable[[], float] = time.monotonic,
+                 sleep: Optional[Callable[[float], None]] = None, timeout: float = 0.01) -> None:
+        device._check_connected()
+        self.device = device
+        self.clock = clock
+        self.sleep = sleep
+        self.timeout = timeout
+        self.is_open = True
+        self.bytes_written = bytearray()
+
+    @classmethod
+    def factory(cls, device: FakeVn100, clock: Callable[[], float] = time.monotonic,
+                sleep: Optional[Callable[[float], None]] = None,
+                timeout: float = 0.01) -> Callable[[], "InMemoryPort"]:
+        """A port factory for :class:`~quadruped_drivers.vn100.driver.Vn100Driver`; opening fails
+        with ``OSError`` while the device is unplugged, like a missing ``/dev`` node."""
+        return lambda: cls(device, clock=clock, sleep=sleep, timeout=timeout)
+
+    def _check_open(self) -> None:
+        if not self.is_open:
+            raise OSError(errno.EBADF, "port is closed")
+
+    @property
+    def in_waiting(self) -> int:
+        self._check_open()
+        self.device.advance(self.clock())
+        return self.device.in_waiting
+
+    def read(self, size: int = 1) -> bytes:
+        self._check_open()
+        self.device.advance(self.clock())
+        data = self.device.read(size)
+        if len(data) < size and self.sleep is not None and self.timeout:
+            self.sleep(self.timeout)
+            self.device.advance(self.clock())
+            data += self.device.read(size - len(data))
+        return data
+
+    def write(self, data: bytes) -> int:
+        self._check_open()
+        self.device.advance(self.clock())
+        self.bytes_written += data
+        return self.device.write(bytes(data))
+
+    def reset_input_buffer(self) -> None:
+        self._check_open()
+        self.device.advance(self.clock())
+        self.device.read(1 << 30)
+
+    def close(self) -> None:
+        self.is_open = False
+
+
+class PtyFakeVn100:
+    """Serve a :class:`FakeVn100` on a pseudo-terminal so a real serial driver can open it.
+
+    ``start()`` creates the pty pair (raw mode), optionally a symlink ``symlink_path`` -> slave
+    device (e.g. ``/tmp/sim/vn100``), and a thread that every ``period`` s advances the fake to
+    ``clock()``, writes its output to the master and feeds bytes read from the master (host
+    commands) to it. ``stop()`` ends the thread and removes the pty and the symlink.
+    """
+
+    PENDING_LIMIT = 1 << 16
+
+    def __init__(self, device: FakeVn100, clock: Callable[[], float] = time.monotonic,
+                 symlink_path: Optional[str] = None, period: float = 0.001) -> None:
+        self.device = device
+        self.clock = clock
+        self.symlink_path = symlink_path
+        self.period = period
+        self._master: Optional[int] = None
+        self._slave: Optional[int] = None
+        self._thread: Optional[threading.Thread] = None
+        self._stop = threading.Event()
+        self.slave_path: Optional[str] = None
+        self.error: Optional[BaseException] = None
+
+    def start(self) -> str:
+        """Open the pty and start pumping; returns the path the driver should open."""
+        if self._thread is not None:
+            raise RuntimeError("PtyFakeVn100 already started")
+        master, slave = os.openpty()
+        tty.setraw(slave)
+        os.set_blocking(master, False)
+        self._master, self._slave = master, slave
+        self.slave_path = os.ttyname(slave)
+        path = self.slave_path
+        if self.symlink_path:
+            if os.path.islink(self.symlink_path):
+                os.unlink(self.symlink_path)
+            directory = os.path.dirname(self.symlink_path)
+            if directory:
+                os.makedirs(directory, exist_ok=True)
+            os.symlink(self.slave_path, self.symlink_path)
+            path = self.symlink_path
+        self._stop.clear()
+        self._thread = threading.Thread(target=self._run, name="fake-vn100-pty", daemon=True)
+        self._thread.start()
+        return path
+
+    @property
+    def path(self) -> Optional[str]:
+        return self.symlink_path or self.slave_path
+
+    def _run(self) -> None:
+        master = self._master
+        assert master is not None
+        pending = bytearray()
+        try:
+            while not self._stop.is_set():
+                self.device.advance(self.clock())
+                try:
+                    pending += self.device.read(self.PENDING_LIMIT)
+                except OSError:
+                    pending = bytearray()  # unplugged: nothing leaves the device
+                if len(pending) > self.PENDING_LIMIT:
+                    del pending[:len(pending) - self.PENDING_LIMIT]
+                if pending:
+                    try:
+                        written = os.write(master, bytes(pending))
+                        del pending[:written]
+                    except BlockingIOError:
+                        pass
+                readable, _, _ = select.select([master], [], [], self.period)
+                if readable:
+                    try:
+                        data = os.read(master, 4096)
+                    except (BlockingIOError, InterruptedError):
+                        data = b""
+                    if data:
+                        try:
+                            self.device.write(data)
+                        except OSError:
+                            pass  # unplugged: the bytes are lost
+        except BaseException as exc:  # surfaced to the owner via .error
+            self.error = exc
+
+    def stop(self) -> None:
+        self._stop.set()
+        if self._thread is not None:
+            self._thread.join(timeout=2.0)
+            self._thread = None
+        for fd in (self._master, self._slave):
+            if fd is not None:
+                try:
+                    os.close(fd)
+                except OSError:
+                    pass
+        self._master = self._slave = None
+        if self.symlink_path and os.path.islink(self.symlink_path):
+            os.unlink(self.symlink_path)
+
+    def __enter__(self) -> "PtyFakeVn100":
+        self.start()
+        return self
+
+    def __exit__(self, *exc) -> None:
+        self.stop()

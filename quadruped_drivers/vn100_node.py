@@ -1,0 +1,149 @@
+"""ROS glue of the VN-100 IMU driver: serial binary packets -> /imu/data (REP-145).
+
+Publishes
+  imu/data      sensor_msgs/Imu  orientation of base FLU relative to world ENU, angular velocity (FLU,
+                rad/s), linear acceleration (FLU, m/s^2, specific force), covariances from parameters.
+                header.stamp is the arrival time of the packet (earlier packets of a burst are dated
+                back by the sensor's own time-since-startup), frame_id from ~frame_id.
+  diagnostics   rate, CRC errors, resync bytes, disconnects, last serial error
+Parameters
+  ~port (/dev/vn100, the udev rule's link)  ~baud (921600)  ~rate (200 Hz; 800 must be divisible by it)
+  ~frame_id (imu_link)  ~orientation_covariance_diagonal ~angular_velocity_covariance_diagonal
+  ~linear_acceleration_covariance_diagonal  ~read_timeout ~reconnect_interval ~command_timeout
+  ~stale_timeout (s)  ~config_yaml (package config/vn100.yaml supplies the defaults of all of the above)
+
+The node reads in its own thread (the serial read blocks for at most the port timeout); framing, CRC,
+configuration, reconnection and the NED/FRD -> ENU/FLU conversion are the driver's.
+"""
+from __future__ import annotations
+
+import threading
+import time
+from typing import List, Optional, Sequence
+
+import rospy
+from diagnostic_msgs.msg import DiagnosticStatus
+from diagnostic_updater import DiagnosticStatusWrapper, Updater
+from sensor_msgs.msg import Imu
+
+from quadruped_control.monitoring import RateMonitor
+from quadruped_control.params import ParameterError, config_path, load_yaml
+from quadruped_drivers.vn100.conversions import vn_to_ros
+from quadruped_drivers.vn100.driver import Vn100Driver, serial_port_factory
+
+
+def _diagonal(values: Sequence[float], name: str) -> List[float]:
+    values = [float(v) for v in values]
+    if len(values) == 9:
+        return values
+    if len(values) != 3 or any(v < 0 for v in values):
+        raise ParameterError("%s must be 3 non-negative variances (diagonal) or 9 values" % name)
+    return [values[0], 0.0, 0.0, 0.0, values[1], 0.0, 0.0, 0.0, values[2]]
+
+
+class Vn100Node:
+    def __init__(self) -> None:
+        defaults = load_yaml(rospy.get_param("~config_yaml", "") or config_path("vn100.yaml"))
+
+        def param(name: str):
+            value = rospy.get_param("~" + name, defaults.get(name))
+            if value is None:
+                raise ParameterError("vn100 parameter %r missing (not in ~%s nor config_yaml)" % (name, name))
+            return value
+
+        self.port = param("port")
+        self.baud = int(param("baud"))
+        self.rate_hz = float(param("rate_hz") if not rospy.has_param("~rate") else rospy.get_param("~rate"))
+        self.frame_id = param("frame_id")
+        self.covariances = {
+            key: _diagonal(param(key + "_covariance_diagonal"), key + "_covariance_diagonal")
+            for key in ("orientation", "angular_velocity", "linear_acceleration")}
+        self.driver = Vn100Driver(serial_port_factory(self.port, self.baud, float(param("read_timeout"))),
+                                  rate_hz=self.rate_hz,
+                                  reconnect_interval=float(param("reconnect_interval")),
+                                  command_timeout=float(param("command_timeout")),
+                                  stale_timeout=float(param("stale_timeout")))
+        self.publisher = rospy.Publisher("imu/data", Imu, queue_size=10, tcp_nodelay=True)
+        self.monitor = RateMonitor(2.0)
+        self.published = 0
+        self.rejected = 0
+        self.diagnostics = Updater()
+        self.diagnostics.setHardwareID("vn100 %s" % self.port)
+        self.diagnostics.add("imu", self._diagnose)
+        self.diag_timer = rospy.Timer(rospy.Duration(1.0), lambda _e: self.diagnostics.update())
+        self.thread = threading.Thread(target=self._run, name="vn100_reader", daemon=True)
+        self.thread.start()
+        rospy.loginfo("vn100_node: %s at %d baud, %.0f Hz, frame %s", self.port, self.baud, self.rate_hz,
+                      self.frame_id)
+
+    def _run(self) -> None:
+        while not rospy.is_shutdown():
+            samples = self.driver.read_samples()
+            if not samples:
+                if not self.driver.connected:
+                    time.sleep(0.01)  # the driver reconnects on its own schedule; do not spin
+                continue
+            arrival = rospy.Time.now()
+            last_time = samples[-1].time_startup_ns
+            for sample in samples:
+                self._publish(sample, arrival, last_time)
+
+    def _publish(self, sample, arrival: rospy.Time, last_time_ns: Optional[int]) -> None:
+        if sample.quaternion_xyzw is None or sample.angular_rate is None or sample.acceleration is None:
+            self.rejected += 1
+            return
+        try:
+            reading = vn_to_ros(sample.quaternion_xyzw, sample.angular_rate, sample.acceleration)
+        except ValueError as exc:  # NaN or non-unit quaternion from the wire: drop, count, say why
+            self.rejected += 1
+            rospy.logwarn_throttle(1.0, "vn100_node: sample dropped: %s" % exc)
+            return
+        stamp = arrival
+        if last_time_ns is not None and sample.time_startup_ns is not None:
+            stamp = arrival - rospy.Duration.from_sec(max(0.0, (last_time_ns - sample.time_startup_ns) * 1e-9))
+        msg = Imu()
+        msg.header.stamp = stamp
+        msg.header.frame_id = self.frame_id
+        (msg.orientation.x, msg.orientation.y, msg.orientation.z,
+         msg.orientation.w) = [float(v) for v in reading.orientation_xyzw]
+        (msg.angular_velocity.x, msg.angular_velocity.y,
+         msg.angular_velocity.z) = [float(v) for v in reading.angular_velocity]
+        (msg.linear_acceleration.x, msg.linear_acceleration.y,
+         msg.linear_acceleration.z) = [float(v) for v in reading.linear_acceleration]
+        msg.orientation_covariance = self.covariances["orientation"]
+        msg.angular_velocity_covariance = self.covariances["angular_velocity"]
+        msg.linear_acceleration_covariance = self.covariances["linear_acceleration"]
+        self.publisher.publish(msg)
+        self.published += 1
+        self.monitor.tick(time.monotonic())
+
+    def _diagnose(self, stat: DiagnosticStatusWrapper) -> DiagnosticStatusWrapper:
+        rate = self.monitor.rate(time.monotonic())
+        parser = self.driver.parser
+        if not self.driver.connected:
+            stat.summary(DiagnosticStatus.ERROR, "disconnected: %s" % (self.driver.last_error or "opening port"))
+        elif rate < 0.9 * self.rate_hz:
+            stat.summary(DiagnosticStatus.WARN, "%.1f Hz, expected %.0f Hz" % (rate, self.rate_hz))
+        else:
+            stat.summary(DiagnosticStatus.OK, "streaming")
+        stat.add("rate [Hz]", "%.1f" % rate)
+        stat.add("published", str(self.published))
+        stat.add("rejected samples", str(self.rejected))
+        stat.add("packets", str(parser.packets))
+        stat.add("CRC errors", str(parser.crc_errors))
+        stat.add("sensor errors", str(self.driver.sensor_errors))
+        stat.add("resync bytes", str(parser.resync_bytes))
+        stat.add("disconnects", str(self.driver.disconnects))
+        stat.add("model", str(self.driver.model))
+        stat.add("last error", str(self.driver.last_error))
+        return stat
+
+
+def main(argv: Optional[List[str]] = None) -> None:
+    rospy.init_node("vn100_node")
+    try:
+        Vn100Node()
+    except (ParameterError, ValueError, OSError) as exc:
+        rospy.logfatal("vn100_node cannot start: %s", exc)
+        raise SystemExit(1)
+    rospy.spin()

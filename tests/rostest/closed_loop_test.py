@@ -1,0 +1,91 @@
+#!/usr/bin/env python3
+"""rostest: the simulated closed loop reaches and holds a 30 degree roll setpoint from a yaw offset.
+
+Listens to /controller_state (geodesic error of every control step) and /sim/servo_output (the pulse
+widths the fake PCA9685 really produces). Passes when the geodesic error, smoothed with the paper's
+centred 3 s moving average, enters the 6 degree band and stays in it for ~hold_duration seconds before
+~settle_timeout; and no pulse width ever left its channel's limits.
+"""
+import math
+import sys
+import threading
+import unittest
+
+import numpy as np
+import rospy
+import rostest
+
+from quadruped_control.metrics import moving_average_centered
+from quadruped_drivers.hardware_config import load_hardware_config
+from underwater_quadruped.msg import ControllerState, ServoCommand
+
+BAND = math.radians(6.0)
+
+
+class ClosedLoopTest(unittest.TestCase):
+    def setUp(self):
+        rospy.init_node("closed_loop_test", anonymous=True)
+        self.lock = threading.Lock()
+        self.times, self.errors = [], []
+        self.armed_seen = False
+        self.width_violations = []
+        hardware = load_hardware_config(rospy.get_param("~hardware_yaml"))
+        self.low, self.high = hardware.min_us, hardware.max_us
+        rospy.Subscriber("controller_state", ControllerState, self.on_state, queue_size=100)
+        rospy.Subscriber("sim/servo_output", ServoCommand, self.on_output, queue_size=100)
+
+    def on_state(self, msg):
+        with self.lock:
+            self.armed_seen |= msg.armed
+            stamp = msg.header.stamp.to_sec()
+            if msg.armed and not msg.holding and (not self.times or stamp > self.times[-1]):
+                self.times.append(stamp)
+                self.errors.append(msg.geodesic_error)
+
+    def on_output(self, msg):
+        widths = np.array(msg.pulse_width_us)
+        on = widths > 0  # 0 = channel off (failsafe before arming), always within limits
+        bad = on & ((widths < self.low - 1.0) | (widths > self.high + 1.0))
+        if np.any(bad):
+            self.width_violations.append(widths.tolist())
+
+    def settled_for(self):
+        """Seconds for which the smoothed error has been inside the band up to the newest complete
+        point of the centred window, and the smoothed error series."""
+        with self.lock:
+            t, e = np.array(self.times), np.array(self.errors)
+        if len(t) < 400:
+            return 0.0, None
+        smooth = moving_average_centered(e, t, 3.0)
+        complete = t <= t[-1] - 1.5  # the centred window needs 1.5 s of future samples
+        t, smooth = t[complete], smooth[complete]
+        if len(t) == 0:
+            return 0.0, None
+        outside = np.nonzero(smooth > BAND)[0]
+        if len(outside) == 0:
+            start = t[0]
+        elif outside[-1] == len(t) - 1:
+            return 0.0, smooth
+        else:
+            start = t[outside[-1] + 1]
+        return t[-1] - start, smooth
+
+    def test_reaches_and_holds_roll_setpoint(self):
+        timeout = rospy.get_param("~settle_timeout", 240.0)
+        hold = rospy.get_param("~hold_duration", 15.0)
+        deadline = rospy.get_time() + timeout
+        held, smooth = 0.0, None
+        while not rospy.is_shutdown() and rospy.get_time() < deadline:
+            rospy.sleep(1.0)
+            held, smooth = self.settled_for()
+            if held >= hold:
+                break
+        self.assertTrue(self.armed_seen, "the controller never reported armed")
+        last = "n/a" if smooth is None else "%.1f" % math.degrees(smooth[-1])
+        self.assertGreaterEqual(held, hold, "smoothed geodesic error within 6 deg for only %.1f s "
+                                "(last smoothed error %s deg)" % (held, last))
+        self.assertEqual(self.width_violations, [], "pulse widths outside the channel limits")
+
+
+if __name__ == "__main__":
+    rostest.rosrun("underwater_quadruped", "closed_loop", ClosedLoopTest, sys.argv)

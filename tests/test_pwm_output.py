@@ -1,0 +1,213 @@
+"""ServoPwmOutput against the fake PCA9685: start-up registers, exact pulses, clamping, watchdog,
+failsafe, enable/disable, shutdown, write errors; and the whole stack through the socket bus bridge."""
+import math
+import os
+import tempfile
+
+import numpy as np
+import pytest
+from hypothesis import given, strategies as st
+
+from quadruped_drivers.bus_bridge import BridgedI2CBus, BusBridgeServer
+from quadruped_drivers.calibration import load_servo_calibration
+from quadruped_drivers.hardware_config import load_hardware_config, pca9685_prescale
+from quadruped_drivers.i2c.fake_devices import build_fake_hardware
+from quadruped_drivers.pwm_output import PwmOutputError, ServoPwmOutput
+from quadruped_drivers.servo_feedback import ServoFeedbackArray
+
+HW = load_hardware_config()
+TICK_US = 1e6 * (121 + 1) / 25e6  # 4.88 us per tick at PRE_SCALE 121
+
+
+class Clock:
+    def __init__(self):
+        self.t = 10.0
+
+    def __call__(self):
+        return self.t
+
+
+def make(hw=HW, start=True):
+    fake = build_fake_hardware(hw, require_lock=True)
+    clock = Clock()
+    pwm = ServoPwmOutput(fake.bus, hw, clock=clock, sleep=lambda s: None)
+    if start:
+        pwm.start()
+    return fake, clock, pwm
+
+
+def with_failsafe(actions):
+    joints = tuple(type(j)(**{**j.__dict__, "failsafe": a}) for j, a in zip(HW.joints, actions))
+    return type(HW)(**{**HW.__dict__, "joints": joints})
+
+
+def test_prescale_formula_and_actual_frequency():
+    assert pca9685_prescale(50.0) == 121 == round(25e6 / (4096 * 50)) - 1
+    assert HW.prescale == 121
+    assert HW.actual_pwm_frequency_hz == pytest.approx(25e6 / (4096 * 122))
+    with pytest.raises(ValueError):
+        pca9685_prescale(2000.0)
+
+
+def test_start_sets_registers_and_leaves_outputs_off():
+    fake, _, pwm = make()
+    pca = fake.pca
+    assert pca.prescale == 121 and not pca.asleep and pca.auto_increment
+    assert pca.registers[0x01] == 0x04 and pca.mode1 & 0x80 == 0
+    assert pca.frequency_hz() == pytest.approx(pwm.frequency_hz)
+    assert np.all(fake.pulse_widths_us() == 0.0) and pwm.enabled
+    assert not fake.bus.locked
+
+
+def test_start_from_a_running_chip_still_takes_the_prescale():
+    fake, _, pwm = make()
+    pwm.command(np.full(12, 1500.0))
+    pwm.start()  # a restarted node: chip awake with outputs running
+    assert fake.pca.prescale == 121 and np.all(fake.pulse_widths_us() == 0.0)
+
+
+def test_start_raises_on_absent_chip_and_on_readback_mismatch():
+    fake, _, pwm = make(start=False)
+    fake.bus.inject_fault(HW.pca_address, "nack", count=None)
+    with pytest.raises(PwmOutputError, match="did not answer"):
+        pwm.start()
+    assert not fake.bus.locked
+    fake.bus.clear_faults()
+    # a chip that takes a different prescale than written (e.g. a glitch on the bus)
+    fake.pca.write = lambda data, _w=fake.pca.write: _w(b"\xfe\x1e" if data[:1] == b"\xfe" and len(data) == 2 else data)
+    with pytest.raises(PwmOutputError, match="PRE_SCALE = 30"):
+        pwm.start()
+    with pytest.raises(RuntimeError):
+        ServoPwmOutput(fake.bus, HW).command(np.full(12, 1500.0))
+
+
+def test_commanded_angle_gives_the_exact_pulse_in_the_chip():
+    fake, _, pwm = make()
+    cal = load_servo_calibration()
+    angles = np.radians([-140.0, -40.0, 90.0, -100.0, 0.0, 30.0, -200.0, -120.0, 170.0, -60.0, 45.0, 5.0])
+    pulses = cal.angles_to_pulses(angles)
+    fake.bus.clear_log()
+    applied = pwm.command(pulses)
+    log = fake.bus.log
+    assert len(log) == 1 and log[0].written[0] == 0x06 and len(log[0].written) == 1 + 4 * 12
+    expected_ticks = np.round(pulses * pwm.frequency_hz * 4096 / 1e6)
+    np.testing.assert_allclose(fake.pulse_widths_us(), expected_ticks * TICK_US, rtol=0, atol=1e-9)
+    np.testing.assert_allclose(applied, fake.pulse_widths_us(), rtol=0, atol=1e-9)
+    assert np.max(np.abs(applied - pulses)) <= TICK_US / 2 + 1e-9
+    # leg1 motor1 at its neutral angle -140 deg -> 1500 us -> 307 ticks
+    assert fake.pca.pulse_width_us(0) == pytest.approx(307 * TICK_US)
+
+
+@given(st.lists(st.one_of(st.floats(allow_nan=True, allow_infinity=True), st.floats(-1e4, 1e4)),
+                min_size=12, max_size=12))
+def test_clamping_never_exceeds_the_limits(values):
+    fake, _, pwm = make()
+    pwm.command(np.full(12, 1500.0))
+    applied = pwm.command(values)
+    widths = fake.pulse_widths_us()
+    np.testing.assert_allclose(applied, widths, atol=1e-9)
+    assert np.all(widths >= HW.min_us - 1e-9) and np.all(widths <= HW.max_us + 1e-9)
+
+
+def test_clamp_and_nan_counting_and_keep_last():
+    fake, _, pwm = make()
+    pwm.command(np.full(12, 1500.0))
+    cmd = np.full(12, 1600.0)
+    cmd[0], cmd[1], cmd[2] = 9000.0, -5.0, np.nan
+    applied = pwm.command(cmd)
+    assert pwm.clamp_count == 2 and pwm.invalid_count == 1
+    assert applied[0] <= 2500.0 and applied[0] > 2495.0 and applied[1] >= 500.0 and applied[1] < 505.0
+    assert applied[2] == pytest.approx(307 * TICK_US)  # NaN keeps the last applied width
+    with pytest.raises(ValueError):
+        pwm.command(np.full(11, 1500.0))
+
+
+def test_nan_before_any_command_uses_failsafe():
+    fake, _, pwm = make(with_failsafe(["neutral", "off", "hold"] * 4))
+    applied = pwm.command(np.full(12, np.nan))
+    assert applied[0] == pytest.approx(307 * TICK_US) and applied[1] == 0.0 and applied[2] == 0.0
+
+
+def test_watchdog_trips_once_applies_failsafe_and_clears_on_command():
+    fake, clock, pwm = make(with_failsafe(["hold", "neutral", "off"] * 4))
+    pwm.command(np.full(12, 2000.0))
+    clock.t += HW.watchdog_timeout * 0.99
+    assert not pwm.update()
+    clock.t += HW.watchdog_timeout * 0.02
+    fake.bus.clear_log()
+    assert pwm.update() and pwm.watchdog_tripped
+    widths = fake.pulse_widths_us()
+    assert widths[0] == pytest.approx(410 * TICK_US)  # hold 2000 us
+    assert widths[1] == pytest.approx(307 * TICK_US)  # neutral 1500 us
+    assert widths[2] == 0.0  # off
+    assert len(fake.bus.log) == 1
+    clock.t += 1.0
+    pwm.update()
+    assert len(fake.bus.log) == 1 and pwm.watchdog_trips == 1  # applied once
+    pwm.command(np.full(12, 1000.0))
+    assert not pwm.watchdog_tripped and np.all(fake.pulse_widths_us() > 0)
+
+
+def test_disable_turns_outputs_off_and_records_commands():
+    fake, clock, pwm = make()
+    pwm.command(np.full(12, 1500.0))
+    pwm.disable()
+    assert not pwm.enabled and np.all(fake.pulse_widths_us() == 0.0)
+    applied = pwm.command(np.full(12, 1800.0))
+    assert np.all(applied == 0.0) and np.all(fake.pulse_widths_us() == 0.0)
+    assert np.all(pwm.requested_us == 1800.0)
+    clock.t += 5.0
+    assert not pwm.update()  # no watchdog while disabled
+    pwm.enable()
+    assert np.all(fake.pulse_widths_us() == 0.0)  # no jump to an old command
+    pwm.command(np.full(12, 1800.0))
+    assert np.all(fake.pulse_widths_us() > 1790.0)
+
+
+def test_shutdown_turns_outputs_off_and_sleeps():
+    fake, _, pwm = make()
+    pwm.command(np.full(12, 1500.0))
+    assert pwm.shutdown()
+    assert fake.pca.asleep and not any(fake.pca.outputs_active(ch) for ch in range(16))
+    fake.pca.write(bytes([0x00, 0x20]))  # even woken again, the outputs stay off (ALL_LED full-off)
+    assert not any(fake.pca.outputs_active(ch) for ch in range(16))
+
+
+def test_write_error_is_counted_and_retried_by_update():
+    fake, clock, pwm = make()
+    pwm.command(np.full(12, 1500.0))
+    fake.bus.inject_fault(HW.pca_address, "oserror", count=1)
+    applied = pwm.command(np.full(12, 1700.0))
+    assert pwm.write_errors == 1 and applied[0] == pytest.approx(307 * TICK_US)
+    assert not fake.bus.locked
+    pwm.update()
+    assert fake.pca.pulse_width_us(0) == pytest.approx(round(1700 / TICK_US) * TICK_US)
+
+
+def test_whole_stack_through_the_socket_bridge():
+    hw = HW
+    cal = load_servo_calibration()
+    fake = build_fake_hardware(hw)
+    directory = tempfile.mkdtemp(prefix="uqpwm")
+    path = os.path.join(directory, "i2c.sock")
+    server = BusBridgeServer(fake.bus, path, lock=fake.bus.lock)
+    client = BridgedI2CBus(path)
+    try:
+        feedback = ServoFeedbackArray(client, hw, cal, clock=Clock())
+        pwm = ServoPwmOutput(client, hw, clock=Clock(), sleep=lambda s: None)
+        pwm.start()
+        angles = np.radians([-120.0, -30.0, 100.0] * 4)
+        fake.set_joint_voltages(cal.angles_to_volts(angles))
+        assert feedback.start() == []
+        reading = feedback.read()
+        assert reading.valid.all()
+        np.testing.assert_allclose(reading.angles, angles, atol=math.radians(0.02))
+        pwm.command(cal.angles_to_pulses(angles))
+        np.testing.assert_allclose(cal.pulses_to_angles(fake.pulse_widths_us()), angles, atol=math.radians(0.3))
+        fake.mux.channel_bus(0).inject_fault(0x49, "nack")
+        assert feedback.read().stale == [1]
+        assert pwm.shutdown() and np.all(fake.pulse_widths_us() == 0.0)
+    finally:
+        client.deinit()
+        server.close()
+        os.rmdir(directory)

@@ -1,0 +1,141 @@
+"""Tests of the simulator's servo models (rate limit, first-order lag, ideal)."""
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+from hypothesis import given
+from hypothesis import strategies as st
+
+from quadruped_control.params import ParameterError
+from quadruped_control.servo_model import (
+    IdealServo,
+    RateLimitedServo,
+    ServoParams,
+    load_servo_params,
+    make_servo_model,
+)
+
+W_MAX = 95.0 * 2.0 * math.pi / 60.0
+
+
+def test_ideal_servo_reaches_command_in_one_step() -> None:
+    servo = IdealServo()
+    servo.reset(np.zeros((4, 3)))
+    target = np.arange(12.0).reshape(4, 3) * 0.1
+    assert np.array_equal(servo.update(target, 0.01), target)
+    assert np.array_equal(servo.position, target)
+
+
+def test_rate_limit_caps_joint_speed_at_no_load_speed() -> None:
+    servo = RateLimitedServo(ServoParams(max_speed=W_MAX, time_constant=0.03))
+    servo.reset(np.zeros(12))
+    command = np.full(12, 2.0)
+    q = servo.update(command, 0.01)
+    assert np.allclose(q, W_MAX * 0.01)   # far from the target: moves at the speed limit
+    positions = [q]
+    for _ in range(20):
+        positions.append(servo.update(command, 0.01))
+    speeds = np.abs(np.diff(np.array(positions), axis=0)) / 0.01
+    assert np.max(speeds) <= W_MAX * (1.0 + 1e-12)
+
+
+def test_small_step_follows_first_order_lag_exactly() -> None:
+    tau = 0.05
+    servo = RateLimitedServo(ServoParams(max_speed=W_MAX, time_constant=tau))
+    servo.reset(np.zeros(12))
+    step = 0.01 * np.ones(12)  # below the knee w_max tau ~ 0.5 rad: pure lag
+    for k in range(1, 11):
+        q = servo.update(step, 0.01)
+        assert np.allclose(q, step * (1.0 - math.exp(-0.01 * k / tau)), rtol=1e-12, atol=1e-15)
+
+
+def test_large_step_is_rate_limited_then_lags() -> None:
+    tau = 0.03
+    servo = RateLimitedServo(ServoParams(max_speed=W_MAX, time_constant=tau))
+    servo.reset(np.zeros(12))
+    target = 1.0
+    # Analytic: linear at w_max until the error is w_max tau, then exponential.
+    t_knee = (target - W_MAX * tau) / W_MAX
+    q = None
+    for k in range(1, 31):
+        q = servo.update(np.full(12, target), 0.01)
+        t = 0.01 * k
+        if t <= t_knee:
+            expected = W_MAX * t
+        else:
+            expected = target - W_MAX * tau * math.exp(-(t - t_knee) / tau)
+        assert q[0] == pytest.approx(expected, abs=1e-12)
+    assert q is not None and abs(q[0] - target) < 1e-3
+
+
+def test_pure_rate_limiter_with_zero_time_constant() -> None:
+    servo = RateLimitedServo(ServoParams(max_speed=1.0, time_constant=0.0))
+    servo.reset(np.zeros(12))
+    assert np.allclose(servo.update(np.full(12, -0.5), 0.1), -0.1)
+    assert np.allclose(servo.update(np.full(12, -0.15), 0.1), -0.15)  # within reach: exact
+
+
+@given(st.lists(st.floats(-3.0, 3.0), min_size=12, max_size=12), st.floats(1e-3, 0.05),
+       st.floats(0.0, 0.2))
+def test_rate_limited_servo_never_overshoots_and_respects_speed(command, dt, tau) -> None:
+    servo = RateLimitedServo(ServoParams(max_speed=W_MAX, time_constant=tau))
+    servo.reset(np.zeros(12))
+    target = np.array(command)
+    previous = np.zeros(12)
+    for _ in range(5):
+        q = servo.update(target, dt)
+        assert np.all(np.abs(q - previous) <= W_MAX * dt * (1.0 + 1e-9) + 1e-15)
+        # Moves monotonically towards the target, never past it.
+        assert np.all(np.abs(target - q) <= np.abs(target - previous) + 1e-15)
+        assert np.all((target - q) * (target - previous) >= -1e-15)
+        previous = q
+
+
+def test_shape_is_preserved_and_bad_input_rejected() -> None:
+    servo = RateLimitedServo(ServoParams(max_speed=W_MAX, time_constant=0.03))
+    servo.reset(np.zeros((4, 3)))
+    assert servo.update(np.ones(12), 0.01).shape == (4, 3)
+    with pytest.raises(ValueError):
+        servo.update(np.full(12, np.nan), 0.01)
+    with pytest.raises(ValueError):
+        servo.update(np.zeros(11), 0.01)
+    with pytest.raises(ValueError):
+        servo.update(np.zeros(12), 0.0)
+    before = servo.position
+    with pytest.raises(ValueError):
+        servo.update(np.full(12, np.inf), 0.01)
+    assert np.array_equal(servo.position, before)  # a rejected command does not move the servos
+    with pytest.raises(RuntimeError):
+        IdealServo().position
+
+
+def test_params_validation_and_config_loading() -> None:
+    with pytest.raises(ParameterError):
+        ServoParams(max_speed=0.0, time_constant=0.03)
+    with pytest.raises(ParameterError):
+        ServoParams(max_speed=1.0, time_constant=-1.0)
+    params = load_servo_params()
+    assert params.max_speed == pytest.approx(W_MAX)
+    assert params.time_constant > 0.0
+    with pytest.raises(ParameterError):
+        load_servo_params(tree={"simulation": {}})
+    with pytest.raises(ParameterError):
+        load_servo_params(tree={"simulation": {"servo": {"no_load_speed_rpm": 95, "time_constant": 0.1,
+                                                          "speed_scale": 2.0}}})
+    assert isinstance(make_servo_model("ideal"), IdealServo)
+    assert isinstance(make_servo_model("rate-limited"), RateLimitedServo)
+    with pytest.raises(ValueError):
+        make_servo_model("magic")
+
+
+def test_update_trusted_matches_update() -> None:
+    params = ServoParams(max_speed=W_MAX, time_constant=0.03)
+    checked, trusted = RateLimitedServo(params), RateLimitedServo(params)
+    checked.reset(np.zeros((4, 3)))
+    trusted.reset(np.zeros((4, 3)))
+    rng = np.random.default_rng(5)
+    for _ in range(30):
+        command = rng.uniform(-1.0, 1.0, (4, 3))
+        np.testing.assert_array_equal(checked.update(command, 0.01), trusted.update_trusted(command, 0.01))

@@ -1,0 +1,213 @@
+"""Tests of the offline closed-loop simulator core (quadruped_control.simulation)."""
+from __future__ import annotations
+
+import dataclasses
+import math
+
+import numpy as np
+import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
+
+from quadruped_control.controller_config import load_controller_config
+from quadruped_control.dynamics import DynamicsError, FloatingBaseModel, RigidBodyState, held_joint_input
+from quadruped_control.kinematics import UnreachableError
+from quadruped_control.params import load_robot_params
+from quadruped_control.servo_model import IdealServo, RateLimitedServo, ServoParams
+from quadruped_control.simulation import (
+    ClosedLoopSimulation,
+    PlantSimulator,
+    SimulationError,
+    geodesic_angles,
+    load_simulation_settings,
+    nominal_joint_angles,
+    rotations_to_quaternions,
+    rotations_to_rpy,
+)
+from quadruped_control.so3 import exp_so3, geodesic_angle, rot_to_quat, rot_to_rpy, rpy_to_rot
+
+ROBOT = load_robot_params()
+CONFIG = load_controller_config(gain_set="simulation")
+Q0 = nominal_joint_angles(ROBOT)
+
+
+# ------------------------------------------------------------------ plant
+
+def test_plant_with_legs_still_does_not_rotate() -> None:
+    # Level: the paw buoyancy acts along the vertical through the symmetric feet, no torque at all.
+    plant = PlantSimulator(ROBOT, IdealServo())
+    for _ in range(200):
+        state = plant.step(Q0)
+    assert geodesic_angle(np.eye(3), state.rotation) < 1e-12
+    assert np.allclose(state.omega, 0.0, atol=1e-15)
+    # Tilted, with neutrally buoyant paws (no conservative torque): still no rotation.
+    neutral = dataclasses.replace(ROBOT, paw_mass=ROBOT.rho * ROBOT.paw_volume)
+    R0 = rpy_to_rot(0.3, -0.2, 1.0)
+    plant = PlantSimulator(neutral, RateLimitedServo(ServoParams(10.0, 0.03)), initial_rotation=R0)
+    for _ in range(200):
+        state = plant.step(Q0.reshape(12))
+    assert geodesic_angle(R0, state.rotation) < 1e-12
+    assert np.allclose(state.omega, 0.0, atol=1e-15)
+    assert np.allclose(plant.joint_velocities, 0.0)
+
+
+def test_tilted_plant_with_negatively_buoyant_paws_swings_back_towards_level() -> None:
+    # The paws sit below the centre of mass and are slightly heavier than water (config estimate):
+    # a pendulum, whose tilt first decreases.
+    plant = PlantSimulator(ROBOT, initial_rotation=rpy_to_rot(0.3, 0.0, 0.0))
+    for _ in range(50):
+        plant.step(Q0)
+    assert 0.0 < rot_to_rpy(plant.state.rotation)[0] < 0.3
+
+
+def test_plant_step_matches_dynamics_with_held_midpoint_input() -> None:
+    plant = PlantSimulator(ROBOT, IdealServo(), initial_rotation=rpy_to_rot(0.1, 0.2, 0.3))
+    model = FloatingBaseModel(ROBOT)
+    state = RigidBodyState(rotation=rpy_to_rot(0.1, 0.2, 0.3))
+    q_prev = Q0
+    rng = np.random.default_rng(4)
+    for _ in range(20):
+        q_next = Q0 + rng.uniform(-0.05, 0.05, (4, 3))
+        got = plant.step(q_next)
+        state = model.step(state, *held_joint_input(q_prev, q_next, 0.01), 0.01)
+        q_prev = q_next
+        np.testing.assert_allclose(got.to_vector(), state.to_vector(), rtol=1e-12, atol=1e-14)
+
+
+def test_plant_with_rate_limited_servo_lags_the_command() -> None:
+    servo = RateLimitedServo(ServoParams(max_speed=10.0, time_constant=0.01))
+    plant = PlantSimulator(ROBOT, servo)
+    command = Q0 + 0.3
+    plant.step(command)
+    assert np.allclose(plant.joint_positions, Q0 + 0.1)  # error above the knee: 10 rad/s for 10 ms
+    for _ in range(50):
+        plant.step(command)
+    assert np.allclose(plant.joint_positions, command, atol=1e-3)
+
+
+def test_plant_clamps_commands_to_servo_ranges() -> None:
+    plant = PlantSimulator(ROBOT)
+    limits = ROBOT.joint_limits.as_array()
+    command = Q0.copy()
+    command[0, 2] = limits[2, 1] + 1.0  # hip of leg 1 beyond its range
+    plant.step(command)
+    assert plant.joint_positions[0, 2] == pytest.approx(limits[2, 1])
+    assert plant.clamped_joints == 1
+
+
+def test_plant_rejects_bad_commands_and_keeps_its_state() -> None:
+    plant = PlantSimulator(ROBOT, RateLimitedServo(ServoParams(max_speed=10.0, time_constant=0.03)))
+    plant.step(Q0 + 0.01)
+    before = plant.state.to_vector()
+    joints = plant.joint_positions
+    for bad in (np.full(12, np.nan), np.zeros(11), [[1, 2, 3]]):
+        with pytest.raises(ValueError):
+            plant.step(bad)
+    with pytest.raises(ValueError):
+        plant.step(Q0, dt=0.0)
+    assert np.array_equal(plant.state.to_vector(), before)
+    assert np.array_equal(plant.joint_positions, joints)
+    with pytest.raises(ValueError):
+        PlantSimulator(ROBOT, initial_rotation=np.ones((3, 3)))
+
+
+@pytest.mark.parametrize("error", [UnreachableError("five-bar cannot close", 1), DynamicsError("diverged")])
+def test_plant_failure_raises_simulation_error_and_keeps_state(monkeypatch, error) -> None:
+    plant = PlantSimulator(ROBOT, RateLimitedServo(ServoParams(10.0, 0.03)))
+    before = plant.state.to_vector()
+
+    def failing(*args, **kwargs):
+        raise error
+
+    monkeypatch.setattr(plant.model, "step_trusted", failing)
+    with pytest.raises(SimulationError):
+        plant.step(Q0 + 0.1)
+    assert np.array_equal(plant.state.to_vector(), before)
+    assert np.array_equal(plant.joint_positions, Q0)
+    assert np.array_equal(plant.servo.position, Q0)  # the servo model is rolled back too
+    assert plant.time == 0.0
+
+
+def test_restoring_offset_rights_a_tilted_plant() -> None:
+    plant = PlantSimulator(ROBOT, initial_rotation=rpy_to_rot(0.4, 0.0, 0.0), restoring_offset=[0.0, 0.0, 0.02])
+    for _ in range(100):
+        plant.step(Q0)
+    roll = rot_to_rpy(plant.state.rotation)[0]
+    assert roll < 0.4 - 0.05
+
+
+# ------------------------------------------------------------------ conversions
+
+@settings(max_examples=50)
+@given(st.lists(st.floats(-3.0, 3.0), min_size=3, max_size=3))
+def test_vectorised_conversions_match_so3(rotvec) -> None:
+    R = exp_so3(rotvec)
+    Rd = rpy_to_rot(0.2, -0.4, 2.0)
+    np.testing.assert_allclose(rotations_to_rpy(R[None])[0], rot_to_rpy(R), atol=1e-12)
+    q = rotations_to_quaternions(R[None])[0]
+    expected = rot_to_quat(R)
+    assert np.allclose(q, expected, atol=1e-12) or np.allclose(q, -expected, atol=1e-12)
+    assert geodesic_angles(Rd, R[None])[0] == pytest.approx(geodesic_angle(Rd, R), abs=1e-12)
+
+
+def test_gimbal_lock_rows_convert_like_so3() -> None:
+    R = np.stack([rpy_to_rot(0.3, math.pi / 2, 0.0), rpy_to_rot(-0.2, -math.pi / 2, 0.0)])
+    np.testing.assert_allclose(rotations_to_rpy(R), [rot_to_rpy(R[0]), rot_to_rpy(R[1])], atol=1e-9)
+
+
+# ------------------------------------------------------------------ closed loop
+
+def _short_run(seed: int, noise: float, duration: float = 3.0):
+    sim = ClosedLoopSimulation(ROBOT, CONFIG, "ideal", np.eye(3), rpy_to_rot(0.3, 0.3, 0.3), seed=seed,
+                               attitude_noise=noise, gyro_noise=noise)
+    return sim.run(duration)
+
+
+def test_closed_loop_is_deterministic_for_a_seed() -> None:
+    a = _short_run(7, 0.01)
+    b = _short_run(7, 0.01)
+    c = _short_run(8, 0.01)
+    np.testing.assert_array_equal(a.rotation, b.rotation)
+    np.testing.assert_array_equal(a.joint_targets, b.joint_targets)
+    assert not np.array_equal(a.rotation, c.rotation)
+
+
+def test_closed_loop_records_consistent_arrays_and_turns_towards_setpoint() -> None:
+    result = _short_run(0, 0.0, duration=5.0)
+    n = 501
+    assert result.t.shape == (n,) and result.t[-1] == pytest.approx(5.0)
+    for name in ("omega", "tau_cmd", "tau_sat", "rpy"):
+        assert getattr(result, name).shape == (n, 3)
+    assert result.quaternion.shape == (n, 4)
+    assert result.joint_targets.shape == (n, 12) and result.pair_phase.shape == (n, 2)
+    assert set(np.unique(result.pair_phase)) <= {"power", "recovery", "hold"}
+    assert np.all(np.linalg.norm(result.tau_sat, axis=1) <= CONFIG.tau_max + 1e-9)
+    assert result.geodesic[-1] < result.geodesic[0] - math.radians(5.0)
+    assert result.info["servo_model"] == "ideal" and result.info["controller_holds"] == 0
+    assert all(np.isfinite(v) for v in result.rotation.reshape(-1))
+
+
+def test_run_rejects_bad_duration_and_rotations() -> None:
+    sim = ClosedLoopSimulation(ROBOT, CONFIG)
+    with pytest.raises(ValueError):
+        sim.run(0.0)
+    with pytest.raises(ValueError):
+        sim.run(float("nan"))
+    with pytest.raises(ValueError):
+        ClosedLoopSimulation(ROBOT, CONFIG, setpoint_R=np.diag([1.0, 1.0, -1.0]))
+    with pytest.raises(ValueError):
+        ClosedLoopSimulation(ROBOT, CONFIG, attitude_noise=-1.0)
+
+
+def test_progress_callback_is_throttled_and_reports_the_end() -> None:
+    calls = []
+    sim = ClosedLoopSimulation(ROBOT, CONFIG, setpoint_R=rpy_to_rot(0.1, 0.0, 0.0))
+    sim.run(2.0, progress=lambda t, d: calls.append((t, d)), progress_interval=1e9)
+    assert calls == [(pytest.approx(2.0), 2.0)]
+
+
+def test_settings_load_from_config() -> None:
+    s = load_simulation_settings()
+    assert s.dt == pytest.approx(0.01)
+    assert s.servo_model == "ideal"  # the paper's model is the default
+    assert s.servo.max_speed == pytest.approx(95.0 * 2.0 * math.pi / 60.0)

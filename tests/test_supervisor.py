@@ -1,0 +1,152 @@
+"""Tests of the safety supervisor the controller node wraps around the controller (no ROS)."""
+import math
+
+import numpy as np
+import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
+
+from quadruped_control.controller import AttitudeController
+from quadruped_control.controller_config import load_controller_config
+from quadruped_control.params import load_robot_params
+from quadruped_control.so3 import rot_to_quat, rpy_to_rot
+from quadruped_control.supervisor import ControlSupervisor
+
+LOW, HIGH = 500.0, 2500.0
+LEVEL = (0.0, 0.0, 0.0, 1.0)
+
+
+def pulse_map(angles):
+    """A stand-in calibration: 1500 us at 0 rad, 600 us/rad, clamped like the node's map."""
+    return np.clip(1500.0 + 600.0 * np.asarray(angles), LOW, HIGH)
+
+
+@pytest.fixture
+def supervisor():
+    robot = load_robot_params()
+    controller = AttitudeController(robot, load_controller_config(gain_set="simulation"))
+    controller.set_setpoint(rpy_to_rot(math.radians(30.0), 0.0, 0.0))
+    return ControlSupervisor(controller, pulse_map, max_imu_age=0.05)
+
+
+def run(supervisor, seconds, quaternion=LEVEL, rate=(0.0, 0.0, 0.0), start=0.0, feed=True):
+    """Tick at 100 Hz for ``seconds``; returns the outputs."""
+    outputs = []
+    for k in range(int(round(seconds * 100))):
+        t = start + 0.01 * k
+        if feed:
+            supervisor.set_imu(quaternion, rate, t)
+        outputs.append(supervisor.tick(t, t))
+    return outputs
+
+
+def stroke_amplitude(outputs):
+    targets = np.array([o.joint_targets for o in outputs if o.joint_targets is not None])
+    return float(np.max(np.ptp(targets, axis=0))) if len(targets) else 0.0
+
+
+def test_unarmed_sends_nothing_and_does_not_stroke(supervisor):
+    outputs = run(supervisor, 2.0)
+    assert all(o.pulse_widths_us is None and o.joint_targets is None for o in outputs)
+    assert all(o.problem == "disarmed" and not o.armed for o in outputs)
+    assert all(o.output.state.holding for o in outputs)
+
+
+def test_armed_with_good_imu_strokes_within_limits(supervisor):
+    assert "armed" in supervisor.arm(True)
+    outputs = run(supervisor, 3.0)
+    assert all(o.problem == "" for o in outputs)
+    assert stroke_amplitude(outputs) > math.radians(5.0)
+    widths = np.array([o.pulse_widths_us for o in outputs])
+    assert np.all((widths >= LOW) & (widths <= HIGH))
+
+
+@pytest.mark.parametrize("quaternion, reason", [
+    ((math.nan, 0.0, 0.0, 1.0), "not finite"),
+    ((0.0, 0.0, 0.0, 0.5), "not unit"),
+    ((0.0, 0.0, 0.0, 0.0), "not unit"),
+])
+def test_invalid_imu_holds_the_safe_pose(supervisor, quaternion, reason):
+    supervisor.arm(True)
+    run(supervisor, 1.0)
+    outputs = run(supervisor, 2.5, quaternion=quaternion, start=1.0)
+    assert all(reason in o.problem for o in outputs)
+    assert all(o.output.state.holding for o in outputs)
+    assert all(o.pulse_widths_us is not None for o in outputs)  # the safe pose is still commanded
+    # The feet retrace to the nominal pose over t_rec (1.5 s), then stay: no stroking.
+    assert stroke_amplitude(outputs[160:]) < 1e-9
+    integral = [o.output.state.integral for o in outputs]
+    np.testing.assert_allclose(integral[0], integral[-1])  # frozen while holding
+
+
+def test_stale_imu_holds_and_resumes(supervisor):
+    supervisor.arm(True)
+    run(supervisor, 1.0)
+    # The IMU stops: the last sample ages past max_imu_age.
+    stale = [supervisor.tick(1.0 + 0.01 * k, 1.0 + 0.01 * k) for k in range(100)]
+    assert stale[0].problem == ""  # 0 ms old
+    assert all("stale" in o.problem for o in stale[10:])
+    resumed = run(supervisor, 3.0, start=2.0)
+    assert all(o.problem == "" for o in resumed)
+    assert stroke_amplitude(resumed) > math.radians(5.0)
+
+
+def test_no_imu_at_all_holds(supervisor):
+    supervisor.arm(True)
+    output = supervisor.tick(0.0, 0.0)
+    assert output.problem == "no IMU sample received yet"
+    assert output.pulse_widths_us is not None
+
+
+def test_arming_resets_integral(supervisor):
+    supervisor.arm(True)
+    before = run(supervisor, 5.0)[-1].output.state.integral
+    assert np.linalg.norm(before) > 0.1
+    supervisor.arm(False)
+    supervisor.arm(True)
+    first = run(supervisor, 0.01, start=6.0)[0]
+    assert np.linalg.norm(first.output.state.integral) < 0.02  # one step of integration at most
+
+
+def test_estimated_torque_is_nan_without_feedback_and_finite_with_it(supervisor):
+    supervisor.arm(True)
+    out = run(supervisor, 0.1)[-1]
+    assert np.all(np.isnan(out.torque_estimated))
+    q = out.joint_targets
+    supervisor.set_joint_feedback(q, np.zeros(12))
+    out = run(supervisor, 0.01, start=0.1)[0]
+    np.testing.assert_allclose(out.torque_estimated, 0.0, atol=1e-12)  # legs still: no leg torque
+    supervisor.set_joint_feedback(q, np.full(12, 2.0))
+    out = run(supervisor, 0.01, start=0.11)[0]
+    assert np.all(np.isfinite(out.torque_estimated)) and np.linalg.norm(out.torque_estimated) > 0
+    with pytest.raises(ValueError):
+        supervisor.set_joint_feedback(q[:6], np.zeros(6))
+
+
+def test_bad_max_age_rejected(supervisor):
+    with pytest.raises(ValueError):
+        ControlSupervisor(supervisor.controller, pulse_map, max_imu_age=0.0)
+
+
+@settings(max_examples=30, deadline=None)
+@given(st.lists(st.one_of(st.floats(allow_nan=True, allow_infinity=True), st.just(0.0)), min_size=7, max_size=7))
+def test_any_imu_message_never_raises_or_leaves_limits(values):
+    robot = load_robot_params()
+    controller = AttitudeController(robot, load_controller_config(gain_set="simulation"))
+    supervisor = ControlSupervisor(controller, pulse_map, armed=True)
+    supervisor.set_imu(values[:4], values[4:], 0.0)
+    output = supervisor.tick(0.0, 0.0)
+    assert np.all((output.pulse_widths_us >= LOW) & (output.pulse_widths_us <= HIGH))
+    assert np.all(np.isfinite(output.joint_targets))
+
+
+def test_tilted_good_sample_is_used():
+    robot = load_robot_params()
+    controller = AttitudeController(robot, load_controller_config(gain_set="simulation"))
+    supervisor = ControlSupervisor(controller, pulse_map, armed=True)
+    q = rot_to_quat(rpy_to_rot(0.3, -0.2, 1.0))
+    supervisor.set_imu(q, (0.1, 0.0, 0.0), 0.0)
+    output = supervisor.tick(0.0, 0.01)
+    assert output.problem == ""
+    assert output.output.state.geodesic_error == pytest.approx(
+        np.arccos((np.trace(rpy_to_rot(0.3, -0.2, 1.0)) - 1) / 2), abs=1e-9)

@@ -1,0 +1,271 @@
+"""VN-100 driver against the byte-level fake: handshake, decoding, corruption, reconnect, pty."""
+from __future__ import annotations
+
+import math
+import time
+
+import numpy as np
+import pytest
+
+from quadruped_control.so3 import quat_to_rot, rot_x, rot_z, rot_to_quat
+from quadruped_drivers.vn100 import protocol as vp
+from quadruped_drivers.vn100.conversions import vn_to_ros
+from quadruped_drivers.vn100.driver import Vn100Driver, Vn100Error, serial_port_factory
+from quadruped_drivers.vn100.fake import (FakeVn100, InMemoryPort, ManualClock, NoiseModel,
+                                          PtyFakeVn100)
+
+HANDSHAKE = (vp.async_pause_command() + vp.read_model_command()
+             + vp.disable_ascii_output_command()
+             + vp.ascii_command("VNWRG,75,1,4,01,0131") + vp.async_resume_command())
+
+TRUTH_Q = rot_to_quat(rot_z(0.7) @ rot_x(0.2))
+TRUTH_W = np.array([0.1, -0.2, 0.3])
+TRUTH_A = np.array([0.5, -1.0, 9.7])
+
+
+class Rig:
+    """Fake sensor + in-memory port + driver sharing one manual clock."""
+
+    def __init__(self, rate_hz: float = 200.0, **fake_kwargs) -> None:
+        self.clock = ManualClock(100.0)
+        self.device = FakeVn100(boot_time=99.0, **fake_kwargs)
+        self.ports = []
+        self.open_attempts = 0
+        inner = InMemoryPort.factory(self.device, clock=self.clock, sleep=self.clock.sleep)
+
+        def factory():
+            self.open_attempts += 1
+            port = inner()
+            self.ports.append(port)
+            return port
+
+        self.driver = Vn100Driver(factory, rate_hz=rate_hz, clock=self.clock,
+                                  reconnect_interval=1.0)
+
+    def run(self, seconds: float, step: float = 0.01):
+        out = []
+        for _ in range(int(round(seconds / step))):
+            self.clock.sleep(step)
+            out += self.driver.read_samples()
+        return out
+
+
+def test_handshake_bytes_exact_and_model_read():
+    rig = Rig()
+    rig.driver.connect()
+    assert bytes(rig.ports[0].bytes_written) == HANDSHAKE
+    assert rig.driver.model == "VN-100T-CR"
+    assert rig.driver.connected and rig.driver.last_error == ""
+    assert rig.device.ascii_output_type == 0
+    assert rig.device.binary_config[75] == (1, 4, {1: 0x0131})
+
+
+def test_samples_decode_to_truth_at_configured_rate():
+    rig = Rig()
+    rig.device.set_state(TRUTH_Q, TRUTH_W, TRUTH_A)
+    samples = rig.run(1.0)
+    assert 195 <= len(samples) <= 205
+    stamps = np.diff([s.time_startup_ns for s in samples])
+    assert np.all(stamps == 5_000_000)
+    for s in samples:
+        reading = vn_to_ros(s.quaternion_xyzw, s.angular_rate, s.acceleration)
+        assert abs(abs(np.dot(reading.orientation_xyzw, TRUTH_Q)) - 1.0) < 1e-6
+        np.testing.assert_allclose(reading.angular_velocity, TRUTH_W, atol=1e-6)
+        np.testing.assert_allclose(reading.linear_acceleration, TRUTH_A, atol=1e-5)
+    assert rig.driver.parser.crc_errors == 0
+    # The factory-default VNYMR lines before the pause never reach the caller as samples.
+    assert rig.driver.bad_ascii_lines == 0
+
+
+@pytest.mark.parametrize("rate, divisor", [(800, 1), (400, 2), (50, 16), (1, 800)])
+def test_rates_dividing_800_accepted(rate, divisor):
+    driver = Vn100Driver(lambda: None, rate_hz=rate)
+    assert driver.rate_divisor == divisor
+
+
+@pytest.mark.parametrize("rate", [300.0, 0.0, -1.0, float("nan"), 1000.0])
+def test_bad_rate_raises(rate):
+    with pytest.raises(ValueError):
+        Vn100Driver(lambda: None, rate_hz=rate)
+
+
+def test_corrupt_and_dropped_packets_counted_and_skipped():
+    rig = Rig(corrupt_probability=0.2, drop_probability=0.05, rng=7)
+    rig.device.set_state(TRUTH_Q, TRUTH_W, TRUTH_A)
+    samples = rig.run(2.0)
+    parser = rig.driver.parser
+    assert rig.device.packets_corrupted > 20 and rig.device.packets_dropped > 0
+    assert parser.crc_errors + parser.unsupported_packets >= 0.5 * rig.device.packets_corrupted
+    assert len(samples) >= rig.device.packets_sent - rig.device.packets_corrupted - 2
+    for s in samples:  # every delivered sample is an intact one
+        np.testing.assert_allclose(s.angular_rate, [0.1, 0.2, -0.3], atol=1e-6)
+
+
+def test_noise_is_seeded_and_has_the_requested_spread():
+    def rates(seed):
+        rig = Rig(noise_std=NoiseModel(attitude=0.01, angular_rate=0.05, acceleration=0.2),
+                  rng=seed)
+        return np.array([s.angular_rate for s in rig.run(2.0)])
+
+    a, b = rates(3), rates(3)
+    np.testing.assert_array_equal(a, b)
+    assert np.std(a[:, 0]) == pytest.approx(0.05, rel=0.2)
+
+
+def test_disconnect_and_reconnect_with_injected_clock():
+    rig = Rig()
+    assert len(rig.run(0.2)) > 30
+    rig.device.disconnect()
+    assert rig.driver.read_samples() == []
+    assert not rig.driver.connected and rig.driver.disconnects == 1
+    assert "serial error" in rig.driver.last_error
+    attempts = rig.open_attempts
+    assert rig.run(0.9) == []
+    assert rig.open_attempts == attempts  # waits for reconnect_interval
+    assert rig.run(0.2) == []
+    assert rig.open_attempts == attempts + 1 and rig.driver.connect_failures == 1
+    assert "connect failed" in rig.driver.last_error
+    rig.device.reconnect()  # the sensor power-cycled: factory settings, must be reconfigured
+    rig.clock.sleep(1.0)
+    samples = rig.run(0.5)
+    assert len(samples) > 80 and rig.driver.connected
+    assert rig.device.binary_config[75] == (1, 4, {1: 0x0131})
+    assert rig.driver.disconnects == 1 and rig.driver.connects == 2
+    assert not rig.ports[0].is_open
+
+
+class RejectingFake(FakeVn100):
+    """Answers the binary output configuration with ``$VNERR,0C`` (insufficient baud rate)."""
+
+    def _write_register(self, args):
+        if args and args[0] == "75":
+            self._reply("VNERR,0C")
+        else:
+            super()._write_register(args)
+
+
+def test_sensor_error_fails_connect_with_reason_and_read_samples_survives():
+    clock = ManualClock(5.0)
+    device = RejectingFake()
+    driver = Vn100Driver(InMemoryPort.factory(device, clock=clock, sleep=clock.sleep),
+                         clock=clock)
+    with pytest.raises(Vn100Error, match="insufficient baud rate"):
+        driver.connect()
+    assert not driver.connected
+    assert driver.read_samples() == []  # no new attempt before reconnect_interval
+    clock.sleep(1.5)
+    assert driver.read_samples() == []
+    assert driver.connect_failures == 2 and "insufficient baud rate" in driver.last_error
+
+
+class SilentFake(FakeVn100):
+    def write(self, data):
+        self._check_connected()
+        return len(data)
+
+
+def test_silent_device_times_out_after_retries():
+    clock = ManualClock()
+    device = SilentFake()
+    driver = Vn100Driver(InMemoryPort.factory(device, clock=clock, sleep=clock.sleep),
+                         clock=clock, command_timeout=0.2, command_retries=2)
+    with pytest.raises(Vn100Error, match="no reply to \\$VNRRG,01"):
+        driver.connect()
+    assert not driver.connected
+    assert 0.2 * 4 <= clock.now < 2.0  # optional VNASY wait + 3 attempts of the model read
+
+
+def test_handshake_tolerates_binary_stream_already_running():
+    rig = Rig()
+    rig.driver.connect()
+    rig.run(0.1)
+    # A new driver (e.g. node restart) finds binary packets and no ASCII output on the line.
+    clock = rig.clock
+    port = InMemoryPort(rig.device, clock=clock, sleep=clock.sleep)
+    port.reset_input_buffer = None  # a port without the optional method
+    driver = Vn100Driver(lambda: port, clock=clock)
+    clock.sleep(0.05)
+    driver.connect()
+    assert driver.model == "VN-100T-CR"
+    clock.sleep(0.05)
+    assert len(driver.read_samples()) >= 8
+
+
+def test_stale_stream_triggers_reconfiguration():
+    rig = Rig()
+    rig.driver.stale_timeout = 0.25
+    assert rig.run(0.2)
+    rig.device.power_cycle()  # watchdog reset: output back to ASCII, no binary packets
+    assert rig.run(0.3) == []
+    assert rig.driver.disconnects == 1 and "no valid packet" in rig.driver.last_error
+    rig.clock.sleep(1.0)
+    assert len(rig.run(0.2)) > 20
+    assert rig.driver.connects == 2
+
+
+def test_fake_answers_errors_and_checksum_bypass():
+    device = FakeVn100()
+    device.write(b"$VNFOO*%02X\r\n" % vp.xor_checksum(b"VNFOO"))
+    device.write(b"$VNRRG,01*00\r\n")
+    device.write(vp.read_register_command(99))
+    device.write(vp.write_register_command(1, ["X"]))
+    device.write(vp.ascii_command("VNWRG,75,1,0,01,0131"))
+    device.write(b"$VNRRG,01*XX\r\n")
+    lines = device.read(4096).split(b"\r\n")[:-1]
+    replies = [vp.parse_ascii_response(line) for line in lines]
+    assert [r.error_code for r in replies[:5]] == [0x04, 0x03, 0x08, 0x09, 0x07]
+    assert replies[5].values == ("VN-100T-CR",)
+
+
+def test_close_is_idempotent_and_port_closed():
+    rig = Rig()
+    rig.driver.connect()
+    rig.driver.close()
+    rig.driver.close()
+    assert not rig.driver.connected and not rig.ports[0].is_open
+    with pytest.raises(OSError):
+        rig.ports[0].read(1)
+
+
+def test_pty_end_to_end_with_pyserial(tmp_path):
+    pytest.importorskip("serial")
+    device = FakeVn100(boot_time=time.monotonic())
+    device.set_state(TRUTH_Q, TRUTH_W, TRUTH_A)
+    link = str(tmp_path / "vn100")
+    with PtyFakeVn100(device, symlink_path=link) as pty:
+        driver = Vn100Driver(serial_port_factory(link, 921600, timeout=0.01), rate_hz=200.0,
+                             command_timeout=1.0)
+        try:
+            driver.connect()
+            assert driver.model == "VN-100T-CR"
+            samples = []
+            deadline = time.monotonic() + 5.0
+            while len(samples) < 40 and time.monotonic() < deadline:
+                samples += driver.read_samples()
+            assert len(samples) >= 40, driver.counters()
+            assert driver.parser.crc_errors == 0
+            reading = vn_to_ros(samples[-1].quaternion_xyzw, samples[-1].angular_rate,
+                                samples[-1].acceleration)
+            np.testing.assert_allclose(quat_to_rot(reading.orientation_xyzw),
+                                       quat_to_rot(TRUTH_Q), atol=1e-6)
+            np.testing.assert_allclose(reading.linear_acceleration, TRUTH_A, atol=1e-5)
+            stamps = np.diff([s.time_startup_ns for s in samples])
+            assert np.all(stamps % 5_000_000 == 0) and np.all(stamps > 0)
+        finally:
+            driver.close()
+        assert pty.error is None
+    assert not (tmp_path / "vn100").exists()
+
+
+def test_config_file_is_consistent():
+    from quadruped_control.params import config_path, load_yaml
+
+    cfg = load_yaml(config_path("vn100.yaml"))
+    assert vp.rate_divisor_for(cfg["rate_hz"]) == 4
+    assert cfg["baud"] == 921600 and cfg["frame_id"] == "imu_link"
+    assert 0 < cfg["stale_timeout"] < 1.0 and cfg["reconnect_interval"] > 0
+    for key in ("orientation", "angular_velocity", "linear_acceleration"):
+        values = cfg[key + "_covariance_diagonal"]
+        assert len(values) == 3 and all(0 < v < 1 for v in values)
+    # Datasheet-derived: 1 deg roll/pitch, 2 deg heading (see the comments in the file).
+    assert cfg["orientation_covariance_diagonal"][2] == pytest.approx(math.radians(2) ** 2, rel=0.01)
