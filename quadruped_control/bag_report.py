@@ -67,10 +67,19 @@ def read_bags(paths: Sequence[str]) -> BagData:
     """Collect the report's topics from one or more (split) bags."""
     from pathlib import Path
 
-    from rosbags.highlevel import AnyReader
+    from rosbags.highlevel import AnyReader, AnyReaderError
+    from rosbags.rosbag1 import ReaderError
 
     data = BagData()
-    with AnyReader([Path(p) for p in paths]) as reader:
+    try:
+        _read_into(data, AnyReader([Path(p) for p in paths]))
+    except (AnyReaderError, ReaderError) as exc:
+        raise BagReportError("cannot read %s: %s" % (", ".join(paths), exc)) from None
+    return data
+
+
+def _read_into(data: BagData, reader) -> None:
+    with reader:
         wanted = [c for c in reader.connections if c.topic in (
             "/imu/data", "/controller_state", "/sim/pose", "/diagnostics")]
         for connection, _timestamp, raw in reader.messages(connections=wanted):
@@ -93,7 +102,6 @@ def read_bags(paths: Sequence[str]) -> BagData:
             else:
                 for status in msg.status:
                     data.diagnostics[status.name] = {kv.key: kv.value for kv in status.values}
-    return data
 
 
 def _rpy(quaternions: Sequence[Sequence[float]]) -> np.ndarray:

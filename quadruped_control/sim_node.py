@@ -96,7 +96,12 @@ class SimNode:
         """Physics loop on absolute wall-clock deadlines (no drift, overruns counted not accumulated)."""
         deadline = time.monotonic()
         while not rospy.is_shutdown():
-            self.step()
+            try:
+                self.step()
+            except rospy.ROSException:
+                if rospy.is_shutdown():
+                    break  # publishers closed by the shutdown
+                raise
             deadline += self.dt
             delay = deadline - time.monotonic()
             if delay > 0:

@@ -35,6 +35,15 @@ from underwater_quadruped.msg import ControllerState
 MARKER_LIFETIME = 1.0
 
 
+def _publish(publisher: rospy.Publisher, msg) -> None:
+    """Publish, except while shutting down (callbacks still running when the publishers close)."""
+    try:
+        publisher.publish(msg)
+    except rospy.ROSException:
+        if not rospy.is_shutdown():
+            raise
+
+
 class VisualizationNode:
     def __init__(self) -> None:
         self.world_frame = rospy.get_param("~world_frame", "world")
@@ -69,7 +78,7 @@ class VisualizationNode:
             out.header.stamp = rospy.Time.now()
         out.name = names
         out.position = positions
-        self.joint_pub.publish(out)
+        _publish(self.joint_pub, out)
 
     def on_imu(self, msg: Imu) -> None:
         q = msg.orientation
@@ -101,7 +110,7 @@ class VisualizationNode:
             except VisualizationError as exc:
                 rospy.logwarn_throttle(5.0, "not drawing foot targets: %s" % exc)
                 return
-            self.marker_pub.publish(self.markers(stamp, spheres))
+            _publish(self.marker_pub, self.markers(stamp, spheres))
 
     def broadcast(self, stamp: rospy.Time, child: str, xyzw: Sequence[float]) -> None:
         t = TransformStamped()

@@ -75,7 +75,12 @@ class ServoFeedbackNode:
         msg.name = list(JOINT_NAMES)
         msg.position = [float(v) for v in reading.angles]
         msg.velocity = [float(v) for v in velocities]
-        self.publisher.publish(msg)
+        try:
+            self.publisher.publish(msg)
+        except rospy.ROSException:
+            if not rospy.is_shutdown():
+                raise
+            return  # shutting down: publisher closed
         self.diagnostics.update()
 
     def _diagnose(self, stat: DiagnosticStatusWrapper) -> DiagnosticStatusWrapper:

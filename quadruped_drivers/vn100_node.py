@@ -85,8 +85,14 @@ class Vn100Node:
                 continue
             arrival = rospy.Time.now()
             last_time = samples[-1].time_startup_ns
-            for sample in samples:
-                self._publish(sample, arrival, last_time)
+            try:
+                for sample in samples:
+                    self._publish(sample, arrival, last_time)
+            except rospy.ROSException:
+                if rospy.is_shutdown():
+                    break  # publisher closed by the shutdown: the thread ends quietly
+                raise
+        self.driver.close()
 
     def _publish(self, sample, arrival: rospy.Time, last_time_ns: Optional[int]) -> None:
         if sample.quaternion_xyzw is None or sample.angular_rate is None or sample.acceleration is None:

@@ -19,37 +19,17 @@ set -u
 OUT="${UQ_OUT:-$ROOT/out}"
 DURATION="${UQ_DURATION:-120}"
 mkdir -p "$OUT"
-export ROS_HOME="$OUT/ros_home"; mkdir -p "$ROS_HOME"
 
 echo "== 1/3 Offline closed-loop simulation: the paper's simulation study (no ROS) =="
 python -m quadruped_control.simulate --study paper-sim --jobs 2 --out "$OUT/paper-sim"
 
 echo
 echo "== 2/3 The ROS stack on the simulated robot: 45 deg roll maneuver, ${DURATION} s, recorded =="
-BAGS="$OUT/sim-maneuver/bags"
-rm -rf "$BAGS"; mkdir -p "$BAGS"
-# A private master port so that a roscore already running on 11311 is not disturbed.
-PORT="${UQ_ROS_PORT:-11357}"
-export ROS_MASTER_URI="http://localhost:$PORT"
-timeout $((DURATION + 180)) roslaunch -p "$PORT" underwater_quadruped sim_maneuver.launch \
-  bag_dir:="$BAGS" duration:="$DURATION" roll:=45 >"$OUT/sim-maneuver.log" 2>&1 &
-LAUNCH_PID=$!
-trap 'kill -INT $LAUNCH_PID 2>/dev/null || true' EXIT
-# Progress from the maneuver node while the launch runs.
-tail -n +1 -F "$OUT/sim-maneuver.log" 2>/dev/null | grep --line-buffered -E "maneuver:|FATAL|ERROR|died" &
-TAIL_PID=$!
-wait $LAUNCH_PID || true
-trap - EXIT
-kill $TAIL_PID 2>/dev/null || true
-shopt -s nullglob
-bags=("$BAGS"/*.bag)
-if [ "${#bags[@]}" -eq 0 ]; then
-  echo "no bag was recorded; last lines of $OUT/sim-maneuver.log:"; tail -40 "$OUT/sim-maneuver.log"; exit 1
-fi
+bash scripts/sim_maneuver.sh "$OUT/sim-maneuver" "$DURATION"
 
 echo
 echo "== 3/3 Report from the bag =="
-python -m quadruped_control.bag_report "${bags[@]}" --out "$OUT/sim-maneuver" \
+python -m quadruped_control.bag_report "$OUT"/sim-maneuver/bags/*.bag --out "$OUT/sim-maneuver" \
   --title "Simulated robot through the full ROS stack: 45 deg roll"
 echo
 echo "Reports: $OUT/paper-sim (study.json, paper_sim.png), $OUT/sim-maneuver (report.md, metrics.json, attitude.png)"

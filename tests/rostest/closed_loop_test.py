@@ -14,6 +14,7 @@ import unittest
 import numpy as np
 import rospy
 import rostest
+from std_srvs.srv import SetBool
 
 from quadruped_control.metrics import moving_average_centered
 from quadruped_drivers.hardware_config import load_hardware_config
@@ -85,6 +86,23 @@ class ClosedLoopTest(unittest.TestCase):
         self.assertGreaterEqual(held, hold, "smoothed geodesic error within 6 deg for only %.1f s "
                                 "(last smoothed error %s deg)" % (held, last))
         self.assertEqual(self.width_violations, [], "pulse widths outside the channel limits")
+
+        # The sensor stalls (fake VN-100 silent behind its pty): the controller must hold the safe pose
+        # with a stale-IMU reason within ~imu_max_age, and stroke again when the samples return.
+        rospy.wait_for_service("sim_node/imu_streaming", timeout=10.0)
+        streaming = rospy.ServiceProxy("sim_node/imu_streaming", SetBool)
+        self.assertTrue(streaming(False).success)
+        msg = rospy.wait_for_message("controller_state", ControllerState, timeout=5.0)
+        deadline = rospy.get_time() + 2.0
+        while not (msg.holding and "stale" in msg.hold_reason) and rospy.get_time() < deadline:
+            msg = rospy.wait_for_message("controller_state", ControllerState, timeout=5.0)
+        self.assertTrue(msg.holding and "stale" in msg.hold_reason,
+                        "no stale-IMU hold after the sensor went silent: %r" % msg.hold_reason)
+        self.assertTrue(streaming(True).success)
+        deadline = rospy.get_time() + 5.0
+        while msg.holding and rospy.get_time() < deadline:
+            msg = rospy.wait_for_message("controller_state", ControllerState, timeout=5.0)
+        self.assertFalse(msg.holding, "controller did not resume after the IMU returned")
 
 
 if __name__ == "__main__":

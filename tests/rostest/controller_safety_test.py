@@ -23,8 +23,11 @@ from underwater_quadruped.msg import ControllerState, ServoCommand
 
 
 class ControllerSafetyTest(unittest.TestCase):
-    def setUp(self):
+    @classmethod
+    def setUpClass(cls):
         rospy.init_node("controller_safety_test", anonymous=True)
+
+    def setUp(self):
         self.lock = threading.Lock()
         self.mode = "good"
         self.commands = []
@@ -135,6 +138,23 @@ class ControllerSafetyTest(unittest.TestCase):
         rospy.sleep(0.2)
         commands, states, _ = self.window(1.0)
         self.assertEqual(commands, [], "servo commands after disarming")
+
+    def test_reconfigure_validates_and_applies(self):
+        """Live gains through dynamic_reconfigure: a valid update is applied and echoed; an update
+        that breaks t_rec >= 2 t_pow_max is refused as a whole and the old values come back."""
+        from dynamic_reconfigure.client import Client
+        client = Client("attitude_controller", timeout=30.0)
+        start = client.get_configuration(timeout=10.0)
+        self.assertAlmostEqual(start["k_p"], 5.0)  # the simulation gain set seeded the server
+        applied = client.update_configuration({"k_p": 7.5, "t_rec": 2.0})
+        self.assertAlmostEqual(applied["k_p"], 7.5)
+        self.assertAlmostEqual(applied["t_rec"], 2.0)
+        refused = client.update_configuration({"k_p": 9.0, "t_rec": 0.6, "t_pow_max": 0.5})
+        self.assertAlmostEqual(refused["k_p"], 7.5)
+        self.assertAlmostEqual(refused["t_rec"], 2.0)
+        self.assertAlmostEqual(refused["t_pow_max"], 0.5)
+        restored = client.update_configuration({"k_p": start["k_p"], "t_rec": start["t_rec"]})
+        self.assertAlmostEqual(restored["t_rec"], start["t_rec"])
 
 
 if __name__ == "__main__":

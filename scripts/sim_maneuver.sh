@@ -1,0 +1,30 @@
+#!/usr/bin/env bash
+# Runs launch/sim_maneuver.launch headless: the whole ROS stack on the simulated robot, armed, level for
+# 5 s, then a roll maneuver (ROLL, default 45 deg) for DURATION s, recorded to OUT/bags/*.bag.
+# Used by scripts/run_main.sh and benchmarks/bench_sim_graph.sh; expects scripts/env.sh sourced.
+#
+# Usage: scripts/sim_maneuver.sh OUT DURATION      env: ROLL (deg), UQ_ROS_PORT (master port)
+set -euo pipefail
+OUT="$1"; DURATION="$2"; ROLL="${ROLL:-45}"
+BAGS="$OUT/bags"
+rm -rf "$BAGS"; mkdir -p "$BAGS"
+export ROS_HOME="${ROS_HOME:-$OUT/ros_home}"; mkdir -p "$ROS_HOME"
+# A private master port so that a roscore already running on 11311 is not disturbed.
+PORT="${UQ_ROS_PORT:-11357}"
+export ROS_MASTER_URI="http://localhost:$PORT"
+LOG="$OUT/launch.log"
+timeout $((DURATION + 180)) roslaunch -p "$PORT" underwater_quadruped sim_maneuver.launch \
+  bag_dir:="$BAGS" duration:="$DURATION" roll:="$ROLL" >"$LOG" 2>&1 &
+LAUNCH_PID=$!
+trap 'kill -INT $LAUNCH_PID 2>/dev/null || true' EXIT
+# Progress from the maneuver node while the launch runs.
+tail -n +1 -F "$LOG" 2>/dev/null | grep --line-buffered -E "maneuver:|FATAL|ERROR|died" &
+TAIL_PID=$!
+wait $LAUNCH_PID || true
+trap - EXIT
+kill $TAIL_PID 2>/dev/null || true
+shopt -s nullglob
+bags=("$BAGS"/*.bag)
+if [ "${#bags[@]}" -eq 0 ]; then
+  echo "no bag was recorded; last lines of $LOG:" >&2; tail -40 "$LOG" >&2; exit 1
+fi
