@@ -33,6 +33,8 @@ from typing import List, Optional
 
 import numpy as np
 import rospy
+from diagnostic_msgs.msg import DiagnosticStatus
+from diagnostic_updater import DiagnosticStatusWrapper, Updater
 from geometry_msgs.msg import PoseStamped
 from std_srvs.srv import SetBool, SetBoolResponse
 
@@ -88,6 +90,10 @@ class SimNode:
         self.steps = 0
         self.overruns = 0
         self.step_errors = 0
+        self.started = time.monotonic()
+        self.diagnostics = Updater()
+        self.diagnostics.setHardwareID("simulated robot")
+        self.diagnostics.add("simulation", self._diagnose)
         rospy.loginfo("sim_node: fake I2C bus on %s, fake VN-100 on %s, %.0f Hz physics, %s servos",
                       self.bridge.path, self.imu_pty.path, rate,
                       rospy.get_param("~servo_model", "rate-limited"))
@@ -143,6 +149,7 @@ class SimNode:
         output.pulse_width_us = widths.tolist()
         output.joint_target = self.commanded.tolist()
         self.output_pub.publish(output)
+        self.diagnostics.update()
 
     def _write_sensors(self, acceleration_world: np.ndarray) -> None:
         state = self.plant.state
@@ -153,6 +160,24 @@ class SimNode:
         # Specific force in the body frame, what an accelerometer measures (REP-145: +g up when level).
         specific_force = R.T @ (acceleration_world + GRAVITY_UP)
         self.vn100.set_state(rot_to_quat(R), state.omega, specific_force)
+
+    def _diagnose(self, stat: DiagnosticStatusWrapper) -> DiagnosticStatusWrapper:
+        elapsed = time.monotonic() - self.started
+        real_time = self.steps * self.dt / elapsed if elapsed > 0 else 0.0
+        if self.step_errors:
+            stat.summary(DiagnosticStatus.WARN, "%d plant steps rejected" % self.step_errors)
+        elif real_time < 0.95 and elapsed > 5.0:
+            stat.summary(DiagnosticStatus.WARN, "physics behind real time (%.2fx)" % real_time)
+        else:
+            stat.summary(DiagnosticStatus.OK, "running")
+        stat.add("steps", str(self.steps))
+        stat.add("real-time factor", "%.3f" % real_time)
+        stat.add("overruns", str(self.overruns))
+        stat.add("rejected steps", str(self.step_errors))
+        stat.add("clamped joint commands", str(self.plant.clamped_joints))
+        stat.add("IMU streaming", str(self.vn100.connected))
+        stat.add("fake VN-100 packets", str(self.vn100.packets_sent))
+        return stat
 
     def _on_imu_streaming(self, request) -> SetBoolResponse:
         # "Unplugging" the fake sensor silences the stream while the pty stays open, exactly what a
