@@ -255,7 +255,7 @@ class AttitudeControllerNode:
                 self.command_pub.publish(command)
             self.state_pub.publish(self._state_message(result, rospy.Time.now()))
         except rospy.ROSException:
-            if not rospy.is_shutdown():
+            if not rospy.core.is_shutdown_requested():
                 raise
             return  # shutting down: the publishers are already closed
         self.step_time.add(time.monotonic() - started)

@@ -105,7 +105,7 @@ class SimNode:
             try:
                 self.step()
             except rospy.ROSException:
-                if rospy.is_shutdown():
+                if rospy.core.is_shutdown_requested():
                     break  # publishers closed by the shutdown
                 raise
             deadline += self.dt

@@ -18,14 +18,18 @@ All maths lives in quadruped_control.visualization; this node only wires message
 """
 from __future__ import annotations
 
+import time
 from typing import Sequence
 
 import rospy
 import tf2_ros
+from diagnostic_msgs.msg import DiagnosticStatus
+from diagnostic_updater import DiagnosticStatusWrapper, Updater
 from geometry_msgs.msg import TransformStamped
 from sensor_msgs.msg import Imu, JointState
 from visualization_msgs.msg import Marker, MarkerArray
 
+from quadruped_control.monitoring import RateMonitor
 from quadruped_control.params import ParameterError, config_path, load_robot_params
 from quadruped_control.visualization import (Throttle, VisualizationError, foot_target_spheres,
                                              imu_orientation, unit_quaternion, visual_joint_state)
@@ -40,7 +44,7 @@ def _publish(publisher: rospy.Publisher, msg) -> None:
     try:
         publisher.publish(msg)
     except rospy.ROSException:
-        if not rospy.is_shutdown():
+        if not rospy.core.is_shutdown_requested():
             raise
 
 
@@ -59,6 +63,12 @@ class VisualizationNode:
             raise ValueError("~marker_rate must be positive, got %r" % marker_rate)
         self.marker_throttle = Throttle(1.0 / marker_rate)
 
+        self.rates = {topic: RateMonitor(2.0) for topic in ("joint_states", "imu/data", "controller_state")}
+        self.dropped = 0
+        self.diagnostics = Updater()
+        self.diagnostics.setHardwareID("none")
+        self.diagnostics.add("inputs", self.diagnose)
+        self.diagnostics_timer = rospy.Timer(rospy.Duration(1.0), lambda _event: self.diagnostics.update())
         self.tf_broadcaster = tf2_ros.TransformBroadcaster()
         self.joint_pub = rospy.Publisher("joint_states_visual", JointState, queue_size=10)
         self.marker_pub = rospy.Publisher("foot_target_markers", MarkerArray, queue_size=2)
@@ -66,11 +76,26 @@ class VisualizationNode:
         rospy.Subscriber("imu/data", Imu, self.on_imu, queue_size=10)
         rospy.Subscriber("controller_state", ControllerState, self.on_controller_state, queue_size=10)
 
+    def diagnose(self, stat: DiagnosticStatusWrapper) -> DiagnosticStatusWrapper:
+        now = time.monotonic()
+        rates = {topic: monitor.rate(now) for topic, monitor in self.rates.items()}
+        silent = [topic for topic, rate in rates.items() if rate == 0.0]
+        if silent:
+            stat.summary(DiagnosticStatus.WARN, "nothing to draw from: %s" % ", ".join(silent))
+        else:
+            stat.summary(DiagnosticStatus.OK, "drawing")
+        for topic, rate in rates.items():
+            stat.add("%s rate [Hz]" % topic, "%.1f" % rate)
+        stat.add("messages not drawn", str(self.dropped))
+        return stat
+
     def on_joint_states(self, msg: JointState) -> None:
+        self.rates["joint_states"].tick(time.monotonic())
         try:
             names, positions = visual_joint_state(msg.name, msg.position, self.params)
         except VisualizationError as exc:
             rospy.logwarn_throttle(5.0, "not drawing joint state: %s" % exc)
+            self.dropped += 1
             return
         out = JointState()
         out.header = msg.header
@@ -81,11 +106,13 @@ class VisualizationNode:
         _publish(self.joint_pub, out)
 
     def on_imu(self, msg: Imu) -> None:
+        self.rates["imu/data"].tick(time.monotonic())
         q = msg.orientation
         try:
             orientation = imu_orientation((q.x, q.y, q.z, q.w), msg.orientation_covariance)
         except VisualizationError as exc:
             rospy.logwarn_throttle(5.0, "ignoring IMU orientation: %s" % exc)
+            self.dropped += 1
             return
         if orientation is None:
             rospy.logwarn_throttle(30.0, "IMU message carries no orientation (covariance[0] = -1)")
@@ -97,6 +124,7 @@ class VisualizationNode:
         self.broadcast(stamp, self.base_frame, orientation)
 
     def on_controller_state(self, msg: ControllerState) -> None:
+        self.rates["controller_state"].tick(time.monotonic())
         stamp = msg.header.stamp if not msg.header.stamp.is_zero() else rospy.Time.now()
         q = msg.setpoint
         try:

@@ -78,7 +78,7 @@ class ServoFeedbackNode:
         try:
             self.publisher.publish(msg)
         except rospy.ROSException:
-            if not rospy.is_shutdown():
+            if not rospy.core.is_shutdown_requested():
                 raise
             return  # shutting down: publisher closed
         self.diagnostics.update()

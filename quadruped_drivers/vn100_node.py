@@ -88,10 +88,13 @@ class Vn100Node:
             try:
                 for sample in samples:
                     self._publish(sample, arrival, last_time)
-            except rospy.ROSException:
-                if rospy.is_shutdown():
-                    break  # publisher closed by the shutdown: the thread ends quietly
-                raise
+            except rospy.ROSException as exc:
+                # The publisher closes during shutdown (rospy closes topics in its pre-shutdown hooks, before
+                # rospy.is_shutdown() turns true); outside a shutdown it cannot recover: stop the node.
+                if not rospy.core.is_shutdown_requested():
+                    rospy.logerr("vn100_node: cannot publish (%s), shutting down", exc)
+                    rospy.signal_shutdown("imu publisher closed")
+                break
         self.driver.close()
 
     def _publish(self, sample, arrival: rospy.Time, last_time_ns: Optional[int]) -> None:
