@@ -19,6 +19,10 @@ Studies:
   direction, with the rate-limited servo, and with the estimated robot parameters that matter varied
   (paw net buoyancy, leg pairing, nominal foot height): ``DIR/robustness.json`` and ``DIR/robustness.md``.
 
+``--robot-yaml PATH`` replaces config/robot.yaml for plant and controller alike (single trials and both
+studies; the robustness study varies its estimates around that file), e.g. to compare candidate
+estimates without editing the package configuration.
+
 Trials of a study run in parallel worker processes (``--jobs``, default: the number of CPUs, max 2
 here). Progress goes to stderr, throttled.
 """
@@ -114,6 +118,8 @@ def run_trial(spec: TrialSpec) -> Dict[str, Any]:
         "setpoint_rpy_deg": list(spec.setpoint_rpy_deg),
         "initial_rpy_deg": list(spec.initial_rpy_deg),
         "gains": GAIN_ALIASES.get(spec.gains, spec.gains),
+        "robot_yaml": spec.robot_yaml or config_path("robot.yaml"),
+        "nominal_foot_leg": [float(v) for v in robot.nominal_foot_leg],
         "metrics": metrics,
         "info": result.info,
         "wall_time": result.wall_time,
@@ -189,7 +195,7 @@ def _paper_sim_specs(args: argparse.Namespace, tree: Dict[str, Any], out: Option
                       servo_model="ideal", seed=args.seed,
                       restoring_offset=tuple(args.restoring_offset) if args.restoring_offset else None,
                       out_dir=os.path.join(out, "trial_%g" % amplitude) if out else None,
-                      quiet=args.quiet)
+                      robot_yaml=args.robot_yaml, quiet=args.quiet)
         fields.update(overrides)
         specs.append(TrialSpec(**fields))
     return specs
@@ -211,6 +217,7 @@ def study_paper_sim(args: argparse.Namespace) -> int:
     plot_trials(traces, figure, title="Closed-loop simulation: setpoints on roll, pitch and yaw (%s gains, %s servos)"
                 % (specs[0].gains, specs[0].servo_model))
     study = {"study": "paper-sim", "figure": figure, "wall_time": wall,
+             "robot_yaml": args.robot_yaml or config_path("robot.yaml"),
              "all_settled": all(s["metrics"]["settled"] for s in summaries),
              "trials": [_strip(s) for s in summaries]}
     with open(os.path.join(args.out, "study.json"), "w") as stream:
@@ -247,7 +254,7 @@ def study_robustness(args: argparse.Namespace) -> int:
     variants.append(("sim gains, normalised force direction",
                      _paper_sim_specs(args, tree, None, "norm ", normalize_force=True)))
     # Sensitivity to the estimated parameters of config/robot.yaml (see docs/simulation_study.md).
-    robot = load_robot_params()
+    robot = load_robot_params(args.robot_yaml)
     neutral_mass = robot.rho * robot.paw_volume
     nominal = np.asarray(robot.nominal_foot_leg, dtype=float)
     variants.append(("paws neutrally buoyant (m_s = rho V_s)",
@@ -293,7 +300,9 @@ def study_robustness(args: argparse.Namespace) -> int:
             r["geodesic_mean_last_10pct_deg"], _fmt(r["t_s_max"], "%.1f"),
             " / ".join(_fmt(v) for v in r["e_ss_deg"])))
     with open(os.path.join(args.out, "robustness.json"), "w") as stream:
-        json.dump({"study": "robustness", "wall_time": wall, "rows": rows}, stream, indent=2, allow_nan=False)
+        json.dump({"study": "robustness", "wall_time": wall, "robot_yaml": args.robot_yaml or config_path("robot.yaml"),
+                   "nominal_foot_leg": [float(v) for v in robot.nominal_foot_leg], "rows": rows},
+                  stream, indent=2, allow_nan=False)
     with open(os.path.join(args.out, "robustness.md"), "w") as stream:
         stream.write("\n".join(table) + "\n")
     print("\n".join(table))
@@ -323,6 +332,9 @@ def build_parser() -> argparse.ArgumentParser:
                         help="normalise the allocation's force direction tau_hat x r_hat (not in the paper)")
     parser.add_argument("--restoring-offset", nargs=3, type=float, metavar=("X", "Y", "Z"), default=None,
                         help="centre of buoyancy relative to the centre of mass, body frame, m (default: none)")
+    parser.add_argument("--robot-yaml", default=None, metavar="PATH",
+                        help="robot model parameters for plant and controller (default: the package's "
+                             "config/robot.yaml); the robustness study varies its estimates around this file")
     parser.add_argument("--study", choices=("paper-sim", "robustness"), default=None, help="run a study")
     parser.add_argument("--jobs", type=int, default=min(2, os.cpu_count() or 1),
                         help="worker processes for studies (default %(default)s)")
@@ -346,6 +358,9 @@ def main(argv: Optional[Sequence[str]] = None) -> int:
         if value is not None and not all(math.isfinite(v) for v in value):
             parser.error("--%s needs finite numbers" % name.replace("_", "-"))
     try:
+        if args.robot_yaml is not None:
+            args.robot_yaml = os.path.abspath(args.robot_yaml)
+            load_robot_params(args.robot_yaml)  # fail early (exit 1) on a missing or invalid file
         settings = load_simulation_settings()
         if args.servo_model is None:
             args.servo_model = settings.servo_model
@@ -363,7 +378,7 @@ def main(argv: Optional[Sequence[str]] = None) -> int:
                          seed=args.seed, normalize_force=args.normalize_force,
                          restoring_offset=tuple(args.restoring_offset) if args.restoring_offset else None,
                          attitude_noise_deg=attitude_noise, gyro_noise=gyro_noise, out_dir=args.out,
-                         quiet=args.quiet)
+                         robot_yaml=args.robot_yaml, quiet=args.quiet)
         summary = run_trial(spec)
     except (ParameterError, SimulationError, ValueError) as exc:
         sys.stderr.write("simulate: error: %s\n" % exc)
