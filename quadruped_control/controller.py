@@ -301,25 +301,32 @@ class AttitudeController:
     def _output(self, t: float, h: float, tau_cmd: Vec3, tau_sat: Vec3, saturated: bool,
                 feedforward: Vec3) -> ControllerOutput:
         stroke = self._stroke
+        p0, p1, p2, p3 = stroke.positions
+        v0, v1, v2, v3 = stroke.velocity_commands
+        j0, j1, j2, j3 = stroke.joints
+        # One array for all vectors of the record (one numpy call instead of nine); the fields are views
+        # of disjoint rows of it.
+        rows = np.array([*self._e_R, *tau_cmd, *tau_sat, *self._integral, *feedforward, *p0, *p1, *p2, *p3,
+                         *v0, *v1, *v2, *v3, *j0, *j1, *j2, *j3], dtype=float).reshape(17, 3)
         state = ControllerStateRecord(
             t=t,
-            e_R=np.array(self._e_R),
-            tau_cmd=np.array(tau_cmd),
-            tau_sat=np.array(tau_sat),
+            e_R=rows[0],
+            tau_cmd=rows[1],
+            tau_sat=rows[2],
             saturated=saturated,
-            integral=np.array(self._integral),
+            integral=rows[3],
             geodesic_error=self._geodesic,
             pair_phase=stroke.pair_phase,
             pair_phase_time=stroke.pair_phase_time,
-            foot_targets=np.array(stroke.positions),
+            foot_targets=rows[5:9],
             holding=stroke.holding,
             hold_reason=self._hold_reason,
             R_d=self._R_d_array.copy(),
             dt=h,
-            tau_feedforward=np.array(feedforward),
-            foot_velocity_commands=np.array(stroke.velocity_commands),
+            tau_feedforward=rows[4],
+            foot_velocity_commands=rows[9:13],
         )
-        return ControllerOutput(joint_targets=np.array(stroke.joints), state=state)
+        return ControllerOutput(joint_targets=rows[13:17], state=state)
 
     # ---- main loop -----------------------------------------------------------------------------
 

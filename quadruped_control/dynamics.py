@@ -27,6 +27,10 @@ fourth order, and the new R is a rotation to machine precision.
 Because q and q_dot are held constant over a step (zero-order hold of the command), the foot positions
 r_e,i^B and the joint-induced foot velocities J_P,i^B q_dot_i are computed once per step; the stages
 only re-evaluate what depends on v, R and omega, on plain floats (faster than numpy for 3-vectors).
+:meth:`FloatingBaseModel.step` and :meth:`~FloatingBaseModel.step_trusted` run that held-input RK4
+on unpacked floats (``_rk4_held``, ``_stage9``: legs unrolled, no position in the stages since no
+force depends on it); the generic ``_rk4`` over the readable :meth:`~FloatingBaseModel._chart_derivative`
+(built from ``_accelerations`` and ``_chart_rate``) is the reference they are tested against.
 :meth:`FloatingBaseModel.step_continuous` samples a smooth joint trajectory at the stage times instead
 (reference solutions). A non-finite result raises :class:`DynamicsError` and leaves the input state as is.
 """
@@ -200,18 +204,20 @@ class LegInput:
         return cls(data[:, 0:3].copy(), data[:, 3:6].copy())
 
 
-# Geometry constants of :func:`leg_kinematics`, cached per RobotParams object (frozen, so safe).
-_GEOMETRY_CACHE: "dict[int, Tuple[RobotParams, Tuple[float, ...]]]" = {}
+# Geometry constants of :func:`leg_kinematics`, cached per RobotParams object (frozen, so safe):
+# (a1, a2, a3, a4, c, l_y, l_z, scale) and per leg (o_x, o_y, o_z, m_x, m_y, m_z).
+_GEOMETRY_CACHE: "dict[int, Tuple[RobotParams, tuple]]" = {}
 
 
-def _leg_geometry(params: RobotParams) -> Tuple[float, ...]:
+def _leg_geometry(params: RobotParams) -> tuple:
     entry = _GEOMETRY_CACHE.get(id(params))
     if entry is not None and entry[0] is params:
         return entry[1]
     fb = params.five_bar
-    values: Tuple[float, ...] = (fb.a1, fb.a2, fb.a3, fb.a4, fb.c, params.l_y, params.l_z)
-    for leg in LEGS:
-        values += tuple(float(x) for x in params.leg_origins[leg].tolist()) + tuple(MIRROR_DIAG[leg])
+    a1, a3, c = fb.a1, fb.a3, fb.c
+    values = (fb.a1, fb.a2, fb.a3, fb.a4, fb.c, params.l_y, params.l_z, 4.0 * a3 * a3 * (c + 2.0 * a1) ** 2,
+              tuple(tuple(float(x) for x in params.leg_origins[leg].tolist()) + tuple(MIRROR_DIAG[leg])
+                    for leg in LEGS))
     if len(_GEOMETRY_CACHE) > 64:
         _GEOMETRY_CACHE.clear()
     _GEOMETRY_CACHE[id(params)] = (params, values)
@@ -230,14 +236,19 @@ def leg_kinematics(q: Sequence[Sequence[float]], q_dot: Sequence[Sequence[float]
     (five-bar cannot close, elbows coincide, singular, non-finite) is handed to those functions, which
     raise the proper :class:`~quadruped_control.kinematics.UnreachableError`.
     """
-    g = _leg_geometry(params)
-    a1, a2, a3, a4, c, l_y, l_z = g[0], g[1], g[2], g[3], g[4], g[5], g[6]
-    scale = 4.0 * a3 * a3 * (c + 2.0 * a1) ** 2
-    out = []
+    if len(q) != NUM_LEGS or len(q_dot) != NUM_LEGS:
+        raise ValueError("q and q_dot must have %d rows (legs), got %d and %d" % (NUM_LEGS, len(q), len(q_dot)))
+    flat = _leg_kinematics_flat(q, q_dot, params)
+    return [list(flat[i:i + 6]) for i in range(0, 6 * NUM_LEGS, 6)]
+
+
+def _leg_kinematics_flat(q: Sequence[Sequence[float]], q_dot: Sequence[Sequence[float]],
+                         params: RobotParams) -> Tuple[float, ...]:
+    """:func:`leg_kinematics` as one flat tuple (legs 1..4 x [x, y, z, vx, vy, vz]): the simulator's path."""
+    a1, a2, a3, a4, c, l_y, l_z, scale, frames = _leg_geometry(params)
+    out: Tuple[float, ...] = ()
     cos, sin, atan2, sqrt = math.cos, math.sin, math.atan2, math.sqrt
-    for row in range(NUM_LEGS):
-        t1, t2, t3 = q[row]
-        d1, d2, d3 = q_dot[row]
+    for (t1, t2, t3), (d1, d2, d3), (ox, oy, oz, mx, my, mz) in zip(q, q_dot, frames):
         c1, s1, c2, s2 = cos(t1), sin(t1), cos(t2), sin(t2)
         # eq. (fk_EFG), (fk_phi), (fk_planar) as in kinematics.five_bar_fk
         e = 2.0 * a3 * (c + a1 * (c2 - c1))
@@ -264,21 +275,19 @@ def leg_kinematics(q: Sequence[Sequence[float]], q_dot: Sequence[Sequence[float]
         u = l_y + y_p
         py = c3 * u - s3 * l_z
         pz = s3 * u + c3 * l_z
-        base = 7 + 6 * row
-        ox, oy, oz, mx, my, mz = g[base], g[base + 1], g[base + 2], g[base + 3], g[base + 4], g[base + 5]
-        out.append([ox + mx * x_d, oy + my * py, oz + mz * pz,
-                    mx * jx, my * (c3 * jy - pz * d3), mz * (s3 * jy + py * d3)])
+        out += (ox + mx * x_d, oy + my * py, oz + mz * pz,
+                mx * jx, my * (c3 * jy - pz * d3), mz * (s3 * jy + py * d3))
     return out
 
 
 def _slow_leg_kinematics(q: Sequence[Sequence[float]], q_dot: Sequence[Sequence[float]],
-                         params: RobotParams) -> list:
+                         params: RobotParams) -> Tuple[float, ...]:
     """Reference path of :func:`leg_kinematics` through the kinematics module (raises its errors)."""
-    out = []
+    out: Tuple[float, ...] = ()
     for row, leg in enumerate(LEGS):
         position = foot_position(q[row], leg, params)
         velocity = foot_jacobian(q[row], leg, params) @ np.asarray(q_dot[row], dtype=float)
-        out.append(position.tolist() + velocity.tolist())
+        out += tuple(position.tolist() + velocity.tolist())
     return out
 
 
@@ -375,16 +384,39 @@ class _StepContext:
     """The inputs of one step as floats: per leg (r_e,i^B, J_P,i^B q_dot_i), and the matrix U with
     U R^T z_hat = paw buoyancy torque (sum_i r_i) x (R^T B_net z_hat) + the optional restoring torque."""
 
-    __slots__ = ("feet", "up_torque")
+    __slots__ = ("feet", "up_torque", "flat")
 
     def __init__(self, rows: Sequence[Sequence[float]], net_paw_buoyancy: float, restoring: Mat3) -> None:
-        self.feet = [tuple(row) for row in rows]
-        sx = sum(row[0] for row in rows) * net_paw_buoyancy
-        sy = sum(row[1] for row in rows) * net_paw_buoyancy
-        sz = sum(row[2] for row in rows) * net_paw_buoyancy
+        feet = self.feet = [tuple(row) for row in rows]
+        sx = sy = sz = 0  # int 0 as sum() starts: 0 + x == x exactly
+        flat: Tuple[float, ...] = ()
+        for foot in feet:
+            sx += foot[0]
+            sy += foot[1]
+            sz += foot[2]
+            flat += foot
+        sx *= net_paw_buoyancy
+        sy *= net_paw_buoyancy
+        sz *= net_paw_buoyancy
         r0, r1, r2, r3, r4, r5, r6, r7, r8 = restoring
         # net * hat(sum_i r_i) + restoring matrix
         self.up_torque = (r0, r1 - sz, r2 + sy, r3 + sz, r4, r5 - sx, r6 - sy, r7 + sx, r8)
+        # Everything :meth:`FloatingBaseModel._stage9` reads: the 4 x 6 leg rows, then U.
+        self.flat = flat + self.up_torque
+
+    @classmethod
+    def from_flat(cls, flat: Tuple[float, ...], net_paw_buoyancy: float, restoring: Mat3) -> "_StepContext":
+        """Context from the flat 24-tuple of :func:`_leg_kinematics_flat` (same values as ``cls(rows, ...)``)."""
+        self = cls.__new__(cls)
+        self.feet = [flat[0:6], flat[6:12], flat[12:18], flat[18:24]]
+        # sum() order: ((0 + r_1) + r_2) + r_3) + r_4, and 0 + x == x
+        sx = (flat[0] + flat[6] + flat[12] + flat[18]) * net_paw_buoyancy
+        sy = (flat[1] + flat[7] + flat[13] + flat[19]) * net_paw_buoyancy
+        sz = (flat[2] + flat[8] + flat[14] + flat[20]) * net_paw_buoyancy
+        r0, r1, r2, r3, r4, r5, r6, r7, r8 = restoring
+        self.up_torque = (r0, r1 - sz, r2 + sy, r3 + sz, r4, r5 - sx, r6 - sy, r7 + sx, r8)
+        self.flat = flat + self.up_torque
+        return self
 
     @classmethod
     def from_legs(cls, legs: LegInput, net_paw_buoyancy: float, restoring: Mat3) -> "_StepContext":
@@ -431,6 +463,8 @@ class FloatingBaseModel:
         self._drag = tuple(self.drag.quad_force.tolist() + self.drag.quad_torque.tolist()
                            + [self.drag.visc_force, self.drag.visc_torque])
         self._paw_buoyancy_force = NUM_LEGS * self.net_paw_buoyancy  # F_buoyancy^W . z_hat, eq. (buoy_torque)
+        self._stage_constants = ((-self.drag_constant,) + self._drag + self._inertia + self._inertia_inverse
+                                 + (1.0 / self.mass, self._paw_buoyancy_force))
 
     # ---- inputs ------------------------------------------------------------------------------
 
@@ -478,8 +512,8 @@ class FloatingBaseModel:
 
     def _context_from_joints(self, q: np.ndarray, q_dot: np.ndarray) -> _StepContext:
         """Step context straight from checked (4, 3) joint arrays (floats all the way)."""
-        rows = leg_kinematics(q.tolist(), q_dot.tolist(), self.params)
-        return _StepContext(rows, self.net_paw_buoyancy, self._restoring)
+        flat = _leg_kinematics_flat(q.tolist(), q_dot.tolist(), self.params)
+        return _StepContext.from_flat(flat, self.net_paw_buoyancy, self._restoring)
 
     def _accelerations(self, context: _StepContext, v: Sequence[float], R: Mat3,
                        omega: Sequence[float]) -> Tuple[float, float, float, float, float, float]:
@@ -540,75 +574,171 @@ class FloatingBaseModel:
         return (y[3], y[4], y[5]) + accelerations[:3] + _chart_rate(y[6], y[7], y[8], y[9], y[10], y[11]) \
             + accelerations[3:]
 
-    def _stage(self, context: _StepContext, R0: Mat3, y: Sequence[float]) -> list:
-        """:meth:`_chart_derivative` with every helper inlined (the integrator's hot path, ~2x faster):
-        R = R0 exp(hat(xi)), the accelerations of :meth:`_accelerations` and the chart rate of
-        :func:`_chart_rate`. The tests compare it with the composed version."""
-        px_, py_, pz_, vx, vy, vz, x, y_, z, wx, wy, wz = y
-        # exp(hat(xi)), Rodrigues (as _exp_rotation)
-        t2 = x * x + y_ * y_ + z * z
-        if t2 < _SMALL_ANGLE * _SMALL_ANGLE:
-            a = 1.0 - t2 / 6.0
-            b = 0.5 - t2 / 24.0
-            c = 1.0 / 12.0 + t2 / 720.0
+    def _stage9(self, context: _StepContext, R0: Mat3, vx: float, vy: float, vz: float, x: float, y_: float,
+                z: float, wx: float, wy: float, wz: float) -> Tuple[float, ...]:
+        """The integrator's hot path: (dv/dt, dxi/dt, domega/dt) (9 floats) of the chart state with
+        velocity v, chart coordinate xi = (x, y_, z) and rate omega; dp/dt = v is left to the caller.
+
+        The maths of :meth:`_chart_derivative` (R = R0 exp(hat(xi)), eq. (trans), (rot), chart rate J_r(xi)^-1
+        omega) in the same floating-point order, with the four legs unrolled and every constant read
+        from two flat tuples. At xi = 0 (the first RK4 stage) exp(hat(xi)) = I and the chart rate is
+        omega, so the rotation products are skipped.
+        """
+        (q0x, q0y, q0z, c0x, c0y, c0z, q1x, q1y, q1z, c1x, c1y, c1z,
+         q2x, q2y, q2z, c2x, c2y, c2z, q3x, q3y, q3z, c3x, c3y, c3z,
+         u0, u1, u2, u3, u4, u5, u6, u7, u8) = context.flat
+        identity = x == 0.0 and y_ == 0.0 and z == 0.0
+        if identity:
+            r0, r1, r2, r3, r4, r5, r6, r7, r8 = R0
         else:
-            t = math.sqrt(t2)
-            st, ct = math.sin(t), math.cos(t)
-            a = st / t
-            b = (1.0 - ct) / t2
-            c = 1.0 / t2 - (1.0 + ct) / (2.0 * t * st)
-        bxy, bxz, byz = b * x * y_, b * x * z, b * y_ * z
-        e0, e1, e2 = 1.0 - b * (y_ * y_ + z * z), bxy - a * z, bxz + a * y_
-        e3, e4, e5 = bxy + a * z, 1.0 - b * (x * x + z * z), byz - a * x
-        e6, e7, e8 = bxz - a * y_, byz + a * x, 1.0 - b * (x * x + y_ * y_)
-        m0, m1, m2, m3, m4, m5, m6, m7, m8 = R0
-        r0, r1, r2 = m0 * e0 + m1 * e3 + m2 * e6, m0 * e1 + m1 * e4 + m2 * e7, m0 * e2 + m1 * e5 + m2 * e8
-        r3, r4, r5 = m3 * e0 + m4 * e3 + m5 * e6, m3 * e1 + m4 * e4 + m5 * e7, m3 * e2 + m4 * e5 + m5 * e8
-        r6, r7, r8 = m6 * e0 + m7 * e3 + m8 * e6, m6 * e1 + m7 * e4 + m8 * e7, m6 * e2 + m7 * e5 + m8 * e8
-        # Accelerations, eq. (trans), (rot) (as _accelerations)
-        bx, by, bz = r0 * vx + r3 * vy + r6 * vz, r1 * vx + r4 * vy + r7 * vz, r2 * vx + r5 * vy + r8 * vz
-        k = self.drag_constant
+            # exp(hat(xi)), Rodrigues (as _exp_rotation)
+            t2 = x * x + y_ * y_ + z * z
+            if t2 < _SMALL_ANGLE * _SMALL_ANGLE:
+                a = 1.0 - t2 / 6.0
+                b = 0.5 - t2 / 24.0
+                c = 1.0 / 12.0 + t2 / 720.0
+            else:
+                t = math.sqrt(t2)
+                st, ct = math.sin(t), math.cos(t)
+                a = st / t
+                b = (1.0 - ct) / t2
+                c = 1.0 / t2 - (1.0 + ct) / (2.0 * t * st)
+            bxy, bxz, byz = b * x * y_, b * x * z, b * y_ * z
+            e0, e1, e2 = 1.0 - b * (y_ * y_ + z * z), bxy - a * z, bxz + a * y_
+            e3, e4, e5 = bxy + a * z, 1.0 - b * (x * x + z * z), byz - a * x
+            e6, e7, e8 = bxz - a * y_, byz + a * x, 1.0 - b * (x * x + y_ * y_)
+            m0, m1, m2, m3, m4, m5, m6, m7, m8 = R0
+            r0, r1, r2 = m0 * e0 + m1 * e3 + m2 * e6, m0 * e1 + m1 * e4 + m2 * e7, m0 * e2 + m1 * e5 + m2 * e8
+            r3, r4, r5 = m3 * e0 + m4 * e3 + m5 * e6, m3 * e1 + m4 * e4 + m5 * e7, m3 * e2 + m4 * e5 + m5 * e8
+            r6, r7, r8 = m6 * e0 + m7 * e3 + m8 * e6, m6 * e1 + m7 * e4 + m8 * e7, m6 * e2 + m7 * e5 + m8 * e8
+        (nk, qf0, qf1, qf2, qg0, qg1, qg2, cf, cg, i0, i1, i2, i3, i4, i5, i6, i7, i8,
+         j0, j1, j2, j3, j4, j5, j6, j7, j8, inv_m, paw_force) = self._stage_constants
         sqrt = math.sqrt
-        fx = fy = fz = tx = ty = tz = 0.0
-        for qx, qy, qz, cx, cy, cz in context.feet:
-            ux = bx + wy * qz - wz * qy + cx
-            uy = by + wz * qx - wx * qz + cy
-            uz = bz + wx * qy - wy * qx + cz
-            sc = -k * sqrt(ux * ux + uy * uy + uz * uz)
-            gx, gy, gz = sc * ux, sc * uy, sc * uz
-            fx += gx
-            fy += gy
-            fz += gz
-            tx += qy * gz - qz * gy
-            ty += qz * gx - qx * gz
-            tz += qx * gy - qy * gx
-        qf0, qf1, qf2, qg0, qg1, qg2, cf, cg = self._drag
-        fx -= (qf0 * abs(bx) + cf) * bx
-        fy -= (qf1 * abs(by) + cf) * by
-        fz -= (qf2 * abs(bz) + cf) * bz
-        tx -= (qg0 * abs(wx) + cg) * wx
-        ty -= (qg1 * abs(wy) + cg) * wy
-        tz -= (qg2 * abs(wz) + cg) * wz
-        u0, u1, u2, u3, u4, u5, u6, u7, u8 = context.up_torque
+        # Accelerations, eq. (trans), (rot) (as _accelerations): body-axes velocity R^T v, then the legs.
+        bx, by, bz = r0 * vx + r3 * vy + r6 * vz, r1 * vx + r4 * vy + r7 * vz, r2 * vx + r5 * vy + r8 * vz
+        ux = bx + wy * q0z - wz * q0y + c0x
+        uy = by + wz * q0x - wx * q0z + c0y
+        uz = bz + wx * q0y - wy * q0x + c0z
+        sc = nk * sqrt(ux * ux + uy * uy + uz * uz)
+        gx, gy, gz = sc * ux, sc * uy, sc * uz
+        fx, fy, fz = gx, gy, gz
+        tx = q0y * gz - q0z * gy
+        ty = q0z * gx - q0x * gz
+        tz = q0x * gy - q0y * gx
+        ux = bx + wy * q1z - wz * q1y + c1x
+        uy = by + wz * q1x - wx * q1z + c1y
+        uz = bz + wx * q1y - wy * q1x + c1z
+        sc = nk * sqrt(ux * ux + uy * uy + uz * uz)
+        gx, gy, gz = sc * ux, sc * uy, sc * uz
+        fx += gx
+        fy += gy
+        fz += gz
+        tx += q1y * gz - q1z * gy
+        ty += q1z * gx - q1x * gz
+        tz += q1x * gy - q1y * gx
+        ux = bx + wy * q2z - wz * q2y + c2x
+        uy = by + wz * q2x - wx * q2z + c2y
+        uz = bz + wx * q2y - wy * q2x + c2z
+        sc = nk * sqrt(ux * ux + uy * uy + uz * uz)
+        gx, gy, gz = sc * ux, sc * uy, sc * uz
+        fx += gx
+        fy += gy
+        fz += gz
+        tx += q2y * gz - q2z * gy
+        ty += q2z * gx - q2x * gz
+        tz += q2x * gy - q2y * gx
+        ux = bx + wy * q3z - wz * q3y + c3x
+        uy = by + wz * q3x - wx * q3z + c3y
+        uz = bz + wx * q3y - wy * q3x + c3z
+        sc = nk * sqrt(ux * ux + uy * uy + uz * uz)
+        gx, gy, gz = sc * ux, sc * uy, sc * uz
+        fx += gx
+        fy += gy
+        fz += gz
+        tx += q3y * gz - q3z * gy
+        ty += q3z * gx - q3x * gz
+        tz += q3x * gy - q3y * gx
+        # |x| inline (same value as abs(), without the call)
+        fx -= (qf0 * (bx if bx >= 0.0 else -bx) + cf) * bx
+        fy -= (qf1 * (by if by >= 0.0 else -by) + cf) * by
+        fz -= (qf2 * (bz if bz >= 0.0 else -bz) + cf) * bz
+        tx -= (qg0 * (wx if wx >= 0.0 else -wx) + cg) * wx
+        ty -= (qg1 * (wy if wy >= 0.0 else -wy) + cg) * wy
+        tz -= (qg2 * (wz if wz >= 0.0 else -wz) + cg) * wz
         tx += u0 * r6 + u1 * r7 + u2 * r8
         ty += u3 * r6 + u4 * r7 + u5 * r8
         tz += u6 * r6 + u7 * r7 + u8 * r8
-        i0, i1, i2, i3, i4, i5, i6, i7, i8 = self._inertia
         hx, hy, hz = i0 * wx + i1 * wy + i2 * wz, i3 * wx + i4 * wy + i5 * wz, i6 * wx + i7 * wy + i8 * wz
         tx -= wy * hz - wz * hy
         ty -= wz * hx - wx * hz
         tz -= wx * hy - wy * hx
-        j0, j1, j2, j3, j4, j5, j6, j7, j8 = self._inertia_inverse
-        inv_m = 1.0 / self.mass
-        # Chart rate J_r(xi)^-1 omega (as _chart_rate)
-        ax, ay, az = y_ * wz - z * wy, z * wx - x * wz, x * wy - y_ * wx
-        cx2, cy2, cz2 = y_ * az - z * ay, z * ax - x * az, x * ay - y_ * ax
-        return [vx, vy, vz,
-                (r0 * fx + r1 * fy + r2 * fz) * inv_m,
+        if identity:  # xi = 0: J_r^-1 = I
+            rx, ry, rz = wx, wy, wz
+        else:  # chart rate J_r(xi)^-1 omega (as _chart_rate)
+            ax, ay, az = y_ * wz - z * wy, z * wx - x * wz, x * wy - y_ * wx
+            cx2, cy2, cz2 = y_ * az - z * ay, z * ax - x * az, x * ay - y_ * ax
+            rx, ry, rz = wx + 0.5 * ax + c * cx2, wy + 0.5 * ay + c * cy2, wz + 0.5 * az + c * cz2
+        return ((r0 * fx + r1 * fy + r2 * fz) * inv_m,
                 (r3 * fx + r4 * fy + r5 * fz) * inv_m,
-                (r6 * fx + r7 * fy + r8 * fz + self._paw_buoyancy_force) * inv_m,
-                wx + 0.5 * ax + c * cx2, wy + 0.5 * ay + c * cy2, wz + 0.5 * az + c * cz2,
-                j0 * tx + j1 * ty + j2 * tz, j3 * tx + j4 * ty + j5 * tz, j6 * tx + j7 * ty + j8 * tz]
+                (r6 * fx + r7 * fy + r8 * fz + paw_force) * inv_m,
+                rx, ry, rz,
+                j0 * tx + j1 * ty + j2 * tz, j3 * tx + j4 * ty + j5 * tz, j6 * tx + j7 * ty + j8 * tz)
+
+    def _rk4_held(self, state: RigidBodyState, dt: float, context: _StepContext) -> RigidBodyState:
+        """:meth:`_rk4` for an input held over the step (one context for all stages), on unpacked floats.
+
+        Same arithmetic as :meth:`_rk4` (the tests compare them): the stages only see (v, xi, omega)
+        since no force depends on the position, whose stage derivatives are the stage velocities.
+        """
+        R0 = tuple(state.rotation.ravel().tolist())
+        p0x, p0y, p0z = state.position.tolist()
+        v0x, v0y, v0z = state.velocity.tolist()
+        w0x, w0y, w0z = state.omega.tolist()
+        h = 0.5 * dt
+        stage = self._stage9
+        try:
+            a1x, a1y, a1z, x1, y1, z1, b1x, b1y, b1z = stage(context, R0, v0x, v0y, v0z, 0.0, 0.0, 0.0,
+                                                             w0x, w0y, w0z)
+            v2x, v2y, v2z = v0x + h * a1x, v0y + h * a1y, v0z + h * a1z
+            a2x, a2y, a2z, x2, y2, z2, b2x, b2y, b2z = stage(context, R0, v2x, v2y, v2z, h * x1, h * y1, h * z1,
+                                                             w0x + h * b1x, w0y + h * b1y, w0z + h * b1z)
+            v3x, v3y, v3z = v0x + h * a2x, v0y + h * a2y, v0z + h * a2z
+            a3x, a3y, a3z, x3, y3, z3, b3x, b3y, b3z = stage(context, R0, v3x, v3y, v3z, h * x2, h * y2, h * z2,
+                                                             w0x + h * b2x, w0y + h * b2y, w0z + h * b2z)
+            v4x, v4y, v4z = v0x + dt * a3x, v0y + dt * a3y, v0z + dt * a3z
+            a4x, a4y, a4z, x4, y4, z4, b4x, b4y, b4z = stage(context, R0, v4x, v4y, v4z, dt * x3, dt * y3,
+                                                             dt * z3, w0x + dt * b3x, w0y + dt * b3y,
+                                                             w0z + dt * b3z)
+        except (ValueError, OverflowError) as exc:  # math.sin(inf) etc. once the state has blown up
+            raise DynamicsError("integration diverged in a step of %g s from %s: %s" % (dt, state, exc)) from None
+        s = dt / 6.0
+        y = (p0x + s * (v0x + 2.0 * (v2x + v3x) + v4x),
+             p0y + s * (v0y + 2.0 * (v2y + v3y) + v4y),
+             p0z + s * (v0z + 2.0 * (v2z + v3z) + v4z),
+             v0x + s * (a1x + 2.0 * (a2x + a3x) + a4x),
+             v0y + s * (a1y + 2.0 * (a2y + a3y) + a4y),
+             v0z + s * (a1z + 2.0 * (a2z + a3z) + a4z))
+        xx = s * (x1 + 2.0 * (x2 + x3) + x4)
+        xy = s * (y1 + 2.0 * (y2 + y3) + y4)
+        xz = s * (z1 + 2.0 * (z2 + z3) + z4)
+        w = (w0x + s * (b1x + 2.0 * (b2x + b3x) + b4x),
+             w0y + s * (b1y + 2.0 * (b2y + b3y) + b4y),
+             w0z + s * (b1z + 2.0 * (b2z + b3z) + b4z))
+        isfinite = math.isfinite
+        if not isfinite(sum(y) + xx + xy + xz + sum(w)) and not all(map(isfinite, y + (xx, xy, xz) + w)):
+            raise DynamicsError("integration diverged (non-finite state) in a step of %g s from %s" % (dt, state))
+        R1 = _matmul(R0, _exp_rotation(xx, xy, xz))
+        # One Newton-Schulz polish, R (3 I - R^T R) / 2 (as _rk4).
+        a0, a1, a2, a3, a4, a5, a6, a7, a8 = R1
+        n0 = 1.5 - 0.5 * (a0 * a0 + a3 * a3 + a6 * a6)
+        n4 = 1.5 - 0.5 * (a1 * a1 + a4 * a4 + a7 * a7)
+        n8 = 1.5 - 0.5 * (a2 * a2 + a5 * a5 + a8 * a8)
+        n1 = -0.5 * (a0 * a1 + a3 * a4 + a6 * a7)
+        n2 = -0.5 * (a0 * a2 + a3 * a5 + a6 * a8)
+        n5 = -0.5 * (a1 * a2 + a4 * a5 + a7 * a8)
+        # One array for the whole state, the fields are views of disjoint parts of it.
+        data = np.array(y + _matmul(R1, (n0, n1, n2, n1, n4, n5, n2, n5, n8)) + w)
+        return RigidBodyState(data[0:3], data[3:6], data[6:15].reshape(3, 3), data[15:18])
 
     def _rk4(self, state: RigidBodyState, dt: float, contexts: Sequence[_StepContext]) -> RigidBodyState:
         """One classic RK4 step in the chart; ``contexts`` hold the inputs at t, t + dt/2, t + dt."""
@@ -617,7 +747,7 @@ class FloatingBaseModel:
         start, middle, end = contexts
         h = 0.5 * dt
         try:
-            stage = self._stage
+            stage = self._chart_derivative
             k1 = stage(start, R0, y0)
             k2 = stage(middle, R0, [a + h * b for a, b in zip(y0, k1)])
             k3 = stage(middle, R0, [a + h * b for a, b in zip(y0, k2)])
@@ -651,15 +781,17 @@ class FloatingBaseModel:
         dt = _check_dt(dt)
         state = state.validate()
         context = self._context_from_joints(_joint_array(q, "q"), _joint_array(q_dot, "q_dot"))
-        return self._rk4(state, dt, (context, context, context))
+        return self._rk4_held(state, dt, context)
 
     def step_trusted(self, state: RigidBodyState, q: np.ndarray, q_dot: np.ndarray, dt: float) -> RigidBodyState:
         """:meth:`step` without re-validating ``state``, for a simulator loop that feeds back the states
         this model returned (finite, R in SO(3) by construction). ``q``, ``q_dot`` must be finite float
-        arrays of shape (4, 3) and ``dt`` a positive float; the caller checks them. Same result as
-        :meth:`step`; kinematics errors and :class:`DynamicsError` are raised as there."""
-        context = self._context_from_joints(q, q_dot)
-        return self._rk4(state, dt, (context, context, context))
+        arrays of shape (4, 3) (or such nested sequences of floats, legs x joints) and ``dt`` a positive
+        float; the caller checks them. Same result as :meth:`step`; kinematics errors and
+        :class:`DynamicsError` are raised as there."""
+        flat = _leg_kinematics_flat(q.tolist() if isinstance(q, np.ndarray) else q,
+                                    q_dot.tolist() if isinstance(q_dot, np.ndarray) else q_dot, self.params)
+        return self._rk4_held(state, dt, _StepContext.from_flat(flat, self.net_paw_buoyancy, self._restoring))
 
     def step_continuous(self, state: RigidBodyState, t: float, dt: float,
                         joint_trajectory: JointTrajectory) -> RigidBodyState:

@@ -7,7 +7,8 @@ Fig. 3c). This module implements:
 - eq. (fk_EFG), (fk_phi), (fk_planar): five-bar forward kinematics, :func:`five_bar_fk`;
 - eq. (ik_dists), (ik_alphas), (ik_theta1245): five-bar inverse kinematics, :func:`five_bar_ik`;
 - eq. (fk_T), (ee_body): leg and body-frame foot position, :func:`leg_fk`, :func:`foot_position`;
-- eq. (ik_theta3) and the planar IK: :func:`joint_angles` (body-frame target -> servo angles);
+- eq. (ik_theta3) and the planar IK: :func:`joint_angles` (body-frame target -> servo angles), and
+  :func:`joint_angles_floats`, the same on plain floats (the controller's per-step IK);
 - eq. (J_leg): translational leg Jacobian, :func:`five_bar_jacobian`, :func:`foot_jacobian`;
 - eq. (ee_vel): floating-base Jacobian, :func:`floating_base_jacobian`.
 
@@ -326,8 +327,79 @@ def joint_angles(r: ArrayLike, leg: int, params: RobotParams) -> np.ndarray:
 
     ``r`` is the body-frame target r_e,i^B; eq. (ee_body) inverted, eq. (ik_theta3) .. (ik_theta1245).
     Raises :class:`UnreachableError` (a ValueError) naming the leg and the cause; never returns NaN.
+    Computed by :func:`joint_angles_floats` (the same values as ``joint_angles_full(r, leg, params)[:3]``).
     """
-    return joint_angles_full(r, leg, params)[:3]
+    rx, ry, rz = _floats3(r, "foot target")
+    return np.array(joint_angles_floats(rx, ry, rz, leg, params))
+
+
+# Constants of :func:`joint_angles_floats`, cached per RobotParams object (frozen, so safe).
+_IK_CACHE: "dict[int, Tuple[RobotParams, tuple]]" = {}
+#: The most recently used entry of _IK_CACHE (rebound atomically), checked first.
+_IK_LAST: "Tuple[Optional[RobotParams], tuple]" = (None, ())
+
+
+def _ik_constants(params: RobotParams) -> tuple:
+    global _IK_LAST
+    entry = _IK_CACHE.get(id(params))
+    if entry is not None and entry[0] is params:
+        _IK_LAST = entry
+        return entry[1]
+    fb, limits = params.five_bar, params.joint_limits
+    legs = {}
+    for leg in LEGS:
+        mx, my, mz = MIRROR_DIAG[leg]
+        legs[leg] = (mx, my, mz) + tuple(params.leg_origins[leg].tolist())
+    values = (legs, float(fb.a1), float(fb.a2), float(fb.a3), float(fb.a4), float(fb.c), float(params.l_y),
+              float(params.l_z)) + tuple(float(x) for x in limits.theta1 + limits.theta2 + limits.theta3)
+    if len(_IK_CACHE) > 64:
+        _IK_CACHE.clear()
+    _IK_CACHE[id(params)] = _IK_LAST = (params, values)
+    return values
+
+
+def joint_angles_floats(rx: float, ry: float, rz: float, leg: int, params: RobotParams) -> Tuple[float, float, float]:
+    """:func:`joint_angles` on plain floats: (theta1, theta2, theta3) for the body-frame target (rx, ry, rz).
+
+    The same formulas in the same floating-point order (eq. (ee_body) inverted, eq. (ik_theta3),
+    (ik_dists), (ik_alphas), (ik_theta1245), wrapped into the servo ranges), without numpy and with the
+    geometry read from a per-``params`` cache: the controller's per-step IK. Any target that is not
+    plainly reachable is handed to :func:`joint_angles_full`, which raises the proper
+    :class:`UnreachableError` (or returns its result for the rare rounding-boundary cases). The tests
+    compare the two bit for bit.
+    """
+    last = _IK_LAST
+    constants = last[1] if last[0] is params else _ik_constants(params)
+    legs, a1, a2, a3, a4, c, l_y, l_z, low1, high1, low2, high2, low3, high3 = constants
+    frame = legs.get(leg)
+    if frame is not None:
+        mx, my, mz, ox, oy, oz = frame
+        x_d, y_d, z_d = mx * (rx - ox), my * (ry - oy), mz * (rz - oz)
+        radius = math.hypot(y_d, z_d)
+        if radius >= l_z and math.isfinite(x_d + radius):  # also rejects NaN
+            # eq. (ik_theta3), then wrap_into_range into the hip servo range
+            theta3 = math.atan2(z_d, y_d) - math.acos(min(l_z / radius, 1.0)) - 0.5 * math.pi
+            theta3 = theta3 + math.ceil((low3 - _ANGLE_TOL - theta3) / TWO_PI) * TWO_PI
+            if theta3 <= high3 + _ANGLE_TOL:
+                y_prime = y_d * math.cos(theta3) + z_d * math.sin(theta3) - l_y
+                # five_bar_ik without theta4, theta5 (their arccos arguments are only range-checked)
+                d13 = math.hypot(x_d, y_prime)
+                d24 = math.hypot(x_d - c, y_prime)
+                if d13 >= _ROUND_TOL and d24 >= _ROUND_TOL:
+                    k1 = (d13 * d13 + a1 * a1 - a3 * a3) / (2.0 * a1 * d13)
+                    k2 = (d24 * d24 + a2 * a2 - a4 * a4) / (2.0 * a2 * d24)
+                    k4 = (d13 * d13 - a1 * a1 - a3 * a3) / (2.0 * a1 * a3)
+                    k5 = (d24 * d24 - a2 * a2 - a4 * a4) / (2.0 * a2 * a4)
+                    if -1.0 <= k1 <= 1.0 and -1.0 <= k2 <= 1.0 and abs(k4) <= 1.0 + _ROUND_TOL \
+                            and abs(k5) <= 1.0 + _ROUND_TOL:
+                        theta1 = math.atan2(y_prime, x_d) - math.acos(k1)
+                        theta2 = math.atan2(y_prime, x_d - c) + math.acos(k2)
+                        theta1 = theta1 + math.ceil((low1 - _ANGLE_TOL - theta1) / TWO_PI) * TWO_PI
+                        theta2 = theta2 + math.ceil((low2 - _ANGLE_TOL - theta2) / TWO_PI) * TWO_PI
+                        if theta1 <= high1 + _ANGLE_TOL and theta2 <= high2 + _ANGLE_TOL:
+                            return theta1, theta2, theta3
+    t1, t2, t3 = joint_angles_full((rx, ry, rz), leg, params)[:3].tolist()
+    return t1, t2, t3
 
 
 def foot_jacobian(q: ArrayLike, leg: int, params: RobotParams) -> np.ndarray:

@@ -142,6 +142,45 @@ class RateLimitedServo(ServoModel):
         self.params = params
 
     def _advance(self, q: np.ndarray, command: np.ndarray, dt: float) -> np.ndarray:
+        """The exact step on plain floats (12 joints: faster than a dozen small numpy operations); the
+        same element-wise formulas as :meth:`_advance_array` (math.exp may differ from np.exp by an ulp)."""
+        w_max, tau = self.params.max_speed, self.params.time_constant
+        exp = math.exp
+        out = []
+        if tau <= 1e-9 * dt:  # no lag to speak of (and no overflow in dt / tau): pure rate limiter
+            step = w_max * dt
+            for x, c in zip(q.ravel().tolist(), command.ravel().tolist()):
+                e = c - x
+                if e > 0.0:
+                    out.append(x + (e if e < step else step))
+                elif e < 0.0:
+                    out.append(x - (-e if -e < step else step))
+                else:  # zero, or NaN (kept, as np.sign gives NaN)
+                    out.append(x + e * 0.0 if e != e else x)
+            return np.array(out).reshape(q.shape)
+        knee = w_max * tau                                # |e| below which the lag is linear
+        for x, c in zip(q.ravel().tolist(), command.ravel().tolist()):
+            e = c - x
+            magnitude = e if e >= 0.0 else -e
+            t_saturated = (magnitude - knee) / w_max
+            if not t_saturated > 0.0:
+                t_saturated = 0.0
+            if t_saturated >= dt:
+                new_magnitude = magnitude - w_max * dt
+            else:
+                remaining = dt - t_saturated
+                new_magnitude = (magnitude if magnitude < knee else knee) * exp(-(remaining if remaining > 0.0 else 0.0)
+                                                                                / tau)
+            if e > 0.0:
+                out.append(c - new_magnitude)
+            elif e < 0.0:
+                out.append(c + new_magnitude)
+            else:  # zero error: stays; NaN propagates as in the array formulas
+                out.append(c - e * new_magnitude if e != e else c)
+        return np.array(out).reshape(q.shape)
+
+    def _advance_array(self, q: np.ndarray, command: np.ndarray, dt: float) -> np.ndarray:
+        """Reference of :meth:`_advance` with numpy array operations (used by the tests)."""
         w_max, tau = self.params.max_speed, self.params.time_constant
         error = command - q
         magnitude = np.abs(error)

@@ -161,6 +161,7 @@ class PlantSimulator:
         limits = robot.joint_limits.as_array()
         self._low = np.tile(limits[:, 0], (4, 1))
         self._high = np.tile(limits[:, 1], (4, 1))
+        self._bounds: Tuple[float, ...] = tuple(limits.reshape(6).tolist())  # (low1, high1, .., low3, high3)
         self.clamped_joints = 0
         self.time = 0.0
         self.reset(initial_rotation, initial_joints)
@@ -182,6 +183,7 @@ class PlantSimulator:
         self.model.leg_input(q, np.zeros((4, 3)))
         self.servo.reset(q)
         self._q = self.servo.position
+        self._q_rows: List[List[float]] = self._q.tolist()  # self._q as floats
         self._q_dot_start = self._q
         self._h = self.dt
         self._command_q = q.copy()
@@ -227,23 +229,48 @@ class PlantSimulator:
             raise ValueError("dt must be a positive finite number of seconds, got %r" % (dt,))
         return self._advance(self._command(q_cmd), h).copy()
 
-    def _advance(self, command: np.ndarray, h: float) -> RigidBodyState:
+    def _outside_count(self, rows: Sequence[Sequence[float]]) -> int:
+        """Number of joint commands in ``rows`` (4 x 3 floats) outside their servo range; NaN counts."""
+        l1, h1, l2, h2, l3, h3 = self._bounds
+        count = 0
+        for t1, t2, t3 in rows:
+            if not (l1 <= t1 <= h1 and l2 <= t2 <= h2 and l3 <= t3 <= h3):
+                count += (not l1 <= t1 <= h1) + (not l2 <= t2 <= h2) + (not l3 <= t3 <= h3)
+        return count
+
+    def _advance(self, command: np.ndarray, h: float, rows: Optional[List[List[float]]] = None,
+                 count: Optional[int] = None) -> RigidBodyState:
         """:meth:`step` for a checked (4, 3) finite command and a positive ``h``; returns the plant's
-        own state object (states are never mutated in place, so it stays valid)."""
-        outside = (command < self._low) | (command > self._high)
-        count = int(np.count_nonzero(outside)) if outside.any() else 0
+        own state object (states are never mutated in place, so it stays valid). ``rows``:
+        ``command.tolist()`` and ``count``: its :meth:`_outside_count`, if the caller has them.
+
+        The held input (midpoint and finite difference of the servo angles) is formed on floats, with
+        the same arithmetic as the array expressions 0.5 * (q_start + q_end) and (q_end - q_start) / h.
+        """
+        if rows is None:
+            rows = command.tolist()
+        if count is None:
+            count = self._outside_count(rows)
         clamped = np.clip(command, self._low, self._high) if count else command
         q_start = self._q
         servo_before = q_start  # the servo's position array is replaced, never mutated
         q_end = self.servo.update_trusted(clamped, h)
+        # An ideal servo reaches the (unclamped) command exactly: its floats are already at hand.
+        end_rows = rows if (count == 0 and type(self.servo) is IdealServo) else q_end.tolist()
+        mid = []
+        rate = []
+        for (a1, a2, a3), (b1, b2, b3) in zip(self._q_rows, end_rows):
+            mid.append((0.5 * (a1 + b1), 0.5 * (a2 + b2), 0.5 * (a3 + b3)))
+            rate.append(((b1 - a1) / h, (b2 - a2) / h, (b3 - a3) / h))
         try:
-            new_state = self.model.step_trusted(self._state, 0.5 * (q_start + q_end), (q_end - q_start) / h, h)
+            new_state = self.model.step_trusted(self._state, mid, rate, h)
         except (UnreachableError, ArithmeticError, RuntimeError) as exc:
             self.servo.reset(servo_before)
             raise SimulationError("plant step at t = %.3f s failed: %s" % (self.time, exc)) from None
         self.clamped_joints += count
         self._state = new_state
         self._q = q_end
+        self._q_rows = end_rows
         self._q_dot_start = q_start
         self._h = h
         self._command_q = clamped
@@ -446,9 +473,13 @@ class ClosedLoopSimulation:
             self.holds += 1
             output = self.controller.hold(t, "bad measurement: %s" % exc)
         targets = output.joint_targets
-        if targets.shape != (4, 3) or not np.isfinite(targets).all():  # the controller guarantees this
+        plant = self.plant
+        # The controller guarantees (4, 3) finite targets; a target inside its servo range is finite.
+        rows = targets.tolist() if targets.shape == (4, 3) else None
+        count = plant._outside_count(rows) if rows is not None else 0  # noqa: SLF001
+        if rows is None or (count and not np.isfinite(targets).all()):
             raise SimulationError("controller returned invalid joint targets at t = %.3f s: %r" % (t, targets))
-        self.plant._advance(targets, self.dt)  # noqa: SLF001 (checked above)
+        plant._advance(targets, self.dt, rows, count)  # noqa: SLF001 (checked above)
         self.k += 1
         return state, output
 

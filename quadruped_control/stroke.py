@@ -35,7 +35,7 @@ import bisect
 import math
 from typing import Callable, List, Optional, Sequence, Tuple
 
-from quadruped_control.kinematics import UnreachableError, joint_angles
+from quadruped_control.kinematics import UnreachableError, joint_angles_floats
 from quadruped_control.params import LEGS, ParameterError, RobotParams
 
 __all__ = [
@@ -165,6 +165,7 @@ class StrokeCycle:
         limits = robot.joint_limits
         self._bounds = (limits.theta1, limits.theta2, limits.theta3)
         self._ik_raw = ik if ik is not None else self._default_ik
+        self._ik_injected = ik is not None
         self.nominal: List[Vec3] = []
         self.nominal_joints: List[Vec3] = []
         for leg in LEGS:
@@ -186,14 +187,21 @@ class StrokeCycle:
     # ---- configuration -----------------------------------------------------------------------
 
     def _default_ik(self, point: Vec3, leg: int) -> Vec3:
-        t1, t2, t3 = joint_angles(point, leg, self.robot).tolist()
-        return t1, t2, t3
+        # joint_angles on floats (same result, no numpy round trip)
+        return joint_angles_floats(point[0], point[1], point[2], leg, self.robot)
 
     def ik(self, point: Vec3, leg: int) -> Vec3:
         """IK of ``point`` for ``leg``, clamped exactly into the servo ranges (the IK's wrap allows 1e-9 rad)."""
-        t1, t2, t3 = self._ik_raw(point, leg)
+        if self._ik_injected:
+            t1, t2, t3 = self._ik_raw(point, leg)
+        else:  # _default_ik, inlined (the controller's per-step IK)
+            t1, t2, t3 = joint_angles_floats(point[0], point[1], point[2], leg, self.robot)
         (l1, h1), (l2, h2), (l3, h3) = self._bounds
-        return (min(max(t1, l1), h1), min(max(t2, l2), h2), min(max(t3, l3), h3))
+        # min(max(t, low), high) inline, with the builtins' exact semantics (ties, NaN)
+        t1 = l1 if l1 > t1 else t1
+        t2 = l2 if l2 > t2 else t2
+        t3 = l3 if l3 > t3 else t3
+        return (h1 if h1 < t1 else t1, h2 if h2 < t2 else t2, h3 if h3 < t3 else t3)
 
     def set_timing(self, t_rec: Optional[float] = None, t_pow_max: Optional[float] = None) -> None:
         """New durations (s); each takes effect at the next start of the phase it governs."""

@@ -36,20 +36,6 @@ def test_leg_kinematics_raises_the_kinematics_error_for_irregular_input() -> Non
         leg_kinematics(q.tolist(), np.zeros((4, 3)).tolist(), PARAMS)
 
 
-@settings(max_examples=60)
-@given(st.integers(0, 2 ** 32 - 1), st.booleans())
-def test_fused_stage_equals_composed_chart_derivative(seed, small_angle) -> None:
-    rng = np.random.default_rng(seed)
-    model = FloatingBaseModel(PARAMS, restoring_offset=rng.uniform(-0.02, 0.02, 3))
-    context = model._context_from_joints(Q0 + rng.uniform(-0.2, 0.2, (4, 3)), rng.uniform(-3.0, 3.0, (4, 3)))
-    R0 = _as_mat3(exp_so3(rng.uniform(-2.0, 2.0, 3)))
-    y = (rng.normal(size=12) * [1, 1, 1, 0.5, 0.5, 0.5, 1, 1, 1, 2, 2, 2]).tolist()
-    if small_angle:
-        y[6:9] = [1e-6, -2e-6, 0.0]
-    np.testing.assert_allclose(model._stage(context, R0, y), model._chart_derivative(context, R0, y),
-                               rtol=1e-13, atol=1e-13)
-
-
 def test_step_trusted_equals_step() -> None:
     model = FloatingBaseModel(PARAMS)
     state = RigidBodyState(rotation=exp_so3([0.3, -0.2, 0.5]), omega=np.array([0.2, 0.1, -0.3]))
