@@ -35,9 +35,8 @@ from typing import Optional, Sequence, Tuple, Union
 
 import numpy as np
 
-from quadruped_control import hydrodynamics
-from quadruped_control.kinematics import foot_jacobian, foot_position
-from quadruped_control.params import LEGS, RobotParams
+from quadruped_control.dynamics import leg_kinematics
+from quadruped_control.params import RobotParams
 
 ArrayLike = Union[Sequence[float], np.ndarray]
 Vec3 = Tuple[float, float, float]
@@ -219,13 +218,13 @@ def estimate_body_torque(q: ArrayLike, q_dot: ArrayLike, R: ArrayLike, omega: Ar
         raise ValueError("R must be a finite 3x3 rotation matrix")
     w = np.array(_floats3(omega, "omega"))
     v_b = np.zeros(3) if v_body_world is None else np.array(_floats3(v_body_world, "v_body_world"))
-    q_arr = q_arr.reshape(4, 3)
-    q_dot_arr = q_dot_arr.reshape(4, 3)
-    feet = np.empty((4, 3))
-    relative = np.empty((4, 3))
-    for row, leg in enumerate(LEGS):
-        feet[row] = foot_position(q_arr[row], leg, robot)
-        relative[row] = np.cross(w, feet[row]) + foot_jacobian(q_arr[row], leg, robot) @ q_dot_arr[row]
-    v_world = v_b + relative @ rot.T
-    _, torques = hydrodynamics.leg_wrench(v_world, feet, rot, robot)
-    return torques.sum(axis=0)
+    # Foot positions r_i and joint-induced velocities J_P,i^B q_dot_i of all legs in one float pass
+    # (the simulator's fast path: the same formulas as foot_position / foot_jacobian).
+    kinematics = np.array(leg_kinematics(q_arr.reshape(4, 3).tolist(), q_dot_arr.reshape(4, 3).tolist(), robot))
+    feet = kinematics[:, :3]
+    # Foot velocity in body axes, R^T v_e,i^W = R^T v_B^W + omega x r_i + J_P,i^B q_dot_i; the drag
+    # F = -k |v| v (eq. drag) is rotation invariant, so the torque r_i x (R^T F_i^W) of eq. (torque_leg)
+    # is computed in body axes directly (hydrodynamics.leg_wrench does the same via the world frame).
+    u = np.cross(w, feet) + kinematics[:, 3:] + rot.T @ v_b
+    force_body = -robot.drag_constant * np.sqrt(np.einsum("ij,ij->i", u, u))[:, None] * u
+    return np.cross(feet, force_body).sum(axis=0)

@@ -22,6 +22,8 @@ Parameters
   ~robot_yaml ~hardware_yaml ~calibration_yaml ~simulation_yaml (package config/)
   ~servo_model (rate-limited | ideal)  ~initial_rpy_deg ([0, 0, 0])  ~restoring_offset ([]: off)
   ~physics_rate (100 Hz)  ~bus_socket (/tmp/uq_sim_i2c.sock)  ~imu_port (/tmp/uq_sim_vn100)
+  ~imu_pump_period (0.0005 s: how often the fake VN-100's byte stream is pumped into the pty; packets
+  leave at most this late, which shows up as IMU timing jitter downstream)
 Services
   ~imu_streaming    std_srvs/SetBool  stop / resume the fake VN-100's output (stale-IMU tests)
 """
@@ -80,7 +82,8 @@ class SimNode:
                                       self.lock)
         self.vn100 = FakeVn100()
         self._write_sensors(np.zeros(3))
-        self.imu_pty = PtyFakeVn100(self.vn100, symlink_path=rospy.get_param("~imu_port", "/tmp/uq_sim_vn100"))
+        self.imu_pty = PtyFakeVn100(self.vn100, symlink_path=rospy.get_param("~imu_port", "/tmp/uq_sim_vn100"),
+                                    period=float(rospy.get_param("~imu_pump_period", 0.0005)))
         self.imu_pty.start()
 
         self.pose_pub = rospy.Publisher("sim/pose", PoseStamped, queue_size=10)

@@ -12,7 +12,8 @@ Publishes:
 Parameters:
   ~world_frame (world), ~base_frame (base_link), ~setpoint_frame (setpoint),
   ~base_position ([0, 0, 0], m, where the body is drawn in the world frame: the robot has no position
-  estimate), ~marker_rate (20 Hz, cap on marker updates), ~robot_yaml (package config/robot.yaml).
+  estimate), ~marker_rate (20 Hz, cap on marker updates), ~draw_rate (30 Hz, cap on joint state and TF
+  updates), ~robot_yaml (package config/robot.yaml).
 
 All maths lives in quadruped_control.visualization; this node only wires messages.
 """
@@ -62,6 +63,14 @@ class VisualizationNode:
         if marker_rate <= 0.0:
             raise ValueError("~marker_rate must be positive, got %r" % marker_rate)
         self.marker_throttle = Throttle(1.0 / marker_rate)
+        # rviz draws at ~30 fps: forwarding the 100-200 Hz inputs would only load the robot's CPU
+        # (and robot_state_publisher, which recomputes every link per joint state).
+        draw_rate = float(rospy.get_param("~draw_rate", 30.0))
+        if draw_rate <= 0.0:
+            raise ValueError("~draw_rate must be positive, got %r" % draw_rate)
+        self.joint_throttle = Throttle(1.0 / draw_rate)
+        self.body_throttle = Throttle(1.0 / draw_rate)
+        self.setpoint_throttle = Throttle(1.0 / draw_rate)
 
         self.rates = {topic: RateMonitor(2.0) for topic in ("joint_states", "imu/data", "controller_state")}
         self.dropped = 0
@@ -91,6 +100,8 @@ class VisualizationNode:
 
     def on_joint_states(self, msg: JointState) -> None:
         self.rates["joint_states"].tick(time.monotonic())
+        if not self.joint_throttle.ready(rospy.get_time()):
+            return
         try:
             names, positions = visual_joint_state(msg.name, msg.position, self.params)
         except VisualizationError as exc:
@@ -107,6 +118,8 @@ class VisualizationNode:
 
     def on_imu(self, msg: Imu) -> None:
         self.rates["imu/data"].tick(time.monotonic())
+        if not self.body_throttle.ready(rospy.get_time()):
+            return
         q = msg.orientation
         try:
             orientation = imu_orientation((q.x, q.y, q.z, q.w), msg.orientation_covariance)
@@ -127,10 +140,11 @@ class VisualizationNode:
         self.rates["controller_state"].tick(time.monotonic())
         stamp = msg.header.stamp if not msg.header.stamp.is_zero() else rospy.Time.now()
         q = msg.setpoint
-        try:
-            self.broadcast(stamp, self.setpoint_frame, unit_quaternion((q.x, q.y, q.z, q.w)))
-        except VisualizationError as exc:
-            rospy.logwarn_throttle(5.0, "ignoring setpoint: %s" % exc)
+        if self.setpoint_throttle.ready(rospy.get_time()):
+            try:
+                self.broadcast(stamp, self.setpoint_frame, unit_quaternion((q.x, q.y, q.z, q.w)))
+            except VisualizationError as exc:
+                rospy.logwarn_throttle(5.0, "ignoring setpoint: %s" % exc)
         if self.marker_throttle.ready(rospy.get_time()):
             points = [(p.x, p.y, p.z) for p in msg.foot_targets]
             try:

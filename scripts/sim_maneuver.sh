@@ -3,7 +3,8 @@
 # 5 s, then a roll maneuver (ROLL, default 45 deg) for DURATION s, recorded to OUT/bags/*.bag.
 # Used by scripts/run_main.sh and benchmarks/bench_sim_graph.sh; expects scripts/env.sh sourced.
 #
-# Usage: scripts/sim_maneuver.sh OUT DURATION      env: ROLL (deg), UQ_ROS_PORT (master port)
+# Usage: scripts/sim_maneuver.sh OUT DURATION
+#   env: ROLL (deg), UQ_ROS_PORT (master port), DESCRIPTION (default false: headless, no robot_state_publisher/visualization)
 set -euo pipefail
 OUT="$1"; DURATION="$2"; ROLL="${ROLL:-45}"
 BAGS="$OUT/bags"
@@ -14,7 +15,7 @@ PORT="${UQ_ROS_PORT:-11357}"
 export ROS_MASTER_URI="http://localhost:$PORT"
 LOG="$OUT/launch.log"
 timeout $((DURATION + 180)) roslaunch -p "$PORT" underwater_quadruped sim_maneuver.launch \
-  bag_dir:="$BAGS" duration:="$DURATION" roll:="$ROLL" >"$LOG" 2>&1 &
+  bag_dir:="$BAGS" duration:="$DURATION" roll:="$ROLL" description:="${DESCRIPTION:-false}" >"$LOG" 2>&1 &
 LAUNCH_PID=$!
 trap 'kill -INT $LAUNCH_PID 2>/dev/null || true' EXIT
 # Progress from the maneuver node while the launch runs.
