@@ -137,12 +137,18 @@ def analyse(data: BagData) -> Dict:
         raise BagReportError("need /imu/data and /controller_state in the bag (got %d and %d messages)"
                              % (len(data.imu_t), len(data.state_t)))
     start = _trial_start(data)
-    imu_t = np.array(data.imu_t)
+    # Bags need not be in stamp order (split bags, several publishers): sort, drop repeated stamps.
+    order = np.argsort(np.array(data.imu_t), kind="stable")
+    imu_t = np.array(data.imu_t)[order]
+    imu_q = [data.imu_q[i] for i in order]
+    unique = np.concatenate(([True], np.diff(imu_t) > 0))
+    imu_t = imu_t[unique]
+    imu_q = [q for q, u in zip(imu_q, unique) if u]
     keep = imu_t >= start
     if np.count_nonzero(keep) < 10:
         raise BagReportError("fewer than 10 IMU samples after the maneuver started")
     t = imu_t[keep] - start
-    R_list = [quat_to_rot(np.asarray(q) / np.linalg.norm(q)) for q, k in zip(data.imu_q, keep) if k]
+    R_list = [quat_to_rot(np.asarray(q) / np.linalg.norm(q)) for q, k in zip(imu_q, keep) if k]
     rpy = np.array([rot_to_rpy(R) for R in R_list])
     setpoint_q = np.asarray(data.state_setpoint[-1])
     R_d = quat_to_rot(setpoint_q / np.linalg.norm(setpoint_q))

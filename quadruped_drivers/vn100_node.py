@@ -67,6 +67,7 @@ class Vn100Node:
         self.monitor = RateMonitor(2.0)
         self.published = 0
         self.rejected = 0
+        self.last_stamp: Optional[rospy.Time] = None
         self.diagnostics = Updater()
         self.diagnostics.setHardwareID("vn100 %s" % self.port)
         self.diagnostics.add("imu", self._diagnose)
@@ -110,6 +111,11 @@ class Vn100Node:
         stamp = arrival
         if last_time_ns is not None and sample.time_startup_ns is not None:
             stamp = arrival - rospy.Duration.from_sec(max(0.0, (last_time_ns - sample.time_startup_ns) * 1e-9))
+        # Dating a burst back can land before the previous sample when the transport delay varied:
+        # keep the stamps strictly increasing (consumers and bag analysis rely on it).
+        if self.last_stamp is not None and stamp <= self.last_stamp:
+            stamp = self.last_stamp + rospy.Duration(0, 1000)
+        self.last_stamp = stamp
         msg = Imu()
         msg.header.stamp = stamp
         msg.header.frame_id = self.frame_id

@@ -4,7 +4,8 @@
 # Used by scripts/run_main.sh and benchmarks/bench_sim_graph.sh; expects scripts/env.sh sourced.
 #
 # Usage: scripts/sim_maneuver.sh OUT DURATION
-#   env: ROLL (deg), UQ_ROS_PORT (master port), DESCRIPTION (default false: headless, no robot_state_publisher/visualization)
+#   env: ROLL (deg), UQ_ROS_PORT (master port), DESCRIPTION (default false: headless, no robot_state_publisher/visualization),
+#        UQ_LAUNCH_PREFIX (launch-prefix of the control-path nodes; default "chrt -f 20" where permitted)
 set -euo pipefail
 OUT="$1"; DURATION="$2"; ROLL="${ROLL:-45}"
 BAGS="$OUT/bags"
@@ -14,12 +15,17 @@ export ROS_HOME="${ROS_HOME:-$OUT/ros_home}"; mkdir -p "$ROS_HOME"
 PORT="${UQ_ROS_PORT:-11357}"
 export ROS_MASTER_URI="http://localhost:$PORT"
 LOG="$OUT/launch.log"
+# The control path (vn100_node, attitude_controller, pwm_node) runs SCHED_FIFO where allowed (root here),
+# as on the robot (README): on two shared cores it halves the loop jitter. UQ_LAUNCH_PREFIX overrides.
+if [ -z "${UQ_LAUNCH_PREFIX+x}" ]; then
+  if chrt -f 20 true 2>/dev/null; then UQ_LAUNCH_PREFIX="chrt -f 20"; else UQ_LAUNCH_PREFIX=""; fi
+fi
 timeout $((DURATION + 180)) roslaunch -p "$PORT" underwater_quadruped sim_maneuver.launch \
-  bag_dir:="$BAGS" duration:="$DURATION" roll:="$ROLL" description:="${DESCRIPTION:-false}" >"$LOG" 2>&1 &
+  bag_dir:="$BAGS" duration:="$DURATION" roll:="$ROLL" description:="${DESCRIPTION:-false}" launch_prefix:="$UQ_LAUNCH_PREFIX" >"$LOG" 2>&1 &
 LAUNCH_PID=$!
 trap 'kill -INT $LAUNCH_PID 2>/dev/null || true' EXIT
 # Progress from the maneuver node while the launch runs.
-tail -n +1 -F "$LOG" 2>/dev/null | grep --line-buffered -E "maneuver:|FATAL|ERROR|died" &
+tail -n +1 -F "$LOG" 2>/dev/null | grep --line-buffered -E "maneuver:|FATAL|ERROR|died" | grep --line-buffered -v "process \[maneuver-" &
 TAIL_PID=$!
 wait $LAUNCH_PID || true
 trap - EXIT
