@@ -98,7 +98,6 @@ class AttitudeControllerNode:
                                             armed=bool(rospy.get_param("~arm_on_start", False)))
         self.lock = threading.Lock()
         self.imu_count = 0
-        self.invalid_imu = 0
         self.last_step_wall: Optional[float] = None
         self.jitter = WindowStatistics(2000)
         self.step_time = WindowStatistics(2000)
