@@ -30,7 +30,7 @@ import math
 from dataclasses import dataclass
 from typing import Any, Mapping, Optional, Tuple
 
-from quadruped_control.params import LEGS, ParameterError, config_path, load_yaml
+from quadruped_control.params import LEGS, ParameterError, load_config
 
 __all__ = [
     "ControllerConfig",
@@ -249,8 +249,4 @@ def load_controller_config(path: Optional[str] = None, gain_set: str = DEFAULT_G
     ``gain_set``: ``'simulation'`` (paper, section "Simulation Validation") or ``'experiment'``
     (section "Experimental Setup"), or any other set defined in the file.
     """
-    path = path or config_path("controller.yaml")
-    try:
-        return controller_config_from_dict(load_yaml(path), gain_set)
-    except ParameterError as exc:
-        raise ParameterError("%s: %s" % (path, exc)) from None
+    return load_config(path, "controller.yaml", lambda tree: controller_config_from_dict(tree, gain_set))

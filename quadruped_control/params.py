@@ -13,7 +13,7 @@ from __future__ import annotations
 import math
 import os
 from dataclasses import dataclass, field
-from typing import Any, Dict, Mapping, Optional, Sequence, Tuple
+from typing import Any, Callable, Dict, Mapping, Optional, Sequence, Tuple, TypeVar
 
 import numpy as np
 import yaml
@@ -31,6 +31,9 @@ MIRROR_DIAG: Dict[int, Tuple[float, float, float]] = {
 
 #: Where the package keeps its configuration (the catkin package root's ``config/``).
 CONFIG_DIR = os.path.join(os.path.dirname(os.path.dirname(os.path.abspath(__file__))), "config")
+
+
+T = TypeVar("T")
 
 
 class ParameterError(ValueError):
@@ -56,18 +59,32 @@ def load_yaml(path: str) -> Dict[str, Any]:
     return data
 
 
-def _get(tree: Mapping[str, Any], dotted: str) -> Any:
+def lookup(tree: Mapping[str, Any], dotted: str, what: str = "parameter") -> Any:
+    """The value at ``dotted`` ("a.b.c") in a parsed YAML tree; ParameterError "missing <what> ..." if absent."""
     node: Any = tree
     for part in dotted.split("."):
         if not isinstance(node, Mapping) or part not in node:
-            raise ParameterError("missing parameter '%s'" % dotted)
+            raise ParameterError("missing %s '%s'" % (what, dotted))
         node = node[part]
     return node
 
 
+def load_config(path: Optional[str], default_name: str, build: Callable[[Dict[str, Any]], T]) -> T:
+    """Read ``path`` (default: ``default_name`` in the package's config/) and ``build`` the typed object
+    from it; every ParameterError names the file (once)."""
+    path = path or config_path(default_name)
+    try:
+        return build(load_yaml(path))
+    except ParameterError as exc:
+        if path in str(exc):
+            raise
+        raise ParameterError("%s: %s" % (path, exc)) from None
+
+
+
 def _number(tree: Mapping[str, Any], dotted: str, low: float = -math.inf, high: float = math.inf,
             low_open: bool = False) -> float:
-    value = _get(tree, dotted)
+    value = lookup(tree, dotted)
     if isinstance(value, bool) or not isinstance(value, (int, float)):
         raise ParameterError("parameter '%s' must be a number, got %r" % (dotted, value))
     value = float(value)
@@ -81,7 +98,7 @@ def _number(tree: Mapping[str, Any], dotted: str, low: float = -math.inf, high: 
 
 
 def _vector(tree: Mapping[str, Any], dotted: str, length: int) -> np.ndarray:
-    value = _get(tree, dotted)
+    value = lookup(tree, dotted)
     if not isinstance(value, Sequence) or isinstance(value, str) or len(value) != length:
         raise ParameterError("parameter '%s' must be a list of %d numbers, got %r" % (dotted, length, value))
     out = []
@@ -192,7 +209,7 @@ def robot_params_from_dict(tree: Mapping[str, Any]) -> RobotParams:
     if not (math.isclose(five_bar.a1, five_bar.a2) and math.isclose(five_bar.a3, five_bar.a4)):
         raise ParameterError("the paper's five-bar kinematics need a1 == a2 and a3 == a4, got %s" % (five_bar,))
 
-    origins_raw = _get(tree, "leg_origins")
+    origins_raw = lookup(tree, "leg_origins")
     if not isinstance(origins_raw, Mapping):
         raise ParameterError("parameter 'leg_origins' must map leg numbers 1..4 to [x, y, z]")
     leg_origins = {}
@@ -236,11 +253,7 @@ def robot_params_from_dict(tree: Mapping[str, Any]) -> RobotParams:
 
 def load_robot_params(path: Optional[str] = None) -> RobotParams:
     """Load and validate ``robot.yaml`` (default: the package's ``config/robot.yaml``)."""
-    path = path or config_path("robot.yaml")
-    try:
-        return robot_params_from_dict(load_yaml(path))
-    except ParameterError as exc:
-        raise ParameterError("%s: %s" % (path, exc)) from None
+    return load_config(path, "robot.yaml", robot_params_from_dict)
 
 
 #: Servo / joint order used everywhere (PWM channels, ADC map, /joint_states, /servo_command):

@@ -23,7 +23,7 @@ from typing import Any, Mapping, Optional, Sequence, Tuple
 
 import numpy as np
 
-from quadruped_control.params import JOINT_NAMES, ParameterError, config_path, load_yaml
+from quadruped_control.params import JOINT_NAMES, ParameterError, load_config
 
 
 @dataclass(frozen=True)
@@ -151,13 +151,7 @@ def servo_calibration_from_dict(tree: Mapping[str, Any]) -> ServoCalibration:
 
 def load_servo_calibration(path: Optional[str] = None) -> ServoCalibration:
     """Load ``config/servo_calibration.yaml`` (or ``path``); ParameterError on any problem."""
-    path = path or config_path("servo_calibration.yaml")
-    try:
-        return servo_calibration_from_dict(load_yaml(path))
-    except ParameterError as exc:
-        if path in str(exc):
-            raise
-        raise ParameterError("%s: %s" % (path, exc)) from exc
+    return load_config(path, "servo_calibration.yaml", servo_calibration_from_dict)
 
 
 _HEADER = """\

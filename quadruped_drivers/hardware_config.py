@@ -16,7 +16,7 @@ from typing import Any, Dict, Mapping, Optional, Tuple
 
 import numpy as np
 
-from quadruped_control.params import JOINT_NAMES, ParameterError, config_path, load_yaml
+from quadruped_control.params import JOINT_NAMES, ParameterError, load_config, lookup
 
 #: Failsafe actions of a PWM channel when the command watchdog trips.
 FAILSAFE_ACTIONS: Tuple[str, ...] = ("hold", "neutral", "off")
@@ -119,12 +119,7 @@ def pca9685_prescale(frequency_hz: float, oscillator_hz: float = 25e6) -> int:
 
 
 def _get(tree: Mapping[str, Any], dotted: str) -> Any:
-    node: Any = tree
-    for part in dotted.split("."):
-        if not isinstance(node, Mapping) or part not in node:
-            raise ParameterError("missing hardware parameter '%s'" % dotted)
-        node = node[part]
-    return node
+    return lookup(tree, dotted, "hardware parameter")
 
 
 def _int(tree: Mapping[str, Any], dotted: str, low: int, high: int) -> int:
@@ -246,13 +241,7 @@ def hardware_config_from_dict(tree: Mapping[str, Any]) -> HardwareConfig:
 
 def load_hardware_config(path: Optional[str] = None) -> HardwareConfig:
     """Load and validate ``config/hardware.yaml`` (or ``path``); ParameterError on any problem."""
-    path = path or config_path("hardware.yaml")
-    try:
-        return hardware_config_from_dict(load_yaml(path))
-    except ParameterError as exc:
-        if path in str(exc):
-            raise
-        raise ParameterError("%s: %s" % (path, exc)) from exc
+    return load_config(path, "hardware.yaml", hardware_config_from_dict)
 
 
 __all__ = ["FAILSAFE_ACTIONS", "ADS1115_FSR_PGA", "ADS1115_RATES", "ADS1115_ADDRESSES", "PCA9685_ALLCALL_ADDRESS",
