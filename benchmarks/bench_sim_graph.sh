@@ -9,11 +9,7 @@
 set -euo pipefail
 ROOT="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"
 cd "$ROOT"
-bash scripts/setup.sh
-set +u
-# shellcheck disable=SC1091
-source scripts/env.sh
-set -u
+source "$ROOT/scripts/prepare.sh"
 DURATION="${1:-60}"
 OUT="$(mktemp -d /tmp/uq_bench_graph.XXXXXX)"
 UQ_ROS_PORT="${UQ_ROS_PORT:-11358}" bash scripts/sim_maneuver.sh "$OUT" "$DURATION" >/dev/null

@@ -4,11 +4,7 @@
 set -uo pipefail
 ROOT="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"
 cd "$ROOT"
-bash scripts/setup.sh || exit 1
-set +u
-# shellcheck disable=SC1091
-source scripts/env.sh
-set -u
+source "$ROOT/scripts/prepare.sh"
 status=0
 for bench in benchmarks/bench_*.py; do
   echo "== $bench"

@@ -11,11 +11,7 @@
 set -euo pipefail
 ROOT="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"
 cd "$ROOT"
-bash scripts/setup.sh
-set +u
-# shellcheck disable=SC1091
-source scripts/env.sh
-set -u
+source "$ROOT/scripts/prepare.sh"
 OUT="${UQ_OUT:-$ROOT/out}"
 DURATION="${UQ_DURATION:-120}"
 mkdir -p "$OUT"

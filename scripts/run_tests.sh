@@ -5,11 +5,7 @@
 set -uo pipefail
 ROOT="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"
 cd "$ROOT"
-bash scripts/setup.sh || exit 1
-set +u
-# shellcheck disable=SC1091
-source scripts/env.sh
-set -u
+source "$ROOT/scripts/prepare.sh"
 
 RESULTS="$ROOT/build/test_results"
 rm -rf "$RESULTS"; mkdir -p "$RESULTS"

@@ -24,11 +24,7 @@ for tool in xvfb-run import convert rviz; do
   command -v "$tool" >/dev/null || { echo "rviz_screenshot: '$tool' not found (apt-get install -y rviz xvfb imagemagick)" >&2; exit 1; }
 done
 
-bash "$ROOT/scripts/setup.sh"
-set +u
-# shellcheck disable=SC1091
-source "$ROOT/scripts/env.sh"
-set -u
+source "$ROOT/scripts/prepare.sh"
 
 SCRATCH="$(mktemp -d /tmp/uq_rviz_shot.XXXXXX)"
 export HOME="$SCRATCH" ROS_HOME="$SCRATCH/ros" ROS_LOG_DIR="$SCRATCH/log"
