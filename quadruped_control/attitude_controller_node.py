@@ -234,7 +234,8 @@ class AttitudeControllerNode:
                     self.overruns += 1
             self.last_step_wall = started
             self.loop_monitor.tick(started)
-            result = self.supervisor.tick(rospy.get_time(), rospy.get_time())
+            now = rospy.get_time()  # controller time and the clock the IMU stamps are judged against
+            result = self.supervisor.tick(now, now)
         # Log on a change of the kind of problem (numbers such as the sample age change every step).
         if _problem_kind(result.problem) != _problem_kind(self.last_problem):
             if result.problem:

@@ -28,6 +28,7 @@ from typing import Dict, List, Optional, Sequence
 import numpy as np
 
 from quadruped_control.metrics import compute_metrics
+from quadruped_control.simulation import geodesic_angles, rotations_to_rpy
 from quadruped_control.so3 import geodesic_angle, quat_to_rot, rot_to_rpy
 
 #: Diagnostic values copied into the report (status name suffix -> keys).
@@ -104,8 +105,9 @@ def _read_into(data: BagData, reader) -> None:
                     data.diagnostics[status.name] = {kv.key: kv.value for kv in status.values}
 
 
-def _rpy(quaternions: Sequence[Sequence[float]]) -> np.ndarray:
-    return np.array([rot_to_rpy(quat_to_rot(np.asarray(q) / np.linalg.norm(q))) for q in quaternions])
+def _rotations(quaternions: Sequence[Sequence[float]]) -> np.ndarray:
+    """(N, 3, 3) rotations of (x, y, z, w) quaternions, normalised first (bags hold float32-rounded ones)."""
+    return np.array([quat_to_rot(np.asarray(q) / np.linalg.norm(q)) for q in quaternions])
 
 
 def _trial_start(data: BagData) -> float:
@@ -148,11 +150,10 @@ def analyse(data: BagData) -> Dict:
     if np.count_nonzero(keep) < 10:
         raise BagReportError("fewer than 10 IMU samples after the maneuver started")
     t = imu_t[keep] - start
-    R_list = [quat_to_rot(np.asarray(q) / np.linalg.norm(q)) for q, k in zip(imu_q, keep) if k]
-    rpy = np.array([rot_to_rpy(R) for R in R_list])
-    setpoint_q = np.asarray(data.state_setpoint[-1])
-    R_d = quat_to_rot(setpoint_q / np.linalg.norm(setpoint_q))
-    geodesic = np.array([geodesic_angle(R_d, R) for R in R_list])
+    R = _rotations([q for q, k in zip(imu_q, keep) if k])
+    rpy = rotations_to_rpy(R)
+    R_d = _rotations([data.state_setpoint[-1]])[0]
+    geodesic = geodesic_angles(R_d, R)
     metrics = compute_metrics(t, rpy, np.array(rot_to_rpy(R_d)), geodesic)
     metrics["setpoint_rpy_deg"] = [math.degrees(a) for a in rot_to_rpy(R_d)]
     metrics["trial_start_unix"] = start
@@ -161,10 +162,10 @@ def analyse(data: BagData) -> Dict:
     metrics["holding_fraction"] = float(np.mean(holding)) if holding.size else None
     if data.truth_t:
         truth_t = np.array(data.truth_t)
-        truth_R = [quat_to_rot(np.asarray(q) / np.linalg.norm(q)) for q in data.truth_q]
+        truth_R = _rotations(data.truth_q)
         # IMU vs truth: how well the measured attitude tracks the simulated one (same stamps +- 10 ms).
         idx = np.clip(np.searchsorted(truth_t, imu_t[keep]), 0, len(truth_t) - 1)
-        errors = [geodesic_angle(truth_R[j], R) for j, R in zip(idx, R_list)]
+        errors = [geodesic_angle(truth_R[j], R_k) for j, R_k in zip(idx, R)]
         metrics["imu_vs_truth_deg"] = {"p50": math.degrees(float(np.percentile(errors, 50))),
                                        "max": math.degrees(float(np.max(errors)))}
     metrics["health"] = health(data)

@@ -6,7 +6,7 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from quadruped_control.dynamics import FloatingBaseModel, RigidBodyState, _as_mat3, leg_kinematics
+from quadruped_control.dynamics import FloatingBaseModel, RigidBodyState, leg_kinematics
 from quadruped_control.kinematics import UnreachableError, foot_jacobian, foot_position
 from quadruped_control.params import LEGS, load_robot_params
 from quadruped_control.simulation import nominal_joint_angles
