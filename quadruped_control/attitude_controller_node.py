@@ -43,7 +43,7 @@ from std_srvs.srv import SetBool, SetBoolResponse
 
 from quadruped_control.controller import AttitudeController
 from quadruped_control.controller_config import Gains, load_controller_config
-from quadruped_control.monitoring import RateMonitor, WindowStatistics
+from quadruped_control.monitoring import HoldEpisodes, RateMonitor, WindowStatistics
 from quadruped_control.params import JOINT_NAMES, ParameterError, load_robot_params
 from quadruped_control.so3 import quat_to_rot, rot_to_quat, rpy_to_rot
 from quadruped_control.supervisor import ControlSupervisor
@@ -58,6 +58,11 @@ _PHASE_CODES = {"recovery": ControllerState.PHASE_RECOVERY, "power": ControllerS
 
 def _problem_kind(problem: str) -> str:
     return re.sub(r"[-+]?[0-9.]+", "#", problem)
+
+
+def _hold_kind(problem: str) -> str:
+    """Diagnostics bucket of a hold reason: "stale IMU" (the timing failure) or "other"."""
+    return "stale IMU" if "stale" in problem else "other"
 
 
 def _optional_path(name: str) -> Optional[str]:
@@ -99,6 +104,8 @@ class AttitudeControllerNode:
         self.lock = threading.Lock()
         self.imu_count = 0
         self.last_step_wall: Optional[float] = None
+        self.last_step_time: Optional[float] = None  # ROS clock (simulated time under use_sim_time)
+        self.hold_episodes = HoldEpisodes()
         self.jitter = WindowStatistics(2000)
         self.step_time = WindowStatistics(2000)
         self.overruns = 0
@@ -149,8 +156,10 @@ class AttitudeControllerNode:
             self._step()
 
     def _on_fallback_timer(self, _event) -> None:
-        last = self.last_step_wall
-        if last is None or time.monotonic() - last > 1.5 * self.period:
+        # Judged on the ROS clock, like the timer itself: under use_sim_time (lock-step simulation) a
+        # slow machine must not make the fallback step in between two IMU-driven steps.
+        last = self.last_step_time
+        if last is None or rospy.get_time() - last > 1.5 * self.period:
             self._step()
 
     def _on_joint_states(self, msg: JointState) -> None:
@@ -235,7 +244,10 @@ class AttitudeControllerNode:
             self.last_step_wall = started
             self.loop_monitor.tick(started)
             now = rospy.get_time()  # controller time and the clock the IMU stamps are judged against
+            self.last_step_time = now
             result = self.supervisor.tick(now, now)
+            held = bool(result.problem) and result.armed
+            self.hold_episodes.update(now, held, _hold_kind(result.problem) if held else "")
         # Log on a change of the kind of problem (numbers such as the sample age change every step).
         if _problem_kind(result.problem) != _problem_kind(self.last_problem):
             if result.problem:
@@ -303,7 +315,10 @@ class AttitudeControllerNode:
         stat.add("step time p50 [ms]", "%.3f" % compute["p50"])
         stat.add("step time p99 [ms]", "%.3f" % compute["p99"])
         stat.add("overruns", str(self.overruns))
-        stat.add("holds", str(self.supervisor.holds))
+        stat.add("held steps", str(self.hold_episodes.held_ticks))
+        stat.add("hold episodes", str(self.hold_episodes.episodes))
+        stat.add("stale-IMU hold episodes", str(self.hold_episodes.episodes_of("stale IMU")))
+        stat.add("time held [s]", "%.3f" % self.hold_episodes.time_held)
         stat.add("controller errors", str(self.supervisor.controller_errors))
         return stat
 

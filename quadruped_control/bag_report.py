@@ -34,7 +34,8 @@ from quadruped_control.so3 import geodesic_angle, quat_to_rot, rot_to_rpy
 #: Diagnostic values copied into the report (status name suffix -> keys).
 HEALTH_KEYS = {
     "control loop": ("loop rate [Hz]", "period jitter p50 [ms]", "period jitter p99 [ms]",
-                     "step time p50 [ms]", "step time p99 [ms]", "overruns", "holds"),
+                     "step time p50 [ms]", "step time p99 [ms]", "overruns", "hold episodes",
+                     "stale-IMU hold episodes", "time held [s]", "held steps"),
     "servo output": ("command rate [Hz]", "latency p50 [ms]", "latency p99 [ms]", "latency max [ms]",
                      "clamped channels", "write errors", "watchdog tripped"),
     "servo feedback": ("rate [Hz]", "read time p50 [ms]", "read time p99 [ms]", "mux errors"),
@@ -131,6 +132,29 @@ def health(data: BagData) -> Dict[str, Dict[str, str]]:
             if name.endswith(suffix):
                 result[name] = {k: values[k] for k in keys if k in values}
     return result
+
+
+def health_across_runs(runs: Sequence[Dict[str, Dict[str, str]]]) -> Dict[str, Dict[str, Dict[str, float]]]:
+    """min / median / max of every numeric health figure over several runs (``health()`` of each).
+
+    Figures missing or non-numeric in a run are left out of that figure's statistics; ``n`` says how
+    many runs had it.
+    """
+    collected: Dict[str, Dict[str, List[float]]] = {}
+    for run in runs:
+        for name, values in run.items():
+            for key, value in values.items():
+                try:
+                    number = float(value)
+                except (TypeError, ValueError):
+                    if str(value) in ("True", "False"):
+                        number = float(str(value) == "True")
+                    else:
+                        continue
+                collected.setdefault(name, {}).setdefault(key, []).append(number)
+    return {name: {key: {"min": float(np.min(v)), "median": float(np.median(v)), "max": float(np.max(v)),
+                         "n": float(len(v))} for key, v in figures.items()}
+            for name, figures in collected.items()}
 
 
 def analyse(data: BagData) -> Dict:

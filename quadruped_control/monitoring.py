@@ -6,6 +6,7 @@
 * :func:`imu_sample_problem`: why an IMU sample must not be used by the controller (NaN, non-unit
   quaternion, too old), or ``None`` when it is fine. The controller node turns a problem into a hold.
 * :class:`LowPassDifferentiator`: filtered joint velocities from sampled positions (servo feedback).
+* :class:`HoldEpisodes`: hold episodes and time held (controller diagnostics), not just held steps.
 """
 from __future__ import annotations
 
@@ -130,3 +131,42 @@ class LowPassDifferentiator:
         self._last_position = position.copy()
         self._last_time = t
         return self.velocity.copy()
+
+
+class HoldEpisodes:
+    """Hold episodes and time held, from a per-tick "holding or not" signal on one clock.
+
+    A run of consecutive holding ticks is one episode, however many ticks it lasts (a 70 ms stale-IMU
+    gap is one episode of seven held steps at 100 Hz). ``time_held`` adds, for every interval between
+    two updates, its length when the earlier update was holding (so an episode lasts from its first
+    held tick to the first tick that strokes again). Episodes are also counted per ``kind`` (the caller
+    names the reason, e.g. "stale IMU"). A non-finite or backward time adds no time.
+    """
+
+    def __init__(self) -> None:
+        self.episodes = 0
+        self.held_ticks = 0
+        self.time_held = 0.0
+        self.by_kind: Dict[str, int] = {}
+        self._holding = False
+        self._last_t: Optional[float] = None
+
+    @property
+    def holding(self) -> bool:
+        return self._holding
+
+    def update(self, t: float, holding: bool, kind: str = "") -> None:
+        t = float(t)
+        if self._holding and self._last_t is not None and math.isfinite(t) and t > self._last_t:
+            self.time_held += t - self._last_t
+        if math.isfinite(t) and (self._last_t is None or t > self._last_t):
+            self._last_t = t
+        if holding:
+            self.held_ticks += 1
+            if not self._holding:
+                self.episodes += 1
+                self.by_kind[kind] = self.by_kind.get(kind, 0) + 1
+        self._holding = bool(holding)
+
+    def episodes_of(self, kind: str) -> int:
+        return self.by_kind.get(kind, 0)

@@ -99,3 +99,21 @@ def test_never_armed_is_a_clear_error(tmp_path, capsys):
 
 def test_missing_bag_is_a_clear_error(tmp_path, capsys):
     assert main([str(tmp_path / "nope.bag"), "--out", str(tmp_path / "r")]) == 1
+
+
+def test_health_across_runs_gives_min_median_max_of_every_figure():
+    from quadruped_control.bag_report import health_across_runs
+
+    runs = [{"ctl: control loop": {"loop rate [Hz]": "99.9", "hold episodes": "0", "hold reason": ""},
+             "pwm: servo output": {"latency p99 [ms]": "3.0", "watchdog tripped": "False"}},
+            {"ctl: control loop": {"loop rate [Hz]": "100.1", "hold episodes": "2"},
+             "pwm: servo output": {"latency p99 [ms]": "4.5", "watchdog tripped": "True"}},
+            {"ctl: control loop": {"loop rate [Hz]": "100.0", "hold episodes": "1"}}]
+    summary = health_across_runs(runs)
+    loop = summary["ctl: control loop"]
+    assert loop["loop rate [Hz]"] == {"min": 99.9, "median": 100.0, "max": 100.1, "n": 3.0}
+    assert loop["hold episodes"]["median"] == 1.0
+    assert "hold reason" not in loop
+    latency = summary["pwm: servo output"]["latency p99 [ms]"]
+    assert latency["n"] == 2.0 and latency["median"] == 3.75
+    assert summary["pwm: servo output"]["watchdog tripped"]["max"] == 1.0

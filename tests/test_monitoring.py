@@ -65,3 +65,32 @@ def test_differentiator_converges_to_ramp_slope_and_survives_nan():
         velocity = diff.update(t, [0.5 * t, math.nan if 50 <= k < 60 else -t])
     assert velocity == pytest.approx([0.5, -1.0], rel=1e-6)
     assert np.all(np.isfinite(velocity))
+
+
+def test_hold_episodes_count_runs_and_time_held():
+    from quadruped_control.monitoring import HoldEpisodes
+
+    holds = HoldEpisodes()
+    # 10 ms ticks: stroking, then a 7-tick stale gap, stroking, a 2-tick controller error, stroking.
+    pattern = [False] * 5 + [True] * 7 + [False] * 3 + [True] * 2 + [False] * 2
+    kinds = ["", ] * 5 + ["stale IMU"] * 7 + [""] * 3 + ["controller"] * 2 + [""] * 2
+    for k, (holding, kind) in enumerate(zip(pattern, kinds)):
+        holds.update(0.01 * k, holding, kind)
+    assert holds.episodes == 2
+    assert holds.held_ticks == 9
+    assert holds.time_held == pytest.approx(0.09)
+    assert holds.episodes_of("stale IMU") == 1 and holds.episodes_of("controller") == 1
+    assert not holds.holding
+
+
+def test_hold_episodes_ignore_bad_time_and_count_an_open_episode():
+    from quadruped_control.monitoring import HoldEpisodes
+
+    holds = HoldEpisodes()
+    holds.update(1.0, True, "stale IMU")
+    holds.update(float("nan"), True, "stale IMU")
+    holds.update(0.5, True, "stale IMU")  # backwards: no time
+    holds.update(1.25, True, "stale IMU")
+    assert holds.episodes == 1 and holds.held_ticks == 4
+    assert holds.time_held == pytest.approx(0.25)
+    assert holds.holding
