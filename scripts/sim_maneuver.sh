@@ -24,8 +24,9 @@ timeout $((DURATION + 180)) roslaunch -p "$PORT" underwater_quadruped sim_maneuv
   bag_dir:="$BAGS" duration:="$DURATION" roll:="$ROLL" description:="${DESCRIPTION:-false}" launch_prefix:="$UQ_LAUNCH_PREFIX" >"$LOG" 2>&1 &
 LAUNCH_PID=$!
 trap 'kill -INT $LAUNCH_PID 2>/dev/null || true' EXIT
-# Progress from the maneuver node while the launch runs.
-tail -n +1 -F "$LOG" 2>/dev/null | grep --line-buffered -E "maneuver:|FATAL|ERROR|died" | grep --line-buffered -v "process \[maneuver-" &
+# Progress from the maneuver node while the launch runs (tail ends with the launch, then grep sees EOF:
+# no process is left holding the caller's stdout).
+tail --pid="$LAUNCH_PID" -n +1 -F "$LOG" 2>/dev/null | grep --line-buffered -E "maneuver:|FATAL|ERROR|died" | grep --line-buffered -v "process \[maneuver-" &
 TAIL_PID=$!
 wait $LAUNCH_PID || true
 trap - EXIT
