@@ -5,15 +5,19 @@ Publishes
                 rad/s), linear acceleration (FLU, m/s^2, specific force), covariances from parameters.
                 header.stamp is the arrival time of the packet (earlier packets of a burst are dated
                 back by the sensor's own time-since-startup), frame_id from ~frame_id.
-  diagnostics   rate, CRC errors, resync bytes, disconnects, last serial error
+  diagnostics   rate, CRC errors, resync bytes, disconnects, last serial error, samples dropped as
+                implausible (per reason), sensor time anomalies, reader errors
 Parameters
   ~port (/dev/vn100, the udev rule's link)  ~baud (921600)  ~rate (200 Hz; 800 must be divisible by it)
   ~frame_id (imu_link)  ~orientation_covariance_diagonal ~angular_velocity_covariance_diagonal
   ~linear_acceleration_covariance_diagonal  ~read_timeout ~reconnect_interval ~command_timeout
-  ~stale_timeout (s)  ~config_yaml (package config/vn100.yaml supplies the defaults of all of the above)
+  ~stale_timeout (s)  ~max_angular_rate (rad/s)  ~max_acceleration (m/s^2)  ~quaternion_norm_tolerance
+  ~config_yaml (package config/vn100.yaml supplies the defaults of all of the above)
 
 The node reads in its own thread (the serial read blocks for at most the port timeout); framing, CRC,
-configuration, reconnection and the NED/FRD -> ENU/FLU conversion are the driver's.
+configuration, reconnection and the NED/FRD -> ENU/FLU conversion are the driver's; the plausibility
+check (sensor range), burst dating and per-sample isolation are :class:`SampleGate`'s. No exception of
+one sample or one read stops the reader thread: it is counted, reported and the stream goes on.
 """
 from __future__ import annotations
 
@@ -28,8 +32,9 @@ from sensor_msgs.msg import Imu
 
 from quadruped_control.monitoring import RateMonitor
 from quadruped_control.params import ParameterError, config_path, load_yaml
-from quadruped_drivers.vn100.conversions import vn_to_ros
+from quadruped_drivers.vn100.conversions import SensorLimits
 from quadruped_drivers.vn100.driver import Vn100Driver, serial_port_factory
+from quadruped_drivers.vn100.sample_gate import DROP_REASONS, TIME_ANOMALY, SampleGate
 
 
 def _diagonal(values: Sequence[float], name: str) -> List[float]:
@@ -63,10 +68,16 @@ class Vn100Node:
                                   reconnect_interval=float(param("reconnect_interval")),
                                   command_timeout=float(param("command_timeout")),
                                   stale_timeout=float(param("stale_timeout")))
+        self.gate = SampleGate(SensorLimits(max_angular_rate=float(param("max_angular_rate")),
+                                            max_acceleration=float(param("max_acceleration")),
+                                            unit_tolerance=float(param("quaternion_norm_tolerance"))),
+                               max_backdate=float(param("stale_timeout")))
         self.publisher = rospy.Publisher("imu/data", Imu, queue_size=10, tcp_nodelay=True)
         self.monitor = RateMonitor(2.0)
         self.published = 0
-        self.rejected = 0
+        self.reported_drops = 0
+        self.reader_errors = 0
+        self.last_reader_error = ""
         self.last_stamp: Optional[rospy.Time] = None
         self.diagnostics = Updater()
         self.diagnostics.setHardwareID("vn100 %s" % self.port)
@@ -79,16 +90,8 @@ class Vn100Node:
 
     def _run(self) -> None:
         while not rospy.is_shutdown():
-            samples = self.driver.read_samples()
-            if not samples:
-                if not self.driver.connected:
-                    time.sleep(0.01)  # the driver reconnects on its own schedule; do not spin
-                continue
-            arrival = rospy.Time.now()
-            last_time = samples[-1].time_startup_ns
             try:
-                for sample in samples:
-                    self._publish(sample, arrival, last_time)
+                self._read_once()
             except rospy.ROSException as exc:
                 # The publisher closes during shutdown (rospy closes topics in its pre-shutdown hooks, before
                 # rospy.is_shutdown() turns true); outside a shutdown it cannot recover: stop the node.
@@ -96,21 +99,27 @@ class Vn100Node:
                     rospy.logerr("vn100_node: cannot publish (%s), shutting down", exc)
                     rospy.signal_shutdown("imu publisher closed")
                 break
+            except Exception as exc:  # noqa: BLE001 - the reader thread must never die
+                self.reader_errors += 1
+                self.last_reader_error = "%s: %s" % (type(exc).__name__, exc)
+                rospy.logerr_throttle(1.0, "vn100_node: reader error (%s), carrying on" % self.last_reader_error)
+                time.sleep(0.001)
         self.driver.close()
 
-    def _publish(self, sample, arrival: rospy.Time, last_time_ns: Optional[int]) -> None:
-        if sample.quaternion_xyzw is None or sample.angular_rate is None or sample.acceleration is None:
-            self.rejected += 1
+    def _read_once(self) -> None:
+        samples = self.driver.read_samples()
+        if not samples:
+            if not self.driver.connected:
+                time.sleep(0.01)  # the driver reconnects on its own schedule; do not spin
             return
-        try:
-            reading = vn_to_ros(sample.quaternion_xyzw, sample.angular_rate, sample.acceleration)
-        except ValueError as exc:  # NaN or non-unit quaternion from the wire: drop, count, say why
-            self.rejected += 1
-            rospy.logwarn_throttle(1.0, "vn100_node: sample dropped: %s" % exc)
-            return
-        stamp = arrival
-        if last_time_ns is not None and sample.time_startup_ns is not None:
-            stamp = arrival - rospy.Duration.from_sec(max(0.0, (last_time_ns - sample.time_startup_ns) * 1e-9))
+        arrival = rospy.Time.now()
+        dropped = self.gate.dropped
+        for reading, age in self.gate.process(samples):
+            self._publish(reading, arrival - rospy.Duration.from_sec(age))
+        if self.gate.dropped != dropped:
+            rospy.logwarn_throttle(1.0, "vn100_node: sample dropped: %s" % self.gate.last_drop)
+
+    def _publish(self, reading, stamp: rospy.Time) -> None:
         # Dating a burst back can land before the previous sample when the transport delay varied:
         # keep the stamps strictly increasing (consumers and bag analysis rely on it).
         if self.last_stamp is not None and stamp <= self.last_stamp:
@@ -142,8 +151,18 @@ class Vn100Node:
         else:
             stat.summary(DiagnosticStatus.OK, "streaming")
         stat.add("rate [Hz]", "%.1f" % rate)
+        drops = self.gate.dropped
+        new_drops, self.reported_drops = drops - self.reported_drops, drops
+        if new_drops and stat.level == DiagnosticStatus.OK:
+            stat.summary(DiagnosticStatus.WARN, "%d implausible samples dropped (%s)" % (new_drops, self.gate.last_drop))
         stat.add("published", str(self.published))
-        stat.add("rejected samples", str(self.rejected))
+        stat.add("dropped samples", str(drops))
+        for reason in DROP_REASONS:
+            stat.add("dropped: %s" % reason, str(self.gate.counts[reason]))
+        stat.add("last dropped sample", self.gate.last_drop)
+        stat.add("sensor time anomalies", str(self.gate.counts[TIME_ANOMALY]))
+        stat.add("reader errors", str(self.reader_errors))
+        stat.add("last reader error", self.last_reader_error)
         stat.add("packets", str(parser.packets))
         stat.add("CRC errors", str(parser.crc_errors))
         stat.add("sensor errors", str(self.driver.sensor_errors))
