@@ -5,14 +5,15 @@ Subscribes
 Services
   ~enable         std_srvs/SetBool  outputs on / off (off = every channel full-off)
 Publishes
-  diagnostics     watchdog state, clamp and write-error counters, command latency
+  diagnostics     watchdog state, clamp, write-error and retry counters, chip resets, command latency
 Parameters
   ~backend (real | sim)  ~bus_socket (sim: the simulated robot's bus bridge)  ~hardware_yaml
   ~update_rate (100 Hz: watchdog checks)  ~enable_on_start (true)
   ~failsafe ("": per channel from hardware_yaml; hold | neutral | off: the same for every channel)
 
-Clamping, the command watchdog and its per-channel failsafe, and ALL_LED full-off on shutdown are
-the driver's (:class:`quadruped_drivers.pwm_output.ServoPwmOutput`); this node only wires them. The
+Clamping, the command watchdog (checked every update period, so it fires within its timeout) and its
+per-channel failsafe, writes that cannot tear a pulse out of its limits, bounded retries, the MODE1
+check that finds and restores a reset chip, and ALL_LED full-off on shutdown are the driver's (:class:`quadruped_drivers.pwm_output.ServoPwmOutput`); this node only wires them. The
 latency measured here is from the IMU sample that caused a command (its header stamp) to the end of the
 I2C write, the end-to-end latency of the control path.
 """
@@ -43,7 +44,8 @@ class PwmNode:
         backend = rospy.get_param("~backend", "real")
         bus = open_bus(backend, self.hardware.i2c_bus, rospy.get_param("~bus_socket", "/tmp/uq_sim_i2c.sock"))
         self.lock = threading.Lock()  # one thread at a time owns the bus (DESIGN.md: PCA9685 library)
-        self.output = ServoPwmOutput(bus, self.hardware)
+        period = 1.0 / float(rospy.get_param("~update_rate", 100.0))
+        self.output = ServoPwmOutput(bus, self.hardware, update_period=period)
         self._start_output()
         if not rospy.get_param("~enable_on_start", True):
             self.output.disable()
@@ -52,6 +54,7 @@ class PwmNode:
         self.commands = RateMonitor(2.0)
         self.rejected = 0
         self.reported_write_errors = 0
+        self.reported_chip_resets = 0
         self.closed = False
         self.last_rejection = ""
         self.diagnostics = Updater()
@@ -60,7 +63,6 @@ class PwmNode:
         rospy.on_shutdown(self._shutdown)
         rospy.Service("~enable", SetBool, self._on_enable)
         rospy.Subscriber("servo_command", ServoCommand, self._on_command, queue_size=1, tcp_nodelay=True)
-        period = 1.0 / float(rospy.get_param("~update_rate", 100.0))
         self.timer = rospy.Timer(rospy.Duration(period), self._on_timer)
         rospy.loginfo("pwm_node: PCA9685 at 0x%02x on %s bus, %.0f Hz PWM, watchdog %.0f ms",
                       self.hardware.pca_address, backend, self.hardware.pwm_frequency_hz,
@@ -131,7 +133,12 @@ class PwmNode:
         latency = self.latency.summary(1e3)
         new_errors = self.output.write_errors - self.reported_write_errors
         self.reported_write_errors = self.output.write_errors
-        if new_errors:
+        new_resets = self.output.chip_resets - self.reported_chip_resets
+        self.reported_chip_resets = self.output.chip_resets
+        if new_resets:
+            stat.summary(DiagnosticStatus.ERROR, "PCA9685 reset %d time(s) since the last report: set up again (%s)"
+                         % (new_resets, self.output.last_fault))
+        elif new_errors:
             stat.summary(DiagnosticStatus.ERROR, "%d I2C write errors since the last report" % new_errors)
         elif self.output.watchdog_tripped:
             stat.summary(DiagnosticStatus.WARN, "command watchdog tripped: outputs in failsafe")
@@ -147,6 +154,10 @@ class PwmNode:
         stat.add("latency max [ms]", "%.3f" % latency["max"])
         stat.add("clamped channels", str(self.output.clamp_count))
         stat.add("write errors", str(self.output.write_errors))
+        stat.add("write retries", str(self.output.write_retries))
+        stat.add("chip resets", str(self.output.chip_resets))
+        stat.add("MODE1 read errors", str(self.output.mode_read_errors))
+        stat.add("last fault", self.output.last_fault)
         stat.add("rejected commands", str(self.rejected))
         stat.add("last rejection", self.last_rejection)
         stat.add("applied pulse widths [us]", " ".join("%.0f" % v for v in self.output.applied_us))

@@ -15,11 +15,36 @@ The prescale formula is the same as the library's (``int(osc / 4096 / f + 0.5) -
 in the tests by running the library against the fake chip).
 
 pulse (us) -> ticks: ticks = round(us * f_actual * 4096 / 1e6), f_actual = osc / (4096 (prescale + 1)).
+
+**Writes that cannot tear a pulse out of its limits.** An I2C write that aborts part-way (bus error,
+arbitration lost) leaves a prefix of its bytes in the chip: a new OFF_L with the old OFF_H could put
+3,743 us on a channel commanded to 2,495 us. The twelve channels still go out in one auto-increment
+write, but each channel's four bytes (ON_L, ON_H, OFF_L, OFF_H, in that order) are chosen so that every
+prefix leaves a pulse inside the channel's tick window [m, M] (:meth:`ServoPwmOutput.channel_bytes`):
+
+* ON_L is a per-channel constant c = (-m) mod 256, so with ON = 256 a + c and a pulse of w ticks,
+  OFF_L = (w - m) mod 256 for every pulse this driver writes;
+* the new ON is either the chip's current ON, when that keeps the torn state below in [m, M], or
+  256 OFF_H_chip - m. With the latter, after ON_H the chip holds OFF_chip - ON_new = m + OFF_L_chip,
+  after OFF_L it holds m + OFF_L_new; each is m + ((w - m) mod 256) for an old or the new w, which is
+  w itself when w - m < 256 and w - 256 (>= m, <= M) otherwise. After OFF_H it holds the new w.
+* turning a channel on from full-off: OFF_H (with the full-off bit) is the last byte, so every prefix
+  is still off; turning it off changes only OFF_H (one byte, cannot tear).
+
+The rule needs the chip's OFF_H. After a failed write the chip holds some prefix of it, so until a write
+succeeds the same bytes are retried (every prefix of a retry is one of the states above); only then is
+a new block computed. A failed write is retried up to ``write_attempts`` times per call (counted in
+``write_retries``).
+
+**A chip that reset** (brown-out: MODE1 back to SLEEP | ALLCALL, outputs off, still ACKing writes) is
+found by reading MODE1/MODE2 every ``mode_check_interval`` s in :meth:`ServoPwmOutput.update`
+(counted in ``chip_resets``, described in ``last_fault``); the start-up sequence is run again and the
+current widths re-applied.
 """
 from __future__ import annotations
 
 import time
-from typing import Any, Callable, List, Optional, Sequence
+from typing import Any, Callable, List, Optional, Sequence, Tuple
 
 import numpy as np
 
@@ -30,6 +55,7 @@ MODE1 = 0x00
 MODE2 = 0x01
 LED0_ON_L = 0x06
 ALL_LED_ON_L = 0xFA
+ALL_LED_OFF_H = 0xFD
 PRE_SCALE = 0xFE
 MODE1_RESTART = 0x80
 MODE1_AI = 0x20
@@ -42,6 +68,12 @@ STAGGER_TICKS = 256
 OSCILLATOR_STARTUP_S = 0.0005
 #: Applied-width marker for a channel whose output is off.
 OFF = 0.0
+#: Attempts per write (the first try and its retries) within one call.
+WRITE_ATTEMPTS = 4
+#: Seconds between MODE1/MODE2 checks for a chip that reset (one 2-byte read, ~50 bits on the wire).
+MODE_CHECK_INTERVAL = 0.1
+#: LEDn registers of a channel that is off and was never driven (start-up / ALL_LED state).
+_OFF_BYTES = (0, 0, 0, FULL)
 
 
 class PwmOutputError(RuntimeError):
@@ -55,7 +87,19 @@ class ServoPwmOutput:
     """
 
     def __init__(self, bus: Any, hardware_config: HardwareConfig, clock: Callable[[], float] = time.monotonic,
-                 sleep: Callable[[float], None] = time.sleep) -> None:
+                 sleep: Callable[[float], None] = time.sleep, update_period: float = 0.0,
+                 write_attempts: int = WRITE_ATTEMPTS, mode_check_interval: float = MODE_CHECK_INTERVAL) -> None:
+        """``update_period``: how often the caller runs :meth:`update` (s); the watchdog trips on the
+        last check that comes before its timeout, so the failsafe is never a period late."""
+        if not (0.0 <= update_period < hardware_config.watchdog_timeout):
+            raise ValueError("update_period must be in [0, watchdog timeout), got %r" % (update_period,))
+        if isinstance(write_attempts, bool) or not isinstance(write_attempts, int) or write_attempts < 1:
+            raise ValueError("write_attempts must be an integer >= 1, got %r" % (write_attempts,))
+        if not mode_check_interval > 0.0:
+            raise ValueError("mode_check_interval must be positive, got %r" % (mode_check_interval,))
+        self.update_period = float(update_period)
+        self.write_attempts = write_attempts
+        self.mode_check_interval = float(mode_check_interval)
         self._bus = bus
         self._config = hardware_config
         self._clock = clock
@@ -73,6 +117,13 @@ class ServoPwmOutput:
         self._min_ticks = np.ceil(self._min * self._ticks_per_us - 1e-9).astype(int)
         self._max_ticks = np.floor(self._max * self._ticks_per_us + 1e-9).astype(int)
         self._span = int(self._channels.max()) + 1  # LED0 .. highest channel in use: one write
+        self._joint_of_channel = {int(channel): index for index, channel in enumerate(self._channels)}
+        # What the chip's LEDn registers hold (known after a successful write), and the block of a failed
+        # write that may have landed in part (None: the chip state is known).
+        self._chip = [_OFF_BYTES] * self._span
+        self._in_flight: Optional[bytes] = None
+        self._commanded = np.zeros(self._count, dtype=bool)
+        self._next_mode_check = -np.inf
         self._applied = np.zeros(self._count)
         self._requested = np.full(self._count, np.nan)
         self._started = False
@@ -82,6 +133,10 @@ class ServoPwmOutput:
         self._pending_write = False
         self._pending = np.zeros(self._count)
         self.write_errors = 0
+        self.write_retries = 0
+        self.chip_resets = 0
+        self.mode_read_errors = 0
+        self.last_fault = ""
         self.clamp_count = 0
         self.invalid_count = 0
         self.watchdog_trips = 0
@@ -130,33 +185,70 @@ class ServoPwmOutput:
         self._bus.writeto_then_readfrom(self._config.pca_address, bytes([register]), buffer)
         return buffer[0]
 
+    def channel_bytes(self, index: int, width_us: float, chip: Sequence[int]) -> Tuple[int, int, int, int]:
+        """LEDn (ON_L, ON_H, OFF_L, OFF_H) for joint ``index`` at ``width_us`` (0 = off), given the bytes
+        ``chip`` its channel holds now, such that every prefix of the write is in limits (module doc)."""
+        on_l, on_h, off_l, off_h = chip
+        if width_us <= 0.0:
+            return on_l, on_h, off_l, (off_h & 0x0F) | FULL  # only OFF_H changes: one byte
+        low = int(self._min_ticks[index])
+        high = int(self._max_ticks[index])
+        ticks = int(round(width_us * self._ticks_per_us))
+        constant = (-low) % 256
+        channel = int(self._channels[index])
+        if off_h & FULL or on_l != constant:
+            # Off now: every prefix stays off (OFF_H with its full-off bit goes last); stagger the edge.
+            base = (channel * STAGGER_TICKS) % 4096 if self._config.pwm_stagger else 0
+            on = (base - low) % 4096
+        else:
+            on_chip = (on_h & 0x0F) << 8 | on_l
+            torn = ((((off_h & 0x0F) << 8) | ((on_chip + ticks) & 0xFF)) - on_chip) % 4096
+            on = on_chip if low <= torn <= high else (((off_h & 0x0F) << 8) - low) % 4096
+        off = (on + ticks) % 4096
+        return on & 0xFF, on >> 8, off & 0xFF, off >> 8
+
     def _block(self, widths: np.ndarray) -> bytes:
-        """LED0..LED(span-1) registers for per-joint ``widths`` (0 = full off; unused channels off)."""
-        data = bytearray(1 + 4 * self._span)
-        data[0] = LED0_ON_L
+        """LED0..LED(span-1) registers for per-joint ``widths`` (0 = full off; unused channels off),
+        computed from the chip's current registers (:meth:`channel_bytes`)."""
+        data = bytearray([LED0_ON_L])
         for channel in range(self._span):
-            data[1 + 4 * channel + 3] = FULL  # unused channel: full off
-        for index, channel in enumerate(self._channels):
-            base = 1 + 4 * int(channel)
-            width = widths[index]
-            if width <= 0.0:
-                data[base:base + 4] = b"\x00\x00\x00" + bytes([FULL])
-                continue
-            on = (int(channel) * STAGGER_TICKS) % 4096 if self._config.pwm_stagger else 0
-            off = (on + int(round(width * self._ticks_per_us))) % 4096
-            data[base:base + 4] = bytes([on & 0xFF, on >> 8, off & 0xFF, off >> 8])
+            index = self._joint_of_channel.get(channel)
+            chip = self._chip[channel]
+            if index is None:
+                data += bytes(chip[:3]) + bytes([(chip[3] & 0x0F) | FULL])
+            else:
+                data += bytes(self.channel_bytes(index, float(widths[index]), chip))
         return bytes(data)
 
+    def _write_block(self, block: bytes) -> bool:
+        """One LED block write (up to ``write_attempts`` tries); the chip state follows on success."""
+        for attempt in range(self.write_attempts):
+            if attempt:
+                self.write_retries += 1
+            try:
+                with bus_locked(self._bus, self._config.bus_lock_timeout):
+                    self._write(block)
+            except OSError as exc:
+                self.write_errors += 1
+                self.last_fault = "LED write failed: %s" % (exc,)
+                self._in_flight = block
+                continue
+            self._chip = [tuple(block[1 + 4 * c:5 + 4 * c]) for c in range(self._span)]
+            self._in_flight = None
+            return True
+        return False
+
     def _apply(self, widths: np.ndarray) -> bool:
-        """Write ``widths`` in one auto-increment transaction; on success they become ``applied_us``."""
+        """Put ``widths`` on the chip; on success they become ``applied_us``, else they stay pending."""
         widths = self.quantize(widths)
-        try:
-            with bus_locked(self._bus, self._config.bus_lock_timeout):
-                self._write(self._block(widths))
-        except OSError:
-            self.write_errors += 1
-            self._pending = widths.copy()
-            self._pending_write = True
+        self._pending = widths.copy()
+        self._pending_write = True
+        retried = self._in_flight is not None
+        if retried and not self._write_block(self._in_flight):
+            return False  # the chip holds a prefix of the failed block: only that block may be retried
+        block = self._block(widths)
+        if not (retried and block[1:] == bytes(b for chip in self._chip for b in chip)) \
+                and not self._write_block(block):
             return False
         self._applied = widths.copy()
         self._pending_write = False
@@ -171,6 +263,18 @@ class ServoPwmOutput:
         RESTART, read back MODE1/MODE2/PRE_SCALE. Raises :class:`PwmOutputError` on a bus error or a
         read-back mismatch (the caller must not run the servos then).
         """
+        self._initialise()
+        self._applied = np.zeros(self._count)
+        self._pending_write = False
+        self._commanded[:] = False
+        self._started = True
+        self._enabled = enable
+        self._watchdog_tripped = False
+        self._last_command = self._clock()
+        self._next_mode_check = self._clock() + self.mode_check_interval
+
+    def _initialise(self) -> None:
+        """The start-up register sequence with read-back; the chip's LED state is known afterwards."""
         try:
             with bus_locked(self._bus, self._config.bus_lock_timeout):
                 self._write(bytes([MODE1, MODE1_SLEEP | MODE1_AI]))
@@ -196,11 +300,8 @@ class ServoPwmOutput:
         if problems:
             raise PwmOutputError("PCA9685 at 0x%02x read-back mismatch: %s"
                                  % (self._config.pca_address, "; ".join(problems)))
-        self._applied = np.zeros(self._count)
-        self._started = True
-        self._enabled = enable
-        self._watchdog_tripped = False
-        self._last_command = self._clock()
+        self._chip = [_OFF_BYTES] * self._span  # ALL_LED full-off wrote 0, 0, 0, FULL everywhere
+        self._in_flight = None
 
     def _require_started(self) -> None:
         if not self._started:
@@ -229,6 +330,7 @@ class ServoPwmOutput:
         self._watchdog_tripped = False
         if not self._enabled:
             return self.applied_us
+        self._commanded |= finite
         self._apply(clamped)
         return self.applied_us
 
@@ -240,19 +342,23 @@ class ServoPwmOutput:
 
     def _failsafe_width(self, index: int, current: float) -> float:
         action = self._failsafe[index]
-        if action == "neutral":
+        if action == "neutral" and self._commanded[index]:  # never move a servo nobody commanded
             return float(self._neutral[index])
         if action == "off":
             return OFF
-        return float(current)  # hold (an output that is off stays off)
+        return float(current)  # hold, or neutral before any command (an output that is off stays off)
 
     def update(self) -> bool:
-        """Call periodically: trips the watchdog (failsafe once) after ``watchdog_timeout`` without a
-        command, and retries a write that failed. Returns :attr:`watchdog_tripped`."""
+        """Call every ``update_period``: checks the chip for a reset (every ``mode_check_interval``), trips
+        the watchdog (failsafe once) on the last check before ``watchdog_timeout`` without a command
+        runs out, and retries a write that failed. Returns :attr:`watchdog_tripped`."""
         self._require_started()
         now = self._clock()
+        if now >= self._next_mode_check:
+            self._next_mode_check = now + self.mode_check_interval
+            self._check_mode()
         if (self._enabled and not self._watchdog_tripped and self._last_command is not None
-                and now - self._last_command > self._config.watchdog_timeout):
+                and now - self._last_command + self.update_period > self._config.watchdog_timeout):
             self._watchdog_tripped = True
             self.watchdog_trips += 1
             base = self._pending if self._pending_write else self._applied
@@ -261,6 +367,33 @@ class ServoPwmOutput:
         elif self._pending_write and self._enabled:
             self._apply(self._pending)
         return self._watchdog_tripped
+
+    def _check_mode(self) -> None:
+        """Read MODE1/MODE2; a chip that lost its configuration (reset) is set up again and re-driven."""
+        buffer = bytearray(2)
+        try:
+            with bus_locked(self._bus, self._config.bus_lock_timeout):
+                self._bus.writeto_then_readfrom(self._config.pca_address, bytes([MODE1]), buffer)
+        except OSError as exc:
+            self.mode_read_errors += 1
+            self.last_fault = "MODE1 read failed: %s" % (exc,)
+            return
+        mode1, mode2 = buffer
+        if mode1 & (MODE1_SLEEP | MODE1_AI | 0x0F) == MODE1_AI and mode2 == MODE2_OUTDRV:
+            return
+        self.chip_resets += 1
+        self.last_fault = ("PCA9685 lost its configuration (MODE1 0x%02x, MODE2 0x%02x): set up again"
+                           % (mode1, mode2))
+        target = self._pending if self._pending_write else self._applied
+        try:
+            self._initialise()
+        except PwmOutputError as exc:
+            self.last_fault += "; failed: %s" % (exc,)
+            self._next_mode_check = -np.inf  # try again on the next update
+            return
+        self._applied = np.zeros(self._count)
+        if self._enabled and np.any(target > 0.0):
+            self._apply(target)
 
     def disable(self) -> None:
         """Outputs off (ALL_LED full-off); later commands are recorded but not applied."""
@@ -275,15 +408,23 @@ class ServoPwmOutput:
         self._require_started()
         self._enabled = True
         self._watchdog_tripped = False
+        self._commanded[:] = False
         self._last_command = self._clock()
 
     def _all_off(self) -> bool:
+        """Every output off with one byte (ALL_LED_OFF_H full-off bit): nothing else changes, so an aborted
+        write cannot tear a pulse (writing ALL_LED_ON_L would shift every running pulse)."""
         try:
             with bus_locked(self._bus, self._config.bus_lock_timeout):
-                self._write(bytes([ALL_LED_ON_L, 0, 0, 0, FULL]))
-        except OSError:
+                self._write(bytes([ALL_LED_OFF_H, FULL]))
+        except OSError as exc:
             self.write_errors += 1
+            self.last_fault = "all-off write failed: %s" % (exc,)
             return False
+        if self._in_flight is not None:  # a prefix of it may sit in the chip; OFF_H is now full-off anyway
+            self._chip = [tuple(self._in_flight[1 + 4 * c:5 + 4 * c]) for c in range(self._span)]
+            self._in_flight = None
+        self._chip = [chip[:3] + (FULL,) for chip in self._chip]
         self._applied = np.zeros(self._count)
         return True
 

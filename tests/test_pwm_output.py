@@ -122,10 +122,10 @@ def test_clamp_and_nan_counting_and_keep_last():
         pwm.command(np.full(11, 1500.0))
 
 
-def test_nan_before_any_command_uses_failsafe():
+def test_nan_before_any_command_never_moves_a_servo():
     fake, _, pwm = make(with_failsafe(["neutral", "off", "hold"] * 4))
     applied = pwm.command(np.full(12, np.nan))
-    assert applied[0] == pytest.approx(307 * TICK_US) and applied[1] == 0.0 and applied[2] == 0.0
+    assert np.all(applied == 0.0) and np.all(fake.pulse_widths_us() == 0.0)  # 'neutral' too: never commanded
 
 
 def test_watchdog_trips_once_applies_failsafe_and_clears_on_command():
@@ -140,10 +140,11 @@ def test_watchdog_trips_once_applies_failsafe_and_clears_on_command():
     assert widths[0] == pytest.approx(410 * TICK_US)  # hold 2000 us
     assert widths[1] == pytest.approx(307 * TICK_US)  # neutral 1500 us
     assert widths[2] == 0.0  # off
-    assert len(fake.bus.log) == 1
+    led_writes = lambda: [t for t in fake.bus.log if t.kind == "write"]  # noqa: E731 (MODE1 checks are reads)
+    assert len(led_writes()) == 1
     clock.t += 1.0
     pwm.update()
-    assert len(fake.bus.log) == 1 and pwm.watchdog_trips == 1  # applied once
+    assert len(led_writes()) == 1 and pwm.watchdog_trips == 1  # applied once
     pwm.command(np.full(12, 1000.0))
     assert not pwm.watchdog_tripped and np.all(fake.pulse_widths_us() > 0)
 
@@ -173,12 +174,16 @@ def test_shutdown_turns_outputs_off_and_sleeps():
     assert not any(fake.pca.outputs_active(ch) for ch in range(16))
 
 
-def test_write_error_is_counted_and_retried_by_update():
+def test_write_error_is_counted_and_retried():
     fake, clock, pwm = make()
     pwm.command(np.full(12, 1500.0))
     fake.bus.inject_fault(HW.pca_address, "oserror", count=1)
-    applied = pwm.command(np.full(12, 1700.0))
-    assert pwm.write_errors == 1 and applied[0] == pytest.approx(307 * TICK_US)
+    applied = pwm.command(np.full(12, 1600.0))  # retried at once
+    assert pwm.write_errors == 1 and pwm.write_retries == 1
+    assert applied[0] == pytest.approx(round(1600 / TICK_US) * TICK_US)
+    fake.bus.inject_fault(HW.pca_address, "oserror", count=pwm.write_attempts)
+    applied = pwm.command(np.full(12, 1700.0))  # every attempt of this call fails: pending
+    assert pwm.write_errors == 1 + pwm.write_attempts and applied[0] == pytest.approx(round(1600 / TICK_US) * TICK_US)
     assert not fake.bus.locked
     pwm.update()
     assert fake.pca.pulse_width_us(0) == pytest.approx(round(1700 / TICK_US) * TICK_US)
@@ -211,3 +216,132 @@ def test_whole_stack_through_the_socket_bridge():
         client.deinit()
         server.close()
         os.rmdir(directory)
+
+
+# --- issue 10: faults the chip and the bus can make --------------------------------------------------------------
+import random  # noqa: E402
+
+from hypothesis import settings  # noqa: E402
+
+
+def narrow(min_us, max_us):
+    joints = tuple(type(j)(**{**j.__dict__, "min_us": min_us, "max_us": max_us, "neutral_us": (min_us + max_us) / 2})
+                   for j in HW.joints)
+    return type(HW)(**{**HW.__dict__, "joints": joints})
+
+
+def assert_chip_in_limits(fake, hw):
+    widths = fake.pulse_widths_us()
+    on = widths > 0.0
+    assert np.all(widths[on] >= hw.min_us[on] - 1e-9), widths
+    assert np.all(widths[on] <= hw.max_us[on] + 1e-9), widths
+
+
+def test_the_torn_write_of_issue_10_cannot_happen():
+    # 2,500 us (512 ticks = 0x200) then 2,495 us (511 = 0x1FF): a new OFF_L with the old OFF_H was 3,743 us.
+    for keep in range(1, 1 + 4 * 12):
+        fake, _, pwm = make()
+        pwm.command(np.full(12, 2500.0))
+        fake.bus.inject_fault(HW.pca_address, "abort", count=pwm.write_attempts, keep=keep)
+        pwm.command(np.full(12, 2495.0))
+        assert_chip_in_limits(fake, HW)
+        pwm.update()
+        np.testing.assert_allclose(fake.pulse_widths_us(), np.round(2495.0 / TICK_US) * TICK_US, atol=1e-9)
+
+
+@settings(max_examples=60, deadline=None)
+@given(st.sampled_from([HW, narrow(800.0, 2200.0), narrow(1000.0, 1900.0), narrow(520.0, 2480.0)]),
+       st.lists(st.tuples(st.lists(st.floats(0.0, 3000.0), min_size=12, max_size=12), st.integers(0, 60),
+                          st.integers(0, 3)), min_size=1, max_size=25))
+def test_aborted_writes_never_put_a_pulse_outside_the_limits(hw, steps):
+    fake, clock, pwm = make(hw)
+    for widths, keep, failures in steps:
+        if failures:
+            fake.bus.inject_fault(hw.pca_address, "abort", count=failures, keep=keep)
+        pwm.command(widths)
+        assert_chip_in_limits(fake, hw)
+        clock.t += 0.01
+        pwm.update()
+        assert_chip_in_limits(fake, hw)
+        fake.bus.clear_faults()
+    pwm.update()
+    np.testing.assert_allclose(fake.pulse_widths_us(), pwm.applied_us, atol=1e-9)
+
+
+def test_disable_with_torn_all_off_write_keeps_pulses_in_limits():
+    fake, _, pwm = make()
+    pwm.command(np.full(12, 2000.0))
+    fake.bus.inject_fault(HW.pca_address, "abort", count=1, keep=1)
+    with pytest.raises(PwmOutputError):
+        pwm.disable()
+    assert_chip_in_limits(fake, HW)
+
+
+def test_chip_reset_is_detected_reported_and_restored():
+    fake, clock, pwm = make()
+    pwm.command(np.full(12, 1700.0))
+    fake.pca.power_cycle()  # brown-out: asleep, outputs off, still ACKs writes
+    assert np.all(fake.pulse_widths_us() == 0.0)
+    for _ in range(3):
+        clock.t += 0.05
+        pwm.command(np.full(12, 1700.0))
+        pwm.update()
+    assert pwm.chip_resets == 1 and "lost its configuration" in pwm.last_fault
+    np.testing.assert_allclose(fake.pulse_widths_us(), np.round(1700.0 / TICK_US) * TICK_US, atol=1e-9)
+    assert fake.pca.prescale == HW.prescale and not fake.pca.asleep
+
+
+def test_neutral_failsafe_never_moves_an_uncommanded_servo():
+    fake, clock, pwm = make(with_failsafe(["neutral"] * 12))
+    clock.t += 1.0
+    assert pwm.update()  # the watchdog trips after start without a command ...
+    assert np.all(fake.pulse_widths_us() == 0.0)  # ... but nothing moves
+    widths = np.full(12, np.nan)
+    widths[3] = 1800.0
+    pwm.command(widths)
+    pwm.disable()
+    pwm.enable()
+    pwm.command(widths)  # only joint 3 commanded since enable
+    clock.t += 1.0
+    pwm.update()
+    out = fake.pulse_widths_us()
+    assert out[3] == pytest.approx(round(1500 / TICK_US) * TICK_US) and np.all(np.delete(out, 3) == 0.0)
+
+
+def failsafe_latency(failsafe, rate, seed, period=0.01):
+    """Seconds from the last command until the chip holds the failsafe, with ``rate`` of transactions failing."""
+    hw = with_failsafe([failsafe] * 12)
+    fake, clock, pwm = make(hw)
+    pwm = ServoPwmOutput(fake.bus, hw, clock=clock, sleep=lambda s: None, update_period=period)
+    pwm.start()
+    rng = random.Random(seed)
+    phase = rng.random() * period
+    clock.t += phase
+    pwm.update()
+    pwm.command(np.full(12, 1200.0))
+    if rate > 0:
+        fake.bus.inject_fault(hw.pca_address, "abort", count=None, probability=rate, rng=rng)
+    last = clock.t
+    for k in range(40):
+        pwm.command(np.full(12, 1200.0 + 20 * k))  # keeps running with bus errors
+        last = clock.t
+        clock.t += period / 2
+        pwm.update()
+        clock.t += period / 2
+    target = {"neutral": 1500.0, "off": 0.0}.get(failsafe)
+    while clock.t - last < 0.5:
+        clock.t += period
+        pwm.update()
+        widths = fake.pulse_widths_us()
+        reached = (np.all(widths == 0.0) if target == 0.0 else
+                   np.allclose(widths, np.round(target / TICK_US) * TICK_US, atol=1e-9) if target else
+                   np.allclose(widths, pwm.applied_us, atol=1e-9) and pwm.watchdog_tripped)
+        if reached:
+            return clock.t - last
+    return float("inf")
+
+
+@pytest.mark.parametrize("failsafe", ["neutral", "off", "hold"])
+def test_watchdog_fires_within_its_timeout_even_with_bus_errors(failsafe):
+    latencies = [failsafe_latency(failsafe, rate, seed) for rate in (0.0, 0.1, 0.3, 0.5) for seed in range(25)]
+    assert max(latencies) <= HW.watchdog_timeout + 0.01 + 1e-9, max(latencies)

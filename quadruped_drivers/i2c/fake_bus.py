@@ -19,6 +19,7 @@ so the drivers -- and the unchanged adafruit CircuitPython drivers -- run agains
 from __future__ import annotations
 
 import errno
+import random
 import threading
 from dataclasses import dataclass
 from typing import Any, Dict, Iterable, List, Optional, Tuple
@@ -73,12 +74,19 @@ def bits_on_wire(transactions: Iterable[Transaction]) -> int:
     return sum(transaction_bits(item) for item in transactions)
 
 
-class _Fault:
-    __slots__ = ("kind", "remaining")
+FAULT_KINDS = ("nack", "oserror", "abort")
 
-    def __init__(self, kind: str, remaining: Optional[int]) -> None:
+
+class _Fault:
+    __slots__ = ("kind", "remaining", "keep", "probability", "rng")
+
+    def __init__(self, kind: str, remaining: Optional[int], keep: Optional[int] = None,
+                 probability: float = 1.0, rng: Optional[random.Random] = None) -> None:
         self.kind = kind
         self.remaining = remaining
+        self.keep = keep
+        self.probability = probability
+        self.rng = rng
 
 
 class FakeI2CBus:
@@ -117,21 +125,31 @@ class FakeI2CBus:
             return self._devices.get(address)
 
     # --- fault injection -----------------------------------------------------------------------
-    def inject_fault(self, address: int, kind: str = "nack", count: Optional[int] = 1) -> None:
+    def inject_fault(self, address: int, kind: str = "nack", count: Optional[int] = 1,
+                     keep: Optional[int] = None, probability: float = 1.0,
+                     rng: Optional[random.Random] = None) -> None:
         """Make the next ``count`` transactions addressed to ``address`` on this bus fail.
 
         ``kind`` 'nack' raises ``OSError(ENXIO)`` (address not acknowledged), 'oserror' raises
-        ``OSError(EIO)`` (e.g. arbitration lost, timeout). ``count=None`` makes the fault permanent
-        until :meth:`clear_faults`. Faults on a multiplexer channel bus apply to transactions that
-        reach that channel through the multiplexer.
+        ``OSError(EIO)`` (e.g. arbitration lost, timeout), 'abort' is a write that breaks off after
+        ``keep`` written bytes (register pointer included; ``None``: a random number from ``rng``): the
+        device takes that prefix, then ``OSError(EIO)`` is raised (reads simply fail). ``count=None``
+        makes the fault permanent until :meth:`clear_faults`. With ``probability`` < 1 each
+        transaction fails only with that probability (drawn from ``rng``), and only failures use up
+        ``count``. Faults on a multiplexer channel bus apply to transactions that reach that channel
+        through the multiplexer.
         """
         _check_address(address)
-        if kind not in ("nack", "oserror"):
-            raise ValueError("fault kind must be 'nack' or 'oserror', got %r" % kind)
+        if kind not in FAULT_KINDS:
+            raise ValueError("fault kind must be one of %s, got %r" % (FAULT_KINDS, kind))
         if count is not None and count < 1:
             raise ValueError("fault count must be >= 1 or None (permanent), got %r" % count)
+        if not 0.0 <= probability <= 1.0:
+            raise ValueError("fault probability must be in [0, 1], got %r" % (probability,))
+        if keep is not None and keep < 0:
+            raise ValueError("keep must be >= 0 or None, got %r" % (keep,))
         with self.lock:
-            self._faults[address] = _Fault(kind, count)
+            self._faults[address] = _Fault(kind, count, keep, probability, rng or random.Random(0))
 
     def clear_faults(self, address: Optional[int] = None) -> None:
         """Remove injected faults (all, or those of ``address``)."""
@@ -141,16 +159,23 @@ class FakeI2CBus:
             else:
                 self._faults.pop(address, None)
 
-    def _take_fault(self, address: int) -> None:
+    def _take_fault(self, address: int, written: int = 0) -> Optional[int]:
+        """Raise the injected fault for ``address``, or return how many of the ``written`` bytes an
+        aborting write delivers first (None: no fault)."""
         fault = self._faults.get(address)
         if fault is None:
-            return
+            return None
+        if fault.probability < 1.0 and fault.rng.random() >= fault.probability:  # type: ignore[union-attr]
+            return None
         if fault.remaining is not None:
             fault.remaining -= 1
             if fault.remaining <= 0:
                 del self._faults[address]
         if fault.kind == "nack":
             raise OSError(errno.ENXIO, "%s: injected NACK at 0x%02x" % (self.name, address))
+        if fault.kind == "abort" and written > 0:
+            keep = fault.keep if fault.keep is not None else fault.rng.randrange(written)  # type: ignore[union-attr]
+            return min(keep, written - 1)
         raise OSError(errno.EIO, "%s: injected I/O error at 0x%02x" % (self.name, address))
 
     # --- log -----------------------------------------------------------------------------------
@@ -200,18 +225,20 @@ class FakeI2CBus:
                 targets.extend(route(address))
         return targets
 
-    def _targets(self, address: int) -> List[Tuple["FakeI2CBus", Any]]:
+    def _targets(self, address: int, written: int = 0) -> Tuple[List[Tuple["FakeI2CBus", Any]], Optional[int]]:
+        """(devices acknowledging ``address``, bytes an injected abort lets through or None)."""
         _check_address(address)
         if self.require_lock and not self._locked:
             raise RuntimeError("%s: transaction to 0x%02x without holding the bus lock" % (self.name, address))
-        self._take_fault(address)
+        keep = self._take_fault(address, written)
         targets = self.resolve(address)
         if not targets:
             raise OSError(errno.ENXIO, "%s: no device acknowledged address 0x%02x" % (self.name, address))
         for owner, _ in targets:
             if owner is not self:
-                owner._take_fault(address)
-        return targets
+                routed = owner._take_fault(address, written)
+                keep = routed if keep is None else keep
+        return targets, keep
 
     @staticmethod
     def _read_all(targets: List[Tuple["FakeI2CBus", Any]], count: int) -> bytes:
@@ -231,8 +258,12 @@ class FakeI2CBus:
         data = bytes(buffer[start:end])
         with self.lock:
             try:
-                for _, device in self._targets(address):
-                    device.write(data)
+                targets, keep = self._targets(address, len(data))
+                for _, device in targets:
+                    device.write(data if keep is None else data[:keep])
+                if keep is not None:
+                    raise OSError(errno.EIO, "%s: injected abort after %d of %d bytes at 0x%02x"
+                                  % (self.name, keep, len(data), address))
             except OSError:
                 self._record(Transaction(WRITE, address, data, b"", ok=False))
                 raise
@@ -244,7 +275,8 @@ class FakeI2CBus:
         count = end - start
         with self.lock:
             try:
-                data = self._read_all(self._targets(address), count)
+                targets, _ = self._targets(address)
+                data = self._read_all(targets, count)
             except OSError:
                 self._record(Transaction(READ, address, b"", b"", ok=False))
                 raise
@@ -260,7 +292,7 @@ class FakeI2CBus:
         count = in_end - in_start
         with self.lock:
             try:
-                targets = self._targets(address)
+                targets, _ = self._targets(address)  # an abort fails the whole exchange: nothing delivered
                 for _, device in targets:
                     device.write(data)
                 result = self._read_all(targets, count)
@@ -287,5 +319,5 @@ def _check_address(address: int) -> None:
         raise ValueError("I2C address must be a 7-bit integer, got %r" % (address,))
 
 
-__all__ = ["Transaction", "FakeI2CBus", "bits_on_wire", "transaction_bits", "WRITE", "READ", "WRITE_READ",
+__all__ = ["Transaction", "FakeI2CBus", "FAULT_KINDS", "bits_on_wire", "transaction_bits", "WRITE", "READ", "WRITE_READ",
            "SCAN", "SCAN_RANGE"]

@@ -51,6 +51,7 @@ class FakeTca9548a:
         self._channels = [FakeI2CBus(name="tca9548a-ch%d" % channel) for channel in range(self.CHANNELS)]
         self._deselect_failures: Optional[int] = 0
         self._deselect_kind = errno.EIO
+        self._ignored_writes = 0
         self.writes = 0
 
     def channel_bus(self, channel: int) -> FakeI2CBus:
@@ -73,6 +74,13 @@ class FakeTca9548a:
         if count is None:
             self._deselect_failures = None
 
+    def inject_ignored_writes(self, count: int = 1) -> None:
+        """ACK the next ``count`` control writes without taking them (a glitch on SDA while latching):
+        the master sees success, the old channel stays selected."""
+        if count < 1:
+            raise ValueError("count must be >= 1")
+        self._ignored_writes = count
+
     def clear_deselect_failure(self) -> None:
         """Stop failing deselect writes."""
         self._deselect_failures = 0
@@ -91,6 +99,9 @@ class FakeTca9548a:
                 self._deselect_failures -= 1
             raise OSError(self._deselect_kind, "TCA9548A: injected deselect failure")
         self.writes += 1
+        if self._ignored_writes > 0:
+            self._ignored_writes -= 1
+            return
         self.control = value
 
     def read(self, count: int) -> bytes:
@@ -145,7 +156,15 @@ class FakeAds1115:
         self.hi_thresh = 0x7FFF
         self._held = 0
         self.config_writes = 0
+        self._garbage: List[int] = []
 
+    def inject_codes(self, codes: Sequence[int]) -> None:
+        """The next conversion-register reads return ``codes`` (16-bit, signed) instead of a conversion:
+        e.g. a disturbed input or a bit error on the bus."""
+        for code in codes:
+            if not -32768 <= int(code) <= 32767:
+                raise ValueError("ADS1115 codes are 16-bit signed, got %r" % (code,))
+        self._garbage = [int(code) for code in codes]
     def set_input_voltage(self, ain: int, volts: float) -> None:
         """Drive input AIN``ain`` (0..3) with ``volts`` (finite)."""
         if not 0 <= ain <= 3:
@@ -204,6 +223,8 @@ class FakeAds1115:
 
     def _register(self) -> int:
         if self.pointer == ADS_REG_CONVERSION:
+            if self._garbage:
+                return self._garbage.pop(0) & 0xFFFF
             if self.continuous:
                 self._held = self.convert()
             return self._held & 0xFFFF
