@@ -1,7 +1,8 @@
 """I2C bus budget of one 100 Hz control cycle (paper: the main node runs at 100 Hz).
 
-One cycle = 12 servo feedback reads through the TCA9548A (incl. mux switching) + one 12-channel
-PCA9685 update. Bits on the wire are counted from the fake bus's transaction log (START, address +
+One cycle = 12 servo feedback reads through the TCA9548A (incl. mux switching, each switch read back,
+and one ADC's config register read back in turn) + one 12-channel PCA9685 update; the PCA9685's
+MODE1/MODE2 check (every 0.1 s) is counted per cycle as its share. Bits on the wire are counted from the fake bus's transaction log (START, address +
 ACK, 9 bits per data byte, repeated START, STOP; clock stretching and the Linux driver's gaps between
 transactions are not included), converted to bus time at 100 kHz and 400 kHz and compared with the
 target of 30 % of the 10 ms cycle at 400 kHz. Also measures the Python time per cycle against the fakes.
@@ -46,15 +47,30 @@ def main() -> None:
     feedback.read()
     read_log = list(fake.bus.log)
     fake.bus.clear_log()
-    pwm.command(pulses)
+    pwm.command(pulses + 10.0)
     pwm_log = list(fake.bus.log)
+    fake.bus.clear_log()
+    pwm._check_mode()  # the periodic chip check, every mode_check_interval
+    check_log = list(fake.bus.log)
+    cycles_per_check = pwm.mode_check_interval / CYCLE_S
     read_bits, pwm_bits = bits_on_wire(read_log), bits_on_wire(pwm_log)
-    mux_writes = sum(1 for t in read_log if t.address == hw.mux_address)
-    total = read_bits + pwm_bits
+    check_bits = bits_on_wire(check_log) / cycles_per_check
+    mux_writes = sum(1 for t in read_log if t.address == hw.mux_address and t.kind == "write")
+    mux_reads = sum(1 for t in read_log if t.address == hw.mux_address and t.kind == "read")
+    config_checks = sum(1 for t in read_log if t.kind == "write_read" and t.written == b"\x01")
+    hardening = sum(bits_on_wire([t]) for t in read_log if t.address == hw.mux_address and t.kind == "read")
+    plain_read = 1 + 9 + 2 * 9 + 1  # a 2-byte conversion read without the pointer byte
+    hardening += sum(bits_on_wire([t]) - (plain_read if t.written == b"\x00" else 0)
+                     for t in read_log if t.kind == "write_read") + check_bits
+    total = read_bits + pwm_bits + check_bits
     print("one 100 Hz cycle on the wire (steady state)")
-    print("  feedback: %2d transactions (%d mux switches), %4d bits" % (len(read_log), mux_writes, read_bits))
+    print("  feedback: %2d transactions (%d mux switches + %d read-backs, %d ADC config check), %4d bits"
+          % (len(read_log), mux_writes, mux_reads, config_checks, read_bits))
     print("  PWM:      %2d transaction  (%d data bytes),   %4d bits" % (len(pwm_log), len(pwm_log[0].written), pwm_bits))
-    print("  total:    %4d bits" % total)
+    print("  PCA9685 MODE1/MODE2 check: %d transaction of %d bits every %.0f cycles = %.1f bits per cycle"
+          % (len(check_log), bits_on_wire(check_log), cycles_per_check, check_bits))
+    print("  total:    %4.0f bits (of which fault detection: %.0f bits = %.3f ms at 400 kHz)"
+          % (total, hardening, hardening / 400e3 * 1e3))
     for clock_hz in (100e3, 400e3):
         bus_time = total / clock_hz
         print("  at %3.0f kHz: %.3f ms = %5.1f %% of the 10 ms cycle" % (clock_hz / 1e3, bus_time * 1e3,

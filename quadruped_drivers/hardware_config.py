@@ -68,6 +68,8 @@ class HardwareConfig:
     stale_after: float
     failed_after: float
     joints: Tuple[JointHardware, ...]
+    #: Feedback outside the angles of a joint's pulse limits by more than this (deg) is not plausible.
+    adc_plausible_margin_deg: float = 15.0
 
     @property
     def pwm_channels(self) -> np.ndarray:
@@ -236,6 +238,7 @@ def hardware_config_from_dict(tree: Mapping[str, Any]) -> HardwareConfig:
         stale_after=stale_after,
         failed_after=failed_after,
         joints=tuple(joints),
+        adc_plausible_margin_deg=_float(tree, "adc.plausible_margin_deg", 0.0, 90.0),
     )
 
 

@@ -23,6 +23,19 @@ Why not adafruit-circuitpython-ads1x15 3.0 / -tca9548a 0.7 (``/work/shared/DESIG
   invalidates the cached channel.
 * ``adafruit_bus_device.I2CDevice`` locks per transaction and spins on ``try_lock`` without bound;
   a cycle must hold the bus across mux select + reads, with a bounded wait (:func:`bus_locked`).
+
+Wrong data is never reported fresh (issue 10):
+
+* every mux switch is read back (one 1-byte read): a control write that was ACKed but not applied
+  would otherwise make four joints report another channel's ADCs; the channel's joints go stale and
+  ``mux_mismatches`` counts it;
+* one ADC per cycle, in turn, has its config register read back (one write-read of the config
+  register, the conversion then read with its pointer byte: 67 bits more than a plain read): an
+  ADS1115 that browned out without a NACK is back in single-shot mode at its defaults, reading a
+  stale 0 V; it is found within 12 cycles, counted in ``config_losses`` and configured again (a joint
+  whose code is implausible is checked first, on the next cycle);
+* a code whose angle lies outside the joint's calibrated range (its pulse limits mapped through the
+  servo calibration) by more than ``adc.plausible_margin_deg`` is stale (``implausible_counts``).
 """
 from __future__ import annotations
 
@@ -30,7 +43,7 @@ import errno
 import math
 import time
 from dataclasses import dataclass, field
-from typing import Any, Callable, Dict, List, Optional
+from typing import Any, Callable, Dict, List, Optional, Set, Tuple
 
 import numpy as np
 
@@ -39,6 +52,15 @@ from quadruped_drivers.i2c import bus_locked
 
 ADS_REG_CONVERSION = 0x00
 ADS_REG_CONFIG = 0x01
+
+
+def plausible_angle_range(hardware_config: HardwareConfig, calibration: Any) -> Tuple[np.ndarray, np.ndarray]:
+    """(low, high) joint angles (rad) a working servo's feedback can show: the angles of its pulse
+    limits through the calibration, widened by ``adc.plausible_margin_deg`` on both sides."""
+    ends = np.stack([calibration.pulses_to_angles(hardware_config.min_us),
+                     calibration.pulses_to_angles(hardware_config.max_us)])
+    margin = math.radians(hardware_config.adc_plausible_margin_deg)
+    return ends.min(axis=0) - margin, ends.max(axis=0) + margin
 
 
 def ads1115_continuous_config(adc_input: int, full_scale_v: float, data_rate: int) -> int:
@@ -60,7 +82,9 @@ class FeedbackReading:
     ``failed``: joints without a good sample for longer than ``failed_after`` (or never, once
     ``failed_after`` has passed since :meth:`ServoFeedbackArray.start`). ``age``: seconds since each
     joint's last good sample (inf if none). ``error_counts``: cumulative failed ADC transactions per
-    joint; ``mux_errors``: cumulative failed mux writes.
+    joint; ``mux_errors``: cumulative failed or unverified mux switches. ``implausible``: joints whose
+    code was read this cycle but lies outside their plausible range (``volts`` holds it, ``angles``
+    is NaN, ``valid`` False).
     """
 
     stamp: float
@@ -71,6 +95,7 @@ class FeedbackReading:
     failed: List[int]
     error_counts: np.ndarray
     mux_errors: int
+    implausible: List[int] = field(default_factory=list)
     held_angles: np.ndarray = field(default_factory=lambda: np.full(12, np.nan))
     age: np.ndarray = field(default_factory=lambda: np.full(12, np.inf))
 
@@ -103,16 +128,43 @@ class ServoFeedbackArray:
         self._last_good = np.full(self._count, -np.inf)
         self._last_angle = np.full(self._count, np.nan)
         self._error_counts = np.zeros(self._count, dtype=int)
+        self._low, self._high = plausible_angle_range(hardware_config, calibration)
+        self._implausible_counts = np.zeros(self._count, dtype=int)
+        self._config_losses = np.zeros(self._count, dtype=int)
+        self._next_check = 0  # the joint whose ADC config is read back next (rotating)
+        self._suspects: Set[int] = set()  # joints to check first (implausible code last cycle)
+        self._mux_mismatches = 0
         self._mux_errors = 0
         self._lock_timeouts = 0
         self._started_at: Optional[float] = None
         self._buffer = bytearray(2)
+        self._mux_buffer = bytearray(1)
 
     # --- properties -------------------------------------------------------------------------
     @property
     def mux_errors(self) -> int:
         """Cumulative failed mux control writes."""
         return self._mux_errors
+
+    @property
+    def mux_mismatches(self) -> int:
+        """Mux switches that were ACKed but read back another channel (also in ``mux_errors``)."""
+        return self._mux_mismatches
+
+    @property
+    def implausible_counts(self) -> np.ndarray:
+        """Codes outside each joint's plausible range, cumulative (copy)."""
+        return self._implausible_counts.copy()
+
+    @property
+    def config_losses(self) -> np.ndarray:
+        """ADCs found with a config register other than the one written (brown-out), per joint (copy)."""
+        return self._config_losses.copy()
+
+    @property
+    def plausible_range(self) -> Tuple[np.ndarray, np.ndarray]:
+        """(low, high) plausible joint angles in rad (copies)."""
+        return self._low.copy(), self._high.copy()
 
     @property
     def lock_timeouts(self) -> int:
@@ -131,14 +183,21 @@ class ServoFeedbackArray:
 
     # --- bus helpers ------------------------------------------------------------------------
     def _select(self, channel: int) -> bool:
-        """Connect mux ``channel`` (write only if not already selected). False on a bus error."""
+        """Connect mux ``channel`` (write only if not already selected) and read the control register
+        back. False on a bus error or when the mux holds another value."""
         if self._selected == channel:
             return True
         try:
             self._bus.writeto(self._config.mux_address, bytes([1 << channel]))
+            self._bus.readfrom_into(self._config.mux_address, self._mux_buffer)
         except OSError:
             self._selected = None  # the mux may or may not have taken the byte
             self._mux_errors += 1
+            return False
+        if self._mux_buffer[0] != 1 << channel:
+            self._selected = None
+            self._mux_errors += 1
+            self._mux_mismatches += 1
             return False
         self._selected = channel
         return True
@@ -158,10 +217,30 @@ class ServoFeedbackArray:
         self._bus.writeto(joint.adc_address, bytes([ADS_REG_CONFIG, word >> 8, word & 0xFF]))
         self._bus.writeto(joint.adc_address, bytes([ADS_REG_CONVERSION]))
 
-    def _read_code(self, index: int) -> int:
-        self._bus.readfrom_into(self._config.joints[index].adc_address, self._buffer)
+    def _read_code(self, index: int, set_pointer: bool = False) -> int:
+        """Joint ``index``'s conversion register (signed); ``set_pointer`` writes the pointer byte first."""
+        address = self._config.joints[index].adc_address
+        if set_pointer:
+            self._bus.writeto_then_readfrom(address, bytes([ADS_REG_CONVERSION]), self._buffer)
+        else:
+            self._bus.readfrom_into(address, self._buffer)
         code = (self._buffer[0] << 8) | self._buffer[1]
         return code - 0x10000 if code & 0x8000 else code
+
+    def _config_intact(self, index: int) -> bool:
+        """Read joint ``index``'s config register back (OS bit ignored) and put the pointer back on the
+        conversion register by reading that with its pointer byte. False: the ADC lost its config."""
+        address = self._config.joints[index].adc_address
+        self._bus.writeto_then_readfrom(address, bytes([ADS_REG_CONFIG]), self._buffer)
+        word = (self._buffer[0] << 8) | self._buffer[1]
+        return (word & 0x7FFF) == (self._configs[index] & 0x7FFF)
+
+    def _due_for_check(self) -> int:
+        if self._suspects:
+            return self._suspects.pop()
+        index = self._next_check
+        self._next_check = (index + 1) % self._count
+        return index
 
     def _mark_error(self, index: int) -> None:
         self._error_counts[index] += 1
@@ -211,6 +290,7 @@ class ServoFeedbackArray:
         return self._assemble(codes)
 
     def _read_cycle(self, codes: np.ndarray) -> None:
+        check = self._due_for_check()
         order = sorted(self._channels)
         if self._selected in self._channels:  # start where the mux already points: one switch saved
             start = order.index(self._selected)
@@ -228,7 +308,11 @@ class ServoFeedbackArray:
                         self._configure(index)
                         self._configured[index] = True
                         continue
-                    codes[index] = self._read_code(index)
+                    if index == check and not self._config_intact(index):
+                        self._config_losses[index] += 1
+                        self._configure(index)  # same path as after a NACK: stale one more cycle
+                        continue
+                    codes[index] = self._read_code(index, set_pointer=index == check)
                 except OSError:
                     self._mark_error(index)
 
@@ -240,6 +324,11 @@ class ServoFeedbackArray:
         angles = np.full(self._count, np.nan)
         if np.any(valid):
             all_angles = self._calibration.volts_to_angles(np.where(valid, volts, 0.0))
+            plausible = (all_angles >= self._low) & (all_angles <= self._high)
+            implausible = valid & ~plausible
+            self._implausible_counts[implausible] += 1
+            self._suspects.update(int(i) for i in np.flatnonzero(implausible))
+            valid = valid & plausible
             angles[valid] = all_angles[valid]
         self._last_good[valid] = now
         self._last_angle[valid] = angles[valid]
@@ -253,7 +342,8 @@ class ServoFeedbackArray:
             (failed if reference > self._config.failed_after else stale).append(int(index))
         return FeedbackReading(stamp=now, volts=volts, angles=angles, valid=valid, stale=stale, failed=failed,
                                error_counts=self._error_counts.copy(), mux_errors=self._mux_errors,
+                               implausible=[int(i) for i in np.flatnonzero(np.isfinite(volts) & ~valid)],
                                held_angles=held, age=age)
 
 
-__all__ = ["FeedbackReading", "ServoFeedbackArray", "ads1115_continuous_config"]
+__all__ = ["FeedbackReading", "ServoFeedbackArray", "ads1115_continuous_config", "plausible_angle_range"]

@@ -4,12 +4,14 @@ Publishes
   joint_states   sensor_msgs/JointState  names from the URDF (JOINT_NAMES), positions in rad (the paper's
                  joint angles; NaN for a joint whose ADC did not answer this cycle), velocities from a
                  low-pass filtered finite difference
-  diagnostics    stale / failed joints, per-joint I2C error counters, mux errors, read time
+  diagnostics    stale / failed / implausible joints, per-joint I2C error, implausible-code and lost-config
+                 counters, mux errors and mux read-back mismatches, read time
 Parameters
   ~backend (real | sim)  ~bus_socket  ~hardware_yaml  ~calibration_yaml  ~rate (100 Hz)
   ~velocity_time_constant (0.03 s)  ~frame_id ("")
 
-Reading, mux handling, stale/failed bookkeeping and the volts-to-angle map are the driver's
+Reading, mux handling and read-back, ADC config checks, plausibility, stale/failed bookkeeping and
+the volts-to-angle map are the driver's
 (:class:`quadruped_drivers.servo_feedback.ServoFeedbackArray`).
 """
 from __future__ import annotations
@@ -95,13 +97,20 @@ class ServoFeedbackNode:
             stat.summary(DiagnosticStatus.WARN, "stale joints: %s" % names(reading.stale))
         else:
             stat.summary(DiagnosticStatus.OK, "all 12 joints fresh")
+        if reading.implausible:
+            stat.mergeSummary(DiagnosticStatus.WARN, "implausible readings: %s" % names(reading.implausible))
         timing = self.read_time.summary(1e3)
         stat.add("rate [Hz]", "%.1f" % self.rate.rate(time.monotonic()))
         stat.add("read time p50 [ms]", "%.3f" % timing["p50"])
         stat.add("read time p99 [ms]", "%.3f" % timing["p99"])
         stat.add("mux errors", str(reading.mux_errors))
+        stat.add("mux read-back mismatches", str(self.array.mux_mismatches))
+        implausible = self.array.implausible_counts
+        losses = self.array.config_losses
         for i, name in enumerate(JOINT_NAMES):
             stat.add("%s I2C errors" % name, str(int(reading.error_counts[i])))
+            stat.add("%s implausible codes" % name, str(int(implausible[i])))
+            stat.add("%s ADC config lost" % name, str(int(losses[i])))
         return stat
 
 

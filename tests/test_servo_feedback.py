@@ -55,15 +55,21 @@ def test_read_returns_volts_and_angles_through_the_mux_with_minimal_traffic(rig)
     np.testing.assert_allclose(reading.angles, cal.volts_to_angles(reading.volts))
     np.testing.assert_allclose(reading.held_angles, reading.angles)
     log = fake.bus.log
-    reads = [t for t in log if t.kind == "read"]
-    mux_writes = [t for t in log if t.address == hw.mux_address]
-    assert len(reads) == 12 and all(len(t.read) == 2 and t.written == b"" for t in reads)
-    # ch2 is still selected from start(): the cycle starts there, only ch0 and ch1 are written
+    adc_reads = [t for t in log if t.kind == "read" and t.address != hw.mux_address]
+    mux_writes = [t for t in log if t.address == hw.mux_address and t.kind == "write"]
+    mux_reads = [t for t in log if t.address == hw.mux_address and t.kind == "read"]
+    checks = [t for t in log if t.kind == "write_read"]
+    # 11 plain conversion reads; joint 0's ADC has its config read back this cycle (rotating), then its
+    # conversion is read with the pointer byte (which also puts the pointer back)
+    assert len(adc_reads) == 11 and all(len(t.read) == 2 and t.written == b"" for t in adc_reads)
+    assert [(t.address, t.written) for t in checks] == [(0x48, b"\x01"), (0x48, b"\x00")]
+    # ch2 is still selected from start(): the cycle starts there, only ch0 and ch1 are written, each read back
     assert [t.written for t in mux_writes] == [b"\x01", b"\x02"]
-    assert len(log) == 14 and not fake.bus.locked
+    assert [t.read for t in mux_reads] == [b"\x01", b"\x02"]
+    assert len(log) == 17 and not fake.bus.locked
     fake.bus.clear_log()
     feedback.read()  # starts on ch1 (still selected): again only two switches
-    assert [t.written for t in fake.bus.log if t.address == hw.mux_address] == [b"\x04", b"\x01"]
+    assert [t.written for t in fake.bus.log if t.address == hw.mux_address and t.kind == "write"] == [b"\x04", b"\x01"]
     assert all(adc.config_writes == 1 for adc in fake.adcs.values())  # config written once
 
 
@@ -142,6 +148,7 @@ def test_start_with_absent_adc_reports_it_and_recovers():
     hw = load_hardware_config()
     fake = build_fake_hardware(hw)
     fake.mux.channel_bus(2).inject_fault(0x4B, "nack", count=1)
+    fake.set_joint_voltages(np.full(12, 1.7))
     feedback = ServoFeedbackArray(fake.bus, hw, load_servo_calibration(), clock=Clock())
     assert feedback.start() == [11]
     feedback.read()
@@ -159,6 +166,7 @@ def test_never_answering_joint_fails_after_failed_after_since_start():
     hw = load_hardware_config()
     fake = build_fake_hardware(hw)
     fake.mux.channel_bus(0).inject_fault(0x48, "nack", count=None)
+    fake.set_joint_voltages(np.full(12, 1.7))
     clock = Clock()
     feedback = ServoFeedbackArray(fake.bus, hw, load_servo_calibration(), clock=clock)
     feedback.start()
@@ -175,3 +183,105 @@ def test_register_config_value_on_the_wire(rig):
     config_writes = [t for t in fake.bus.log if t.address != hw.mux_address and t.written[:1] == bytes([ADS_REG_CONFIG])]
     assert len(config_writes) == 12
     assert all(t.written == bytes([0x01, 0x42, 0xE3]) for t in config_writes)
+
+
+# --- issue 10: wrong data is never reported fresh -------------------------------------------------------------
+from hypothesis import given, settings  # noqa: E402
+from hypothesis import strategies as st  # noqa: E402
+
+
+def assert_fresh_is_true(reading, cal, volts):
+    """Every joint reported valid shows its own servo's voltage (within an LSB)."""
+    for index in np.flatnonzero(reading.valid):
+        assert abs(reading.volts[index] - volts[index]) <= LSB, (index, reading.volts[index], volts[index])
+    assert np.all(np.isnan(reading.angles[~reading.valid]))
+
+
+def test_mux_write_acked_but_not_applied_is_caught(rig):
+    hw, cal, fake, clock, feedback, volts = rig
+    feedback.read()
+    fake.mux.inject_ignored_writes(1)  # the next switch (ch1 -> ch2) is ACKed, the mux stays on ch1
+    clock.t += 0.01
+    reading = feedback.read()
+    assert reading.stale == [8, 9, 10, 11] and feedback.mux_mismatches == 1
+    assert_fresh_is_true(reading, cal, volts)
+    clock.t += 0.01
+    assert feedback.read().valid.all()
+
+
+def test_browned_out_adc_is_stale_detected_and_reconfigured(rig):
+    hw, cal, fake, clock, feedback, volts = rig
+    feedback.read()
+    fake.adcs[6].power_cycle()  # no NACK: single-shot defaults, the conversion register reads 0 V
+    clock.t += 0.01
+    reading = feedback.read()
+    assert 6 in reading.implausible and not reading.valid[6]  # 0 V = far outside the joint's range
+    for _ in range(2):
+        clock.t += 0.01
+        reading = feedback.read()
+    assert feedback.config_losses[6] == 1 and fake.adcs[6].continuous
+    assert reading.valid.all() and abs(reading.volts[6] - volts[6]) <= LSB
+
+
+def test_lost_config_with_a_plausible_reading_is_found_within_twelve_cycles(rig):
+    hw, cal, fake, clock, feedback, volts = rig
+    adc = fake.adcs[9]
+    adc.config = (adc.config & ~0x00E0) | (4 << 5)  # e.g. a glitch rewrote the data rate: still converts
+    for _ in range(13):
+        clock.t += 0.01
+        feedback.read()
+    assert feedback.config_losses[9] == 1 and adc.data_rate == 860
+
+
+def test_garbage_codes_are_stale(rig):
+    hw, cal, fake, clock, feedback, volts = rig
+    fake.adcs[2].inject_codes([-22600])  # -2.83 V: -374 deg on a motor joint, way off any servo
+    clock.t += 0.01
+    reading = feedback.read()
+    assert reading.implausible == [2] and not reading.valid[2] and feedback.implausible_counts[2] == 1
+    assert_fresh_is_true(reading, cal, volts)
+
+
+def test_plausible_range_is_the_pulse_range_plus_margin():
+    hw = load_hardware_config()
+    cal = load_servo_calibration()
+    low, high = ServoFeedbackArray(build_fake_hardware(hw).bus, hw, cal).plausible_range
+    np.testing.assert_allclose(np.degrees(low[:3]), [-230 - 15, -130 - 15, 0 - 15], atol=1e-9)
+    np.testing.assert_allclose(np.degrees(high[:3]), [-50 + 15, 50 + 15, 180 + 15], atol=1e-9)
+
+
+@settings(max_examples=40, deadline=None)
+@given(st.lists(st.tuples(st.sampled_from(["none", "ignore_mux", "brownout", "garbage", "nack", "mux_error"]),
+                          st.integers(0, 11), st.integers(-32768, 32767)), min_size=5, max_size=40))
+def test_no_fault_sequence_reports_a_wrong_value_fresh(faults):
+    hw = load_hardware_config()
+    cal = load_servo_calibration()
+    fake = build_fake_hardware(hw)
+    clock = Clock()
+    feedback = ServoFeedbackArray(fake.bus, hw, cal, clock=clock)
+    volts = np.linspace(0.6, 2.8, 12)
+    fake.set_joint_voltages(volts)
+    feedback.start()
+    for kind, index, code in faults:
+        joint = hw.joints[index]
+        if kind == "ignore_mux":
+            fake.mux.inject_ignored_writes(1)
+        elif kind == "brownout":
+            fake.adcs[index].power_cycle()
+        elif kind == "garbage":
+            volts_read = code * 4.096 / 32768
+            angle = cal.volts_to_angles(np.where(np.arange(12) == index, volts_read, volts))[index]
+            low, high = feedback.plausible_range
+            if low[index] - 1e-3 <= angle <= high[index] + 1e-3:
+                continue  # a plausible wrong code cannot be told from a real one: not injected
+            fake.adcs[index].inject_codes([code])
+        elif kind == "nack":
+            fake.mux.channel_bus(joint.mux_channel).inject_fault(joint.adc_address, "nack", count=1)
+        elif kind == "mux_error":
+            fake.bus.inject_fault(hw.mux_address, "oserror", count=1)
+        clock.t += 0.01
+        assert_fresh_is_true(feedback.read(), cal, volts)
+    for _ in range(14):  # everything heals once the faults stop
+        clock.t += 0.01
+        reading = feedback.read()
+    assert reading.valid.all()
