@@ -32,8 +32,8 @@ prefix leaves a pulse inside the channel's tick window [m, M] (:meth:`ServoPwmOu
   is still off; turning it off changes only OFF_H (one byte, cannot tear).
 
 The rule needs the chip's OFF_H. After a failed write the chip holds some prefix of it, so until a write
-succeeds the same bytes are retried (every prefix of a retry is one of the states above); only then is
-a new block computed. A failed write is retried up to ``write_attempts`` times per call (counted in
+succeeds the same bytes are retried (every prefix of a retry is one of the states above; channels that
+are to turn off get their full-off bit in the retry already); only then is a new block computed. A failed write is retried up to ``write_attempts`` times per call (counted in
 ``write_retries``).
 
 **A chip that reset** (brown-out: MODE1 back to SLEEP | ALLCALL, outputs off, still ACKing writes) is
@@ -68,8 +68,9 @@ STAGGER_TICKS = 256
 OSCILLATOR_STARTUP_S = 0.0005
 #: Applied-width marker for a channel whose output is off.
 OFF = 0.0
-#: Attempts per write (the first try and its retries) within one call.
-WRITE_ATTEMPTS = 4
+#: Attempts per write (the first try and its retries) within one call: with half of all transactions
+#: failing, a write misses one call with probability 1/256 (the failsafe must land within one period).
+WRITE_ATTEMPTS = 8
 #: Seconds between MODE1/MODE2 checks for a chip that reset (one 2-byte read, ~50 bits on the wire).
 MODE_CHECK_INTERVAL = 0.1
 #: LEDn registers of a channel that is off and was never driven (start-up / ALL_LED state).
@@ -238,13 +239,22 @@ class ServoPwmOutput:
             return True
         return False
 
+    def _merge_off(self, block: bytes, widths: np.ndarray) -> bytes:
+        """``block`` (a failed write) with the full-off bit set for every joint ``widths`` turns off: each
+        prefix of it is still a prefix of ``block`` or an output turned off, so it may be sent at once."""
+        data = bytearray(block)
+        for index, channel in enumerate(self._channels):
+            if widths[index] <= 0.0:
+                data[4 + 4 * int(channel)] |= FULL
+        return bytes(data)
+
     def _apply(self, widths: np.ndarray) -> bool:
         """Put ``widths`` on the chip; on success they become ``applied_us``, else they stay pending."""
         widths = self.quantize(widths)
         self._pending = widths.copy()
         self._pending_write = True
         retried = self._in_flight is not None
-        if retried and not self._write_block(self._in_flight):
+        if retried and not self._write_block(self._merge_off(self._in_flight, widths)):
             return False  # the chip holds a prefix of the failed block: only that block may be retried
         block = self._block(widths)
         if not (retried and block[1:] == bytes(b for chip in self._chip for b in chip)) \
