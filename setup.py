@@ -5,6 +5,7 @@ from setuptools import setup
 setup(**generate_distutils_setup(
     packages=[
         "quadruped_control",
+        "quadruped_control.studies",
         "quadruped_drivers",
         "quadruped_drivers.i2c",
         "quadruped_drivers.vn100",

@@ -23,8 +23,10 @@ Studies:
 studies; the robustness study varies its estimates around that file), e.g. to compare candidate
 estimates without editing the package configuration.
 
-Trials of a study run in parallel worker processes (``--jobs``, default: the number of CPUs, max 2
-here). Progress goes to stderr, throttled.
+Trials of a study run through :mod:`quadruped_control.studies` on worker processes (``--jobs``, default:
+the number of CPUs, max 2 here) or on an existing Dask cluster (``--dask-scheduler ADDRESS``), with a
+progress bar and ETA on stderr. Each finished trial is kept in ``DIR/trials/``; rerunning a study with the
+same ``--out`` skips the trials already finished (``--no-resume`` runs them all again).
 """
 from __future__ import annotations
 
@@ -35,7 +37,6 @@ import math
 import os
 import sys
 import time
-from concurrent.futures import ProcessPoolExecutor
 from typing import Any, Dict, List, Optional, Sequence, Tuple
 
 import numpy as np
@@ -45,6 +46,7 @@ from quadruped_control.params import ParameterError, config_path, load_robot_par
 from quadruped_control.servo_model import make_servo_model
 from quadruped_control.simulation import ClosedLoopSimulation, SimulationError, SimulationResult, load_simulation_settings
 from quadruped_control.so3 import rpy_to_rot
+from quadruped_control.studies import StudyError, run_trials
 
 GAIN_ALIASES = {"sim": "simulation", "simulation": "simulation", "experiment": "experiment", "exp": "experiment"}
 
@@ -71,6 +73,8 @@ class TrialSpec:
     controller_yaml: Optional[str] = None
     simulation_yaml: Optional[str] = None
     quiet: bool = False
+    #: keep the attitude traces in the summary (figures); studies that only need metrics drop them.
+    keep_trace: bool = True
     #: (field, value) pairs replaced in RobotParams / ControllerConfig (sensitivity studies).
     robot_overrides: Tuple[Tuple[str, Any], ...] = ()
     config_overrides: Tuple[Tuple[str, Any], ...] = ()
@@ -128,8 +132,9 @@ def run_trial(spec: TrialSpec) -> Dict[str, Any]:
     if spec.out_dir:
         write_trial(result, metrics, spec.out_dir, title=spec.label)
         summary["out_dir"] = spec.out_dir
-    summary["trace"] = {"t": result.t, "rpy": result.rpy, "setpoint": result.setpoint_rpy,
-                        "geodesic": result.geodesic}
+    if spec.keep_trace:
+        summary["trace"] = {"t": result.t, "rpy": result.rpy, "setpoint": result.setpoint_rpy,
+                            "geodesic": result.geodesic}
     return summary
 
 
@@ -167,11 +172,10 @@ def format_metrics_table(metrics: Dict[str, Any], label: str = "") -> str:
     return "\n".join(lines)
 
 
-def _run_many(specs: Sequence[TrialSpec], jobs: int) -> List[Dict[str, Any]]:
-    if jobs <= 1 or len(specs) == 1:
-        return [run_trial(spec) for spec in specs]
-    with ProcessPoolExecutor(max_workers=min(jobs, len(specs))) as pool:
-        return list(pool.map(run_trial, specs))
+def _run_many(specs: Sequence[TrialSpec], args: argparse.Namespace, desc: str) -> List[Dict[str, Any]]:
+    """A study's trials through the study runner (executor, progress bar, resume from ``args.out``)."""
+    return run_trials(run_trial, specs, args.out, jobs=args.jobs, dask_scheduler=args.dask_scheduler,
+                      resume=args.resume, progress=not args.quiet, desc=desc)
 
 
 def _strip(summary: Dict[str, Any]) -> Dict[str, Any]:
@@ -195,7 +199,7 @@ def _paper_sim_specs(args: argparse.Namespace, tree: Dict[str, Any], out: Option
                       servo_model="ideal", seed=args.seed,
                       restoring_offset=tuple(args.restoring_offset) if args.restoring_offset else None,
                       out_dir=os.path.join(out, "trial_%g" % amplitude) if out else None,
-                      robot_yaml=args.robot_yaml, quiet=args.quiet)
+                      robot_yaml=args.robot_yaml, quiet=True)
         fields.update(overrides)
         specs.append(TrialSpec(**fields))
     return specs
@@ -209,7 +213,7 @@ def study_paper_sim(args: argparse.Namespace) -> int:
     specs = _paper_sim_specs(args, tree, args.out, gains=GAIN_ALIASES[args.gains], servo_model=args.servo_model,
                              normalize_force=args.normalize_force)
     start = time.perf_counter()
-    summaries = _run_many(specs, args.jobs)
+    summaries = _run_many(specs, args, "paper-sim")
     wall = time.perf_counter() - start
     traces = [Trace(s["trace"]["t"], s["trace"]["rpy"], s["trace"]["setpoint"], s["trace"]["geodesic"],
                     label=s["label"]) for s in summaries]
@@ -269,9 +273,9 @@ def study_robustness(args: argparse.Namespace) -> int:
         variants.append(("nominal foot %+.0f cm in z" % (100 * dz),
                          _paper_sim_specs(args, tree, None, "foot%+g " % dz,
                                           robot_overrides=(("nominal_foot_leg", foot),))))
-    specs = [spec for _, group in variants for spec in group]
+    specs = [dataclasses.replace(spec, keep_trace=False) for _, group in variants for spec in group]
     start = time.perf_counter()
-    summaries = _run_many(specs, args.jobs)
+    summaries = _run_many(specs, args, "robustness")
     wall = time.perf_counter() - start
     rows = []
     index = 0
@@ -338,6 +342,11 @@ def build_parser() -> argparse.ArgumentParser:
     parser.add_argument("--study", choices=("paper-sim", "robustness"), default=None, help="run a study")
     parser.add_argument("--jobs", type=int, default=min(2, os.cpu_count() or 1),
                         help="worker processes for studies (default %(default)s)")
+    parser.add_argument("--dask-scheduler", default=None, metavar="ADDRESS",
+                        help="run a study's trials on an existing Dask cluster (e.g. tcp://host:8786) "
+                             "instead of local processes")
+    parser.add_argument("--no-resume", dest="resume", action="store_false",
+                        help="run every trial of a study again instead of reusing DIR/trials/*.json")
     parser.add_argument("--out", default="simulation_output", help="output directory (default %(default)s)")
     parser.add_argument("--quiet", action="store_true", help="no progress output")
     return parser
@@ -380,7 +389,7 @@ def main(argv: Optional[Sequence[str]] = None) -> int:
                          attitude_noise_deg=attitude_noise, gyro_noise=gyro_noise, out_dir=args.out,
                          robot_yaml=args.robot_yaml, quiet=args.quiet)
         summary = run_trial(spec)
-    except (ParameterError, SimulationError, ValueError) as exc:
+    except (ParameterError, SimulationError, StudyError, ValueError) as exc:
         sys.stderr.write("simulate: error: %s\n" % exc)
         return 1
     print(format_metrics_table(summary["metrics"], "%s, %s gains, %s servos, %.0f s (%.0fx real time)"

@@ -17,7 +17,7 @@ DURATION="${UQ_DURATION:-120}"
 mkdir -p "$OUT"
 
 echo "== 1/3 Offline closed-loop simulation: the paper's simulation study (no ROS) =="
-python -m quadruped_control.simulate --study paper-sim --jobs 2 --out "$OUT/paper-sim"
+python -m quadruped_control.simulate --study paper-sim --jobs 2 --no-resume --out "$OUT/paper-sim"
 
 echo
 echo "== 2/3 The ROS stack on the simulated robot: 45 deg roll maneuver, ${DURATION} s, recorded =="
