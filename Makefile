@@ -9,4 +9,4 @@ setup:
 bench: setup
 	bash scripts/run_benchmarks.sh
 clean:
-	rm -rf build .ws .stamps out
+	bash -c 'source scripts/paths.sh && rm -rf build .stamps out "$$UQ_WS"'

@@ -11,9 +11,9 @@ Subscribes
   attitude_setpoint_rpy  geometry_msgs/Vector3Stamped   R_d as roll, pitch, yaw in DEGREES
                                                          (R = Rz(yaw) Ry(pitch) Rx(roll))
 Publishes
-  servo_command          underwater_quadruped/ServoCommand   12 pulse widths (us) + joint targets,
+  servo_command          quadruped_msgs/ServoCommand   12 pulse widths (us) + joint targets,
                                                              header.stamp = the IMU sample's stamp
-  controller_state       underwater_quadruped/ControllerState  telemetry of every step (stamp: step time)
+  controller_state       quadruped_msgs/ControllerState  telemetry of every step (stamp: step time)
   diagnostics            diagnostic_msgs/DiagnosticArray
 Services
   ~arm                   std_srvs/SetBool   legs move only when armed
@@ -50,7 +50,7 @@ from quadruped_control.supervisor import ControlSupervisor
 from quadruped_drivers.calibration import load_servo_calibration
 from quadruped_drivers.hardware_config import load_hardware_config
 from underwater_quadruped.cfg import AttitudeControllerConfig
-from underwater_quadruped.msg import ControllerState, ServoCommand
+from quadruped_msgs.msg import ControllerState, ServoCommand
 
 _PHASE_CODES = {"recovery": ControllerState.PHASE_RECOVERY, "power": ControllerState.PHASE_POWER,
                 "hold": ControllerState.PHASE_HOLD}

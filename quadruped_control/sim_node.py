@@ -16,7 +16,7 @@ body rate and specific force into the fake VN-100.
 
 Publishes (ground truth, for tests and reports; nothing in the control path subscribes to these)
   sim/pose          geometry_msgs/PoseStamped  world ENU <- base_link, true attitude
-  sim/servo_output  underwater_quadruped/ServoCommand  pulse widths the fake PCA9685 really produces and
+  sim/servo_output  quadruped_msgs/ServoCommand  pulse widths the fake PCA9685 really produces and
                                                        the joint angles they command
 Parameters
   ~robot_yaml ~hardware_yaml ~calibration_yaml ~simulation_yaml (package config/)
@@ -49,7 +49,7 @@ from quadruped_drivers.calibration import load_servo_calibration
 from quadruped_drivers.hardware_config import load_hardware_config
 from quadruped_drivers.i2c.fake_devices import build_fake_hardware
 from quadruped_drivers.vn100.fake import FakeVn100, PtyFakeVn100
-from underwater_quadruped.msg import ServoCommand
+from quadruped_msgs.msg import ServoCommand
 
 GRAVITY_UP = np.array([0.0, 0.0, 9.81])
 

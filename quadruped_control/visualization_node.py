@@ -34,7 +34,7 @@ from quadruped_control.monitoring import RateMonitor
 from quadruped_control.params import ParameterError, config_path, load_robot_params
 from quadruped_control.visualization import (Throttle, VisualizationError, foot_target_spheres,
                                              imu_orientation, unit_quaternion, visual_joint_state)
-from underwater_quadruped.msg import ControllerState
+from quadruped_msgs.msg import ControllerState
 
 #: Foot-target markers disappear this long after the controller stops publishing, s.
 MARKER_LIFETIME = 1.0

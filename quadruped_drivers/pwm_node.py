@@ -1,7 +1,7 @@
 """ROS glue of the PCA9685 servo output: /servo_command -> pulse widths on the chip.
 
 Subscribes
-  servo_command   underwater_quadruped/ServoCommand  12 pulse widths (us) by joint name
+  servo_command   quadruped_msgs/ServoCommand  12 pulse widths (us) by joint name
 Services
   ~enable         std_srvs/SetBool  outputs on / off (off = every channel full-off)
 Publishes
@@ -34,7 +34,7 @@ from quadruped_control.params import JOINT_NAMES, ParameterError
 from quadruped_drivers.hardware_config import load_hardware_config
 from quadruped_drivers.node_support import open_bus, with_failsafe
 from quadruped_drivers.pwm_output import ServoPwmOutput
-from underwater_quadruped.msg import ServoCommand
+from quadruped_msgs.msg import ServoCommand
 
 
 class PwmNode:

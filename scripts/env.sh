@@ -1,14 +1,13 @@
-# Source this file to get the stack's environment in a shell:  source scripts/env.sh
-# (after `make setup`). It puts the venv first on PATH and sources the catkin workspace.
-_uq_root="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"
-if [ -f /opt/ros/noetic/setup.bash ]; then
-  # shellcheck disable=SC1091
-  source /opt/ros/noetic/setup.bash
+# Convenience for an interactive shell:  source scripts/env.sh   (after scripts/setup.sh)
+# It is `source <workspace>/devel/setup.bash` (which also puts the venv's tools first on PATH, through the
+# package's catkin env-hook) for the workspace scripts/setup.sh built; the workspace path is printed by
+# the set-up and defaults to the sibling folder "<clone>_ws" (scripts/paths.sh).
+# shellcheck disable=SC1091
+source "$(dirname "${BASH_SOURCE[0]}")/paths.sh"
+if [ ! -f "$UQ_WS/devel/setup.bash" ]; then
+  echo "env.sh: no workspace at $UQ_WS; run: bash $UQ_ROOT/scripts/setup.sh" >&2
+  return 1 2>/dev/null || exit 1
 fi
 # shellcheck disable=SC1091
-source "$_uq_root/.ws/devel/setup.bash"
-export PATH="$_uq_root/.venv/bin:$PATH"
-export VIRTUAL_ENV="$_uq_root/.venv"
-export UQ_ROOT="$_uq_root"
+source "$UQ_WS/devel/setup.bash"
 export PYTHONDONTWRITEBYTECODE=1
-unset _uq_root

@@ -51,7 +51,7 @@ from sensor_msgs.msg import Imu, JointState
 
 from quadruped_control.kinematics import joint_angles
 from quadruped_control.params import JOINT_NAMES, LEGS, load_robot_params
-from underwater_quadruped.msg import ControllerState
+from quadruped_msgs.msg import ControllerState
 
 
 def quaternion_rpy(roll, pitch, yaw):

@@ -5,18 +5,21 @@
 #     on Debian 12 the archive's own ROS 1 packages are installed with apt (root).
 #  2. A venv (.venv) from /usr/bin/python3 with --system-site-packages, so Debian's/Noetic's rospy stays
 #     visible, holding the pinned PyPI dependencies (requirements.txt, or requirements-jetson.txt).
-#  3. A catkin workspace in .ws (ignored by git) whose src/ links to this source tree. It is a dot
-#     folder on purpose: roslaunch/roslib prune dot folders when they search a package for a file, so
-#     the link back into the tree does not make every launch file appear twice (or loop).
+#  3. A catkin workspace OUTSIDE this tree (scripts/paths.sh: UQ_WS, default the sibling folder
+#     "<clone>_ws") whose src/ links to the two packages of this tree: underwater_quadruped (the root)
+#     and quadruped_msgs (quadruped_msgs/). Outside, so that rosrun / rospack / roscd see exactly one
+#     copy of the package. Sourcing its devel/setup.bash gives everything the launch files need.
 #
 # Each step records a stamp (hash of its inputs) in .stamps/ and is skipped when nothing changed, so a
 # second run takes about a second.
 set -euo pipefail
 
-ROOT="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"
+# shellcheck disable=SC1091
+source "$(dirname "${BASH_SOURCE[0]}")/paths.sh"
+ROOT="$UQ_ROOT"
 STAMPS="$ROOT/.stamps"
-VENV="$ROOT/.venv"
-WS="$ROOT/.ws"
+VENV="$UQ_VENV"
+WS="$UQ_WS"
 mkdir -p "$STAMPS"
 
 log() { printf '[setup] %s\n' "$*" >&2; }
@@ -73,12 +76,21 @@ fi
 # the venv's python (which is /usr/bin/python3 plus the pinned packages): the node relays in devel/ get
 # it as their interpreter, so nodes started by roslaunch see numpy, scipy and the Adafruit drivers.
 build_inputs=("$ROOT/CMakeLists.txt" "$ROOT/package.xml" "$ROOT/setup.py" "$ROOT"/quadruped_msgs/msg/*.msg
-              "$ROOT"/cfg/*.cfg)
-build_key="$(hash_of "${build_inputs[@]}")-venv-python-$( (ls "$ROOT/nodes" "$ROOT/tests/rostest" 2>/dev/null || true) | sha256sum | cut -d' ' -f1)"
+              "$ROOT/quadruped_msgs/CMakeLists.txt" "$ROOT/quadruped_msgs/package.xml" "$ROOT"/cfg/*.cfg
+              "$ROOT"/env-hooks/*)
+build_key="$(hash_of "${build_inputs[@]}")-venv-python-$( (ls "$ROOT/nodes" "$ROOT/tests/rostest" 2>/dev/null || true) | sha256sum | cut -d' ' -f1)-$WS"
+# A workspace that earlier versions built inside the tree (.ws) makes rosrun see every node twice: gone.
+if [ -f "$ROOT/.ws/.catkin_workspace" ]; then
+  log "removing the old in-tree workspace $ROOT/.ws (the workspace is now $WS)"
+  rm -rf "$ROOT/.ws"
+fi
 if [ ! -f "$WS/devel/setup.bash" ] || ! stamp_matches catkin "$build_key"; then
-  log "building the catkin workspace in .ws"
+  log "building the catkin workspace in $WS"
   mkdir -p "$WS/src"
   ln -sfn "$ROOT" "$WS/src/underwater_quadruped"
+  ln -sfn "$ROOT/quadruped_msgs" "$WS/src/quadruped_msgs"
+  # Keep another workspace or a ROS_PACKAGE_PATH that contains this folder from crawling into it.
+  touch "$WS/CATKIN_IGNORE" "$WS/rospack_nosubdirs"
   (
     set +u
     if [ "$ROS_FLAVOUR" = noetic ]; then source /opt/ros/noetic/setup.bash; fi

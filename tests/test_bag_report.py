@@ -14,7 +14,7 @@ from rosbags.rosbag1 import Writer  # noqa: E402
 from rosbags.typesys import Stores, get_types_from_msg, get_typestore  # noqa: E402
 
 MSG_DIR = os.path.join(os.path.dirname(__file__), "..", "quadruped_msgs", "msg")
-STATE_TYPE = "underwater_quadruped/msg/ControllerState"
+STATE_TYPE = "quadruped_msgs/msg/ControllerState"
 
 
 def typestore():
