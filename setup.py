@@ -6,6 +6,7 @@ setup(**generate_distutils_setup(
     packages=[
         "quadruped_control",
         "quadruped_control.studies",
+        "quadruped_control.strokes",
         "quadruped_drivers",
         "quadruped_drivers.i2c",
         "quadruped_drivers.vn100",

@@ -11,8 +11,13 @@ One :meth:`AttitudeController.step` (100 Hz) runs the three layers of the paper 
    torque (eq. (buoy_torque)) is evaluated at the currently commanded foot positions and the measured
    attitude.
 3. Allocation, eq. (foot_speed), (foot_vel) (:mod:`quadruped_control.allocation`), latched at each
-   power-phase start by the stroke cycle (:mod:`quadruped_control.stroke`), Euler integration of the
-   foot position, eq. (foot_integration), and the leg IK -> joint targets (4 x 3, rad).
+   power-phase start by the stroke scheme (:mod:`quadruped_control.strokes`: the paper's cycle or the
+   coordinated scheme, ``config.stroke_scheme``), Euler integration of the foot position, eq.
+   (foot_integration), and the leg IK -> joint targets (4 x 3, rad).
+
+Switching the stroke scheme at run time (:meth:`AttitudeController.set_stroke_scheme`) is smooth: the
+current scheme holds (power strokes retrace, recoveries complete, the feet return to the nominal pose;
+the record shows 'hold' with the reason), then the new scheme starts from the nominal pose.
 
 Discretisation of the integral (the paper gives the continuous law): with h the elapsed time of this
 step, the integral is first advanced over the interval that just ended,
@@ -39,7 +44,7 @@ from quadruped_control.allocation import estimate_body_torque, foot_velocity_com
 from quadruped_control.controller_config import ControllerConfig, Gains
 from quadruped_control.params import ParameterError, RobotParams
 from quadruped_control.so3 import rpy_to_rot
-from quadruped_control.stroke import StrokeCycle
+from quadruped_control.strokes import StrokeScheme, make_stroke_scheme
 
 ArrayLike = Union[Sequence[float], Sequence[Sequence[float]], np.ndarray]
 Vec3 = Tuple[float, float, float]
@@ -198,7 +203,8 @@ class AttitudeController:
         self._inertia: Tuple[float, ...] = tuple(inertia.ravel().tolist())
         self._k_drag = float(robot.drag_constant)
         self._net_buoyancy = float(robot.paw_net_buoyancy)
-        self._stroke = StrokeCycle(robot, config.pairs, config.t_rec, config.t_pow_max)
+        self._stroke = self._make_stroke(config.stroke_scheme)
+        self._pending_scheme: Optional[str] = None
         self._R_d: Tuple[float, ...] = (1.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 1.0)
         self._R_d_array = np.eye(3)
         self._hold_reason = ""
@@ -223,9 +229,26 @@ class AttitudeController:
         return self._stroke.holding
 
     @property
-    def stroke(self) -> StrokeCycle:
-        """The stroke cycle (read-only use: phases, recorded paths)."""
+    def stroke(self) -> StrokeScheme:
+        """The stroke scheme in use (read-only use: phases, recorded paths)."""
         return self._stroke
+
+    def _make_stroke(self, name: str) -> StrokeScheme:
+        config = self._config
+        return make_stroke_scheme(name, self.robot, config.pairs, config.t_rec, config.t_pow_max, config.coordinated)
+
+    def set_stroke_scheme(self, name: str) -> None:
+        """Switch to the stroke scheme ``name`` ('paper', 'coordinated'; ParameterError otherwise).
+
+        The switch is smooth: the current scheme holds until every foot is back at the nominal pose
+        (strokes retrace or complete), then the new scheme starts there. ``config.stroke_scheme`` names
+        the scheme being switched to from the call on.
+        """
+        config = self._config.replace(stroke_scheme=name)  # validates the name
+        if name != self._stroke.name:
+            self._make_stroke(name)  # fail early (e.g. an unreachable nominal pose), before anything changes
+        self._config = config
+        self._pending_scheme = None if name == self._stroke.name else name
 
     def set_setpoint(self, R_d: ArrayLike) -> None:
         """Desired attitude R_d (body -> world rotation); ValueError unless a finite rotation matrix.
@@ -278,6 +301,9 @@ class AttitudeController:
         self._e_R: Vec3 = (0.0, 0.0, 0.0)
         self._geodesic = 0.0
         self._hold_reason = ""
+        if self._pending_scheme is not None:
+            self._stroke = self._make_stroke(self._pending_scheme)
+            self._pending_scheme = None
         self._stroke.reset()
 
     # ---- helpers -----------------------------------------------------------------------------
@@ -292,11 +318,12 @@ class AttitudeController:
         self._t_prev = t
         return h
 
-    def _velocity_command(self, leg: int, r: Vec3) -> Vec3:
-        """eq. (foot_vel) for one leg at a power-phase start, from the latest tau_sat and omega."""
+    def _velocity_command(self, leg: int, r: Vec3, share: float = 0.25) -> Vec3:
+        """eq. (foot_vel) for one leg at a power-phase start, from the latest tau_sat and omega, with the
+        leg's torque tau_i = share * tau_sat (the paper: tau_sat / 4)."""
         tx, ty, tz = self._tau_sat
-        share = (0.25 * tx, 0.25 * ty, 0.25 * tz)  # tau_i^B = tau_sat / 4
-        return foot_velocity_command_f(share, r, self._omega, self._k_drag, self._config.normalize_force_direction)
+        tau_i = (share * tx, share * ty, share * tz)
+        return foot_velocity_command_f(tau_i, r, self._omega, self._k_drag, self._config.normalize_force_direction)
 
     def _output(self, t: float, h: float, tau_cmd: Vec3, tau_sat: Vec3, saturated: bool,
                 feedforward: Vec3) -> ControllerOutput:
@@ -409,8 +436,20 @@ class AttitudeController:
         self._omega = (wx, wy, wz)
 
         # Allocation (latched at power starts), eq. (foot_integration) and IK.
-        self._stroke.advance(h, self._velocity_command)
+        if self._pending_scheme is not None:
+            self._switch_step(h)
+        else:
+            self._stroke.advance(h, self._velocity_command)
         return self._output(t, h, (cx, cy, cz), (sx_, sy_, sz_), saturated, (fx, fy, fz))
+
+    def _switch_step(self, h: float) -> None:
+        """One step of a scheme switch: the old scheme holds until its feet are at the nominal pose."""
+        self._stroke.hold(h)
+        self._hold_reason = "switching stroke scheme to %s" % self._pending_scheme
+        if self._stroke.at_rest:
+            assert self._pending_scheme is not None
+            self._stroke = self._make_stroke(self._pending_scheme)
+            self._pending_scheme = None
 
     def hold(self, t: float, reason: str) -> ControllerOutput:
         """Safe state: no new strokes, integral frozen, feet retrace back to the nominal pose.

@@ -31,6 +31,7 @@ from dataclasses import dataclass
 from typing import Any, Mapping, Optional, Tuple
 
 from quadruped_control.params import LEGS, ParameterError, load_config
+from quadruped_control.strokes import SCHEMES, CoordinatedParams
 
 __all__ = [
     "ControllerConfig",
@@ -129,6 +130,8 @@ class ControllerConfig:
     - ``max_step_factor``: irregular steps are integrated with the elapsed time clipped to
       [0, max_step_factor * dt] (a stalled loop must not inject a huge integral increment).
     - ``rotation_tolerance``: largest |R^T R - I| accepted for measured and desired attitudes.
+    - ``stroke_scheme``: 'paper' (the paper's stroke cycle) or 'coordinated'; ``coordinated``: the
+      parameters of the latter (:mod:`quadruped_control.strokes`).
     """
 
     gains: Gains
@@ -143,6 +146,8 @@ class ControllerConfig:
     integral_limit: Optional[float] = None
     max_step_factor: float = 5.0
     rotation_tolerance: float = 1e-6
+    stroke_scheme: str = "paper"
+    coordinated: CoordinatedParams = dataclasses.field(default_factory=CoordinatedParams)
 
     def __post_init__(self) -> None:
         if not isinstance(self.gains, Gains):
@@ -165,6 +170,10 @@ class ControllerConfig:
         for name in ("normalize_force_direction", "gyroscopic_feedforward", "buoyancy_feedforward"):
             if not isinstance(getattr(self, name), bool):
                 raise ParameterError("%s must be true or false, got %r" % (name, getattr(self, name)))
+        if self.stroke_scheme not in SCHEMES:
+            raise ParameterError("stroke.scheme must be one of %s, got %r" % (", ".join(SCHEMES), self.stroke_scheme))
+        if not isinstance(self.coordinated, CoordinatedParams):
+            raise ParameterError("coordinated must be a CoordinatedParams instance, got %r" % (self.coordinated,))
         if self.integral_limit is not None:
             set_(self, "integral_limit", _finite("integral_limit", self.integral_limit, low_open=True))
 
@@ -215,10 +224,21 @@ def controller_config_from_dict(tree: Mapping[str, Any], gain_set: str = DEFAULT
             raise ParameterError("missing parameter 'gain_sets.%s.%s'" % (gain_set, key))
     known_top = {"gain_sets", "tau_max", "t_rec", "t_pow_max", "dt", "pairs", "normalize_force_direction",
                  "gyroscopic_feedforward", "buoyancy_feedforward", "integral_limit", "max_step_factor",
-                 "rotation_tolerance"}
+                 "rotation_tolerance", "stroke"}
     unknown = sorted(set(tree) - known_top)
     if unknown:
         raise ParameterError("unknown controller parameters %s" % unknown)
+
+    stroke = tree.get("stroke", {}) or {}
+    if not isinstance(stroke, Mapping) or sorted(set(stroke) - {"scheme", "coordinated"}):
+        raise ParameterError("parameter 'stroke' must be a mapping with keys scheme, coordinated, got %r" % (stroke,))
+    coordinated_tree = stroke.get("coordinated", {}) or {}
+    if not isinstance(coordinated_tree, Mapping):
+        raise ParameterError("parameter 'stroke.coordinated' must be a mapping, got %r" % (coordinated_tree,))
+    known = {f.name for f in dataclasses.fields(CoordinatedParams)}
+    if sorted(set(coordinated_tree) - known):
+        raise ParameterError("unknown parameters stroke.coordinated.%s (allowed: %s)"
+                             % (sorted(set(coordinated_tree) - known), ", ".join(sorted(known))))
 
     def timing(key: str, default: float) -> Any:
         return chosen.get(key, tree.get(key, default))
@@ -238,6 +258,8 @@ def controller_config_from_dict(tree: Mapping[str, Any], gain_set: str = DEFAULT
             integral_limit=tree.get("integral_limit"),
             max_step_factor=tree.get("max_step_factor", 5.0),
             rotation_tolerance=tree.get("rotation_tolerance", 1e-6),
+            stroke_scheme=stroke.get("scheme", "paper"),
+            coordinated=CoordinatedParams(**coordinated_tree),
         )
     except ParameterError as exc:
         raise ParameterError("gain set '%s': %s" % (gain_set, exc)) from None

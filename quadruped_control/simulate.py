@@ -47,6 +47,7 @@ from quadruped_control.servo_model import make_servo_model
 from quadruped_control.simulation import ClosedLoopSimulation, SimulationError, SimulationResult, load_simulation_settings
 from quadruped_control.so3 import rpy_to_rot
 from quadruped_control.studies import StudyError, run_trials
+from quadruped_control.strokes import SCHEMES
 
 GAIN_ALIASES = {"sim": "simulation", "simulation": "simulation", "experiment": "experiment", "exp": "experiment"}
 
@@ -78,6 +79,8 @@ class TrialSpec:
     #: (field, value) pairs replaced in RobotParams / ControllerConfig (sensitivity studies).
     robot_overrides: Tuple[Tuple[str, Any], ...] = ()
     config_overrides: Tuple[Tuple[str, Any], ...] = ()
+    #: Stroke scheme ('paper', 'coordinated'); None keeps config/controller.yaml's stroke.scheme.
+    scheme: Optional[str] = None
 
 
 def _progress_printer(label: str, quiet: bool):
@@ -105,6 +108,8 @@ def run_trial(spec: TrialSpec) -> Dict[str, Any]:
         config = dataclasses.replace(config, normalize_force_direction=True)
     if spec.config_overrides:
         config = dataclasses.replace(config, **dict(spec.config_overrides))
+    if spec.scheme is not None:
+        config = config.replace(stroke_scheme=spec.scheme)
     settings = load_simulation_settings(spec.simulation_yaml)
     if abs(settings.dt - config.dt) > 1e-12:
         raise ParameterError("simulation dt %g s differs from the controller period %g s" % (settings.dt, config.dt))
@@ -122,6 +127,7 @@ def run_trial(spec: TrialSpec) -> Dict[str, Any]:
         "setpoint_rpy_deg": list(spec.setpoint_rpy_deg),
         "initial_rpy_deg": list(spec.initial_rpy_deg),
         "gains": GAIN_ALIASES.get(spec.gains, spec.gains),
+        "scheme": config.stroke_scheme,
         "robot_yaml": spec.robot_yaml or config_path("robot.yaml"),
         "nominal_foot_leg": [float(v) for v in robot.nominal_foot_leg],
         "metrics": metrics,
@@ -211,7 +217,7 @@ def study_paper_sim(args: argparse.Namespace) -> int:
     os.makedirs(args.out, exist_ok=True)
     tree = _study_config()
     specs = _paper_sim_specs(args, tree, args.out, gains=GAIN_ALIASES[args.gains], servo_model=args.servo_model,
-                             normalize_force=args.normalize_force)
+                             normalize_force=args.normalize_force, scheme=args.scheme)
     start = time.perf_counter()
     summaries = _run_many(specs, args, "paper-sim")
     wall = time.perf_counter() - start
@@ -339,6 +345,8 @@ def build_parser() -> argparse.ArgumentParser:
     parser.add_argument("--robot-yaml", default=None, metavar="PATH",
                         help="robot model parameters for plant and controller (default: the package's "
                              "config/robot.yaml); the robustness study varies its estimates around this file")
+    parser.add_argument("--scheme", choices=SCHEMES, default=None,
+                        help="stroke scheme (default: stroke.scheme of config/controller.yaml, 'paper')")
     parser.add_argument("--study", choices=("paper-sim", "robustness"), default=None, help="run a study")
     parser.add_argument("--jobs", type=int, default=min(2, os.cpu_count() or 1),
                         help="worker processes for studies (default %(default)s)")
@@ -387,13 +395,13 @@ def main(argv: Optional[Sequence[str]] = None) -> int:
                          seed=args.seed, normalize_force=args.normalize_force,
                          restoring_offset=tuple(args.restoring_offset) if args.restoring_offset else None,
                          attitude_noise_deg=attitude_noise, gyro_noise=gyro_noise, out_dir=args.out,
-                         robot_yaml=args.robot_yaml, quiet=args.quiet)
+                         robot_yaml=args.robot_yaml, quiet=args.quiet, scheme=args.scheme)
         summary = run_trial(spec)
     except (ParameterError, SimulationError, StudyError, ValueError) as exc:
         sys.stderr.write("simulate: error: %s\n" % exc)
         return 1
-    print(format_metrics_table(summary["metrics"], "%s, %s gains, %s servos, %.0f s (%.0fx real time)"
-                               % (spec.label, spec.gains, spec.servo_model, spec.duration,
+    print(format_metrics_table(summary["metrics"], "%s, %s gains, %s servos, %s strokes, %.0f s (%.0fx real time)"
+                               % (spec.label, spec.gains, spec.servo_model, summary["scheme"], spec.duration,
                                   summary["real_time_factor"])))
     print("wrote %s/{timeseries.csv, metrics.json, attitude.png}" % args.out)
     return 0

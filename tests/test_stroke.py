@@ -9,7 +9,7 @@ from hypothesis import strategies as st
 
 from quadruped_control.kinematics import UnreachableError, joint_angles, within_limits
 from quadruped_control.params import LEGS, ParameterError, load_robot_params
-from quadruped_control.stroke import (PHASE_HOLD, PHASE_POWER, PHASE_RECOVERY, StrokeCycle, StrokePath,
+from quadruped_control.strokes.paper import (PHASE_HOLD, PHASE_POWER, PHASE_RECOVERY, StrokeCycle, StrokePath,
                                       cubic_time_profile)
 
 PARAMS = load_robot_params()

@@ -1,4 +1,5 @@
-"""Power and recovery stroke cycle (paper section "Power and Recovery Stroke Cycle").
+"""The paper's stroke scheme ``paper``: power and recovery stroke cycle (paper section "Power and Recovery
+Stroke Cycle"), one implementation of :class:`quadruped_control.strokes.StrokeScheme`.
 
 Two leg pairs alternate between a power phase, in which the feet move with the velocity command of
 eq. (foot_vel), and a recovery phase, in which they return to the start of the stroke:
@@ -33,10 +34,12 @@ from __future__ import annotations
 
 import bisect
 import math
-from typing import Callable, List, Optional, Sequence, Tuple
+from typing import List, Optional, Sequence, Tuple
 
 from quadruped_control.kinematics import UnreachableError, joint_angles_floats
 from quadruped_control.params import LEGS, ParameterError, RobotParams
+from quadruped_control.strokes.base import (PHASE_HOLD, PHASE_POWER, PHASE_RECOVERY, IkFunction, StrokeScheme, Vec3,
+                                            VelocityCommand)
 
 __all__ = [
     "PHASE_HOLD",
@@ -49,16 +52,6 @@ __all__ = [
     "cubic_time_profile",
 ]
 
-Vec3 = Tuple[float, float, float]
-
-PHASE_POWER = "power"
-PHASE_RECOVERY = "recovery"
-PHASE_HOLD = "hold"
-
-#: (r_body, leg) -> (theta1, theta2, theta3); raises UnreachableError when the target cannot be reached.
-IkFunction = Callable[[Vec3, int], Vec3]
-#: (leg, r_body at the start of the power phase) -> foot velocity command v^cmd (body frame, m/s).
-VelocityCommand = Callable[[int, Vec3], Vec3]
 
 #: Slack when comparing phase times with durations (durations are sums of 0.01 s steps).
 _TIME_EPS = 1e-9
@@ -143,7 +136,7 @@ class _Pair:
         self.velocities: List[Vec3] = [(0.0, 0.0, 0.0), (0.0, 0.0, 0.0)]
 
 
-class StrokeCycle:
+class StrokeCycle(StrokeScheme):
     """The two-pair power/recovery cycle of the paper with foot positions and joint targets for 4 legs.
 
     ``robot``: kinematic parameters and nominal foot positions; ``pairs``: the two leg pairs, the first
@@ -152,13 +145,12 @@ class StrokeCycle:
     Raises ParameterError if a nominal foot position is unreachable.
     """
 
+    name = "paper"
+
     def __init__(self, robot: RobotParams, pairs: Sequence[Sequence[int]] = ((1, 3), (2, 4)),
                  t_rec: float = 1.5, t_pow_max: float = 0.5, ik: Optional[IkFunction] = None) -> None:
         self.robot = robot
-        pair_tuples = tuple((int(p[0]), int(p[1])) for p in pairs)
-        if len(pair_tuples) != 2 or sorted(leg for p in pair_tuples for leg in p) != list(LEGS):
-            raise ParameterError("pairs %r must be two pairs forming a partition of the legs %s" % (pairs, LEGS))
-        self.pairs: Tuple[Tuple[int, int], Tuple[int, int]] = (pair_tuples[0], pair_tuples[1])
+        self.pairs = self._checked_pairs(pairs)
         self.t_rec = 0.0
         self.t_pow_max = 0.0
         self.set_timing(t_rec, t_pow_max)
@@ -166,17 +158,7 @@ class StrokeCycle:
         self._bounds = (limits.theta1, limits.theta2, limits.theta3)
         self._ik_raw = ik if ik is not None else self._default_ik
         self._ik_injected = ik is not None
-        self.nominal: List[Vec3] = []
-        self.nominal_joints: List[Vec3] = []
-        for leg in LEGS:
-            point = tuple(float(x) for x in robot.nominal_foot_body(leg))
-            try:
-                joints = self.ik(point, leg)  # type: ignore[arg-type]
-            except UnreachableError as exc:
-                raise ParameterError("nominal foot position of leg %d %s is unreachable: %s"
-                                     % (leg, point, exc)) from None
-            self.nominal.append(point)  # type: ignore[arg-type]
-            self.nominal_joints.append(joints)
+        self._set_nominal(robot)
         self.positions: List[Vec3] = []
         self.joints: List[Vec3] = []
         self.holding = False
@@ -205,12 +187,7 @@ class StrokeCycle:
 
     def set_timing(self, t_rec: Optional[float] = None, t_pow_max: Optional[float] = None) -> None:
         """New durations (s); each takes effect at the next start of the phase it governs."""
-        new_rec = self.t_rec if t_rec is None else float(t_rec)
-        new_pow = self.t_pow_max if t_pow_max is None else float(t_pow_max)
-        for name, value in (("t_rec", new_rec), ("t_pow_max", new_pow)):
-            if not (math.isfinite(value) and value > 0.0):
-                raise ParameterError("%s must be a positive finite duration, got %r" % (name, value))
-        self.t_rec, self.t_pow_max = new_rec, new_pow
+        self.t_rec, self.t_pow_max = self._checked_timing(t_rec, t_pow_max, self.t_rec, self.t_pow_max)
 
     # ---- state -------------------------------------------------------------------------------
 
@@ -373,13 +350,3 @@ class StrokeCycle:
         if done:
             assert velocity_command is not None
             self._start_power(pair, velocity_command)
-
-    # ---- outputs -----------------------------------------------------------------------------
-
-    def foot_targets(self) -> List[Vec3]:
-        """Commanded foot positions r_e,i^B (legs 1..4), m."""
-        return list(self.positions)
-
-    def joint_targets(self) -> List[Vec3]:
-        """Joint targets (theta1, theta2, theta3) per leg (legs 1..4), rad, within the servo ranges."""
-        return list(self.joints)
