@@ -81,6 +81,8 @@ class TrialSpec:
     config_overrides: Tuple[Tuple[str, Any], ...] = ()
     #: Stroke scheme ('paper', 'coordinated'); None keeps config/controller.yaml's stroke.scheme.
     scheme: Optional[str] = None
+    #: Also compute the stroke-scheme figures (torque delivered vs commanded, power fraction).
+    scheme_metrics: bool = False
 
 
 def _progress_printer(label: str, quiet: bool):
@@ -135,6 +137,8 @@ def run_trial(spec: TrialSpec) -> Dict[str, Any]:
         "wall_time": result.wall_time,
         "real_time_factor": result.real_time_factor,
     }
+    if spec.scheme_metrics:
+        summary["scheme_metrics"] = stroke_metrics(result, robot)
     if spec.out_dir:
         write_trial(result, metrics, spec.out_dir, title=spec.label)
         summary["out_dir"] = spec.out_dir
@@ -142,6 +146,34 @@ def run_trial(spec: TrialSpec) -> Dict[str, Any]:
         summary["trace"] = {"t": result.t, "rpy": result.rpy, "setpoint": result.setpoint_rpy,
                             "geodesic": result.geodesic}
     return summary
+
+
+def stroke_metrics(result: SimulationResult, robot: Any, every: int = 5) -> Dict[str, float]:
+    """Torque delivered by the paws, eq. (torque_leg) from the simulated joints (every ``every``-th sample,
+    joint rates by central differences), against the commanded tau_sat: the mean delivered component along
+    tau_sat over the mean |tau_sat| (``torque_ratio``) and the mean delivered component across it over the
+    mean |tau_sat| (``torque_sideways``); and the fraction of samples with some pair in power."""
+    from quadruped_control.allocation import estimate_body_torque
+
+    n = result.t.size
+    q = result.joint_positions.reshape(n, 4, 3)
+    q_dot = np.gradient(q, result.t, axis=0)
+    along, across, commanded = [], [], []
+    for k in range(1, n - 1, every):
+        tau_sat = result.tau_sat[k]
+        norm = float(np.linalg.norm(tau_sat))
+        delivered = estimate_body_torque(q[k], q_dot[k], result.rotation[k], result.omega[k], robot)
+        commanded.append(norm)
+        if norm > 1e-9:
+            unit = tau_sat / norm
+            along.append(float(delivered @ unit))
+            across.append(float(np.linalg.norm(delivered - (delivered @ unit) * unit)))
+    mean_cmd = float(np.mean(commanded)) if commanded else 0.0
+    power = np.any(result.pair_phase == "power", axis=1)
+    return {"torque_commanded_mean": mean_cmd,
+            "torque_ratio": float(np.sum(along) / len(commanded) / mean_cmd) if mean_cmd > 0 else 0.0,
+            "torque_sideways": float(np.sum(across) / len(commanded) / mean_cmd) if mean_cmd > 0 else 0.0,
+            "power_fraction": float(np.mean(power))}
 
 
 def write_trial(result: SimulationResult, metrics: Dict[str, Any], out_dir: str, title: str = "") -> None:
@@ -347,7 +379,9 @@ def build_parser() -> argparse.ArgumentParser:
                              "config/robot.yaml); the robustness study varies its estimates around this file")
     parser.add_argument("--scheme", choices=SCHEMES, default=None,
                         help="stroke scheme (default: stroke.scheme of config/controller.yaml, 'paper')")
-    parser.add_argument("--study", choices=("paper-sim", "robustness"), default=None, help="run a study")
+    parser.add_argument("--study", choices=("paper-sim", "robustness", "schemes"), default=None, help="run a study")
+    parser.add_argument("--perturbed", type=int, default=1,
+                        help="schemes study: perturbed (+-0.5 deg) starts per case besides the nominal one (default 1)")
     parser.add_argument("--jobs", type=int, default=min(2, os.cpu_count() or 1),
                         help="worker processes for studies (default %(default)s)")
     parser.add_argument("--dask-scheduler", default=None, metavar="ADDRESS",
@@ -389,6 +423,9 @@ def main(argv: Optional[Sequence[str]] = None) -> int:
             return study_paper_sim(args)
         if args.study == "robustness":
             return study_robustness(args)
+        if args.study == "schemes":
+            from quadruped_control.scheme_study import main_study
+            return main_study(args.out, args.jobs, args.perturbed, args.robot_yaml)
         spec = TrialSpec(label="setpoint %s deg" % " ".join("%g" % v for v in args.rpy),
                          setpoint_rpy_deg=tuple(args.rpy), initial_rpy_deg=tuple(args.initial_rpy),
                          duration=args.duration, gains=GAIN_ALIASES[args.gains], servo_model=args.servo_model,
