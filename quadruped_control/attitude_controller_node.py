@@ -22,7 +22,9 @@ Parameters
   ~loop_rate (100 Hz)    ~imu_rate (200 Hz: the loop steps on every imu_rate/loop_rate-th sample, so
                           the command leaves right after the sample that caused it)
   ~imu_max_age (0.05 s)  ~arm_on_start (false)   ~setpoint_rpy_deg ([0, 0, 0])
-  dynamic_reconfigure (AttitudeController.cfg): k_p k_i k_d k_aw tau_max t_rec t_pow_max
+  ~stroke_scheme (stroke.scheme of controller.yaml: paper | coordinated)
+  dynamic_reconfigure (AttitudeController.cfg): k_p k_i k_d k_aw tau_max t_rec t_pow_max stroke_scheme
+                         (a scheme switch is smooth: the feet return to the nominal pose first)
 """
 from __future__ import annotations
 
@@ -85,6 +87,8 @@ class AttitudeControllerNode:
         robot = load_robot_params(_optional_path("~robot_yaml"))
         gain_set = rospy.get_param("~gain_set", "experiment")
         self.config = load_controller_config(_optional_path("~controller_yaml"), gain_set)
+        scheme = rospy.get_param("~stroke_scheme", "") or self.config.stroke_scheme
+        self.config = self.config.replace(stroke_scheme=scheme)
         hardware = load_hardware_config(_optional_path("~hardware_yaml"))
         calibration = load_servo_calibration(_optional_path("~calibration_yaml"))
         self.loop_rate = float(rospy.get_param("~loop_rate", 100.0))
@@ -129,6 +133,7 @@ class AttitudeControllerNode:
                             ("k_aw", gains.k_aw), ("tau_max", self.config.tau_max),
                             ("t_rec", self.config.t_rec), ("t_pow_max", self.config.t_pow_max)):
             rospy.set_param("~" + name, float(value))
+        rospy.set_param("~stroke_scheme", self.config.stroke_scheme)
         self.reconfigure = ReconfigureServer(AttitudeControllerConfig, self._on_reconfigure)
 
         rospy.Service("~arm", SetBool, self._on_arm)
@@ -139,8 +144,8 @@ class AttitudeControllerNode:
         # Fallback: when IMU samples stop, this timer still ticks the supervisor so that it holds.
         self.fallback_timer = rospy.Timer(rospy.Duration(self.period), self._on_fallback_timer)
         rospy.loginfo("attitude controller: gain set '%s' (K_p %.3g K_i %.3g K_d %.3g K_aw %.3g), "
-                      "%.0f Hz stepped every %d IMU samples, %s", gain_set, gains.k_p, gains.k_i,
-                      gains.k_d, gains.k_aw, self.loop_rate, self.decimation,
+                      "%.0f Hz stepped every %d IMU samples, %s strokes, %s", gain_set, gains.k_p, gains.k_i,
+                      gains.k_d, gains.k_aw, self.loop_rate, self.decimation, self.config.stroke_scheme,
                       "ARMED" if self.supervisor.armed else "disarmed (call ~arm)")
 
     # ---- callbacks -----------------------------------------------------------------------------
@@ -209,22 +214,27 @@ class AttitudeControllerNode:
         try:
             # Validate the whole update first, so that it is applied completely or not at all.
             current.with_gains(gains).replace(t_rec=config.t_rec, t_pow_max=config.t_pow_max,
-                                              tau_max=config.tau_max)
+                                              tau_max=config.tau_max, stroke_scheme=config.stroke_scheme)
         except ValueError as exc:
             rospy.logerr("reconfigure refused: %s", exc)
             config.k_p, config.k_i, config.k_d, config.k_aw = (current.gains.k_p, current.gains.k_i,
                                                                current.gains.k_d, current.gains.k_aw)
             config.t_rec, config.t_pow_max, config.tau_max = current.t_rec, current.t_pow_max, current.tau_max
+            config.stroke_scheme = current.stroke_scheme
             return config
         with self.lock:
             self.supervisor.controller.set_gains(gains)
             self.supervisor.controller.set_timing(t_rec=config.t_rec, t_pow_max=config.t_pow_max,
                                                   tau_max=config.tau_max)
+            self.supervisor.controller.set_stroke_scheme(config.stroke_scheme)
         changed = ["%s %.4g -> %.4g" % (name, old, new) for name, old, new in (
             ("k_p", current.gains.k_p, gains.k_p), ("k_i", current.gains.k_i, gains.k_i),
             ("k_d", current.gains.k_d, gains.k_d), ("k_aw", current.gains.k_aw, gains.k_aw),
             ("tau_max", current.tau_max, config.tau_max), ("t_rec", current.t_rec, config.t_rec),
             ("t_pow_max", current.t_pow_max, config.t_pow_max)) if abs(old - new) > 1e-12]
+        if config.stroke_scheme != current.stroke_scheme:
+            changed.append("stroke_scheme %s -> %s (switching once the feet are at the nominal pose)"
+                           % (current.stroke_scheme, config.stroke_scheme))
         if changed:
             rospy.loginfo("reconfigure: %s", ", ".join(changed))
         return config

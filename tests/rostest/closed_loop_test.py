@@ -4,7 +4,8 @@
 Listens to /controller_state (geodesic error of every control step) and /sim/servo_output (the pulse
 widths the fake PCA9685 really produces). Passes when the geodesic error, smoothed with the paper's
 centred 3 s moving average, enters the 6 degree band and stays in it for ~hold_duration seconds before
-~settle_timeout; and no pulse width ever left its channel's limits.
+~settle_timeout; and no pulse width ever left its channel's limits; with ~expected_scheme, that the
+controller runs that stroke scheme (sim_coordinated.test).
 """
 import math
 import sys
@@ -86,6 +87,9 @@ class ClosedLoopTest(unittest.TestCase):
         self.assertGreaterEqual(held, hold, "smoothed geodesic error within 6 deg for only %.1f s "
                                 "(last smoothed error %s deg)" % (held, last))
         self.assertEqual(self.width_violations, [], "pulse widths outside the channel limits")
+        scheme = rospy.get_param("~expected_scheme", "")
+        if scheme:
+            self.assertEqual(rospy.get_param("attitude_controller/stroke_scheme"), scheme)
 
         # The sensor stalls (fake VN-100 silent behind its pty): the controller must hold the safe pose
         # with a stale-IMU reason within ~imu_max_age, and stroke again when the samples return.
