@@ -31,11 +31,15 @@ def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--steps", type=int, default=20000, help="closed-loop steps (default 20000 = 200 s)")
     parser.add_argument("--gain-set", default="simulation")
+    parser.add_argument("--scheme", default=None, help="stroke scheme (default: config/controller.yaml's)")
     args = parser.parse_args()
 
     params = load_robot_params()
     model = FloatingBaseModel(params)
-    controller = AttitudeController(params, load_controller_config(gain_set=args.gain_set))
+    config = load_controller_config(gain_set=args.gain_set)
+    if args.scheme:
+        config = config.replace(stroke_scheme=args.scheme)
+    controller = AttitudeController(params, config)
     state = RigidBodyState(rotation=rpy_to_rot(math.radians(30.0), 0.0, 0.0))
     q_previous = np.array([joint_angles(params.nominal_foot_body(leg), leg, params) for leg in LEGS])
     setpoints = [(0.0, 0.0, 0.0), (math.radians(45.0), 0.0, 0.0), (0.0, math.radians(30.0), 0.0),
@@ -55,7 +59,8 @@ def main() -> None:
         q_previous = out.joint_targets
 
     us = durations * 1e6
-    print("AttitudeController.step over %d closed-loop steps (%s gains):" % (args.steps, args.gain_set))
+    print("AttitudeController.step over %d closed-loop steps (%s gains, %s strokes):"
+          % (args.steps, args.gain_set, config.stroke_scheme))
     print("  median %.1f us   mean %.1f us   p90 %.1f us   p99 %.1f us   p99.9 %.1f us   max %.1f us"
           % (np.median(us), us.mean(), np.percentile(us, 90), np.percentile(us, 99), np.percentile(us, 99.9),
              us.max()))
@@ -76,7 +81,7 @@ def main() -> None:
         return best * 1e6
 
     ik_us = per_call_us(lambda: [joint_angles(r, leg, params) for leg, r in zip(LEGS, feet)])
-    hold_controller = AttitudeController(params, load_controller_config(gain_set=args.gain_set))
+    hold_controller = AttitudeController(params, config)
     hold_us = per_call_us(lambda: hold_controller.hold(0.0, "bench"))
     print("  parts: IK for 4 legs %.1f us; hold() %.1f us" % (ik_us, hold_us))
 

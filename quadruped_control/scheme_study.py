@@ -222,3 +222,67 @@ def main_study(out: str, jobs: int, perturbed: int, robot_yaml: Optional[str] = 
     print(text.split("\n## Per trial")[0])
     print("%d trials in %.0f s wall; %s/{schemes.json, schemes.md, schemes.png}" % (len(rows), wall, out))
     return 0 if result["all_met"] else 2
+
+
+def plot_stroke_timelines(path: str, setpoint_deg: Tuple[float, float, float] = (45.0, 45.0, 45.0),
+                          window: Tuple[float, float] = (2.0, 8.0), leg: int = 1) -> None:
+    """Figure of both schemes on one trial (simulation gains, rate-limited servos): the phase timeline
+    of the two pairs (power intervals) and the commanded path of one foot in the body frame."""
+    import matplotlib
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    from quadruped_control.controller_config import load_controller_config
+    from quadruped_control.params import load_robot_params
+    from quadruped_control.simulation import ClosedLoopSimulation
+    from quadruped_control.so3 import rpy_to_rot
+
+    robot = load_robot_params()
+    fig, axes = plt.subplots(2, 2, figsize=(11, 6.5), gridspec_kw={"height_ratios": [1, 2]})
+    for column, scheme in enumerate(SCHEME_ORDER):
+        config = load_controller_config().replace(stroke_scheme=scheme)
+        sim = ClosedLoopSimulation(robot, config, "rate-limited", setpoint_R=rpy_to_rot(*np.radians(setpoint_deg)))
+        feet = []
+        phases = []
+        times = []
+        for _ in range(int(round(window[1] / sim.dt)) + 1):
+            times.append(sim.time)
+            _, output = sim.step()
+            feet.append(output.state.foot_targets[leg - 1].copy())
+            phases.append(output.state.pair_phase)
+        t = np.array(times)
+        phase = np.array(phases)
+        ax = axes[0, column]
+        for index, pair in enumerate(config.pairs):
+            power = phase[:, index] == "power"
+            edges = np.diff(np.concatenate(([0], power.astype(int), [0])))
+            starts, ends = np.nonzero(edges == 1)[0], np.nonzero(edges == -1)[0]
+            ax.broken_barh([(t[s], t[min(e, len(t) - 1)] - t[s]) for s, e in zip(starts, ends)],
+                           (index + 0.6, 0.8), color="C%d" % index)
+        none = ~np.any(phase == "power", axis=1)
+        ax.fill_between(t, 0.4, 2.6, where=none, color="0.85", step="post", label="no pair in power")
+        ax.set_xlim(*window)
+        ax.set_yticks([1, 2])
+        ax.set_yticklabels(["pair %s" % (config.pairs[0],), "pair %s" % (config.pairs[1],)])
+        ax.set_title("%s scheme: power strokes (%.0f %% of the time some pair is in power)"
+                     % (scheme, 100.0 * np.mean(~none)), fontsize=9)
+        ax.legend(fontsize=7, loc="upper right")
+        ax.set_xlabel("t [s]")
+        ax = axes[1, column]
+        f = np.array(feet)
+        sel = (t >= window[0]) & (t <= window[1])
+        ax.plot(f[sel, 0], f[sel, 2], "-", lw=0.8, color="C0", label="x-z")
+        ax.plot(f[sel, 1] + 0.0, f[sel, 2], "-", lw=0.8, color="C3", label="y-z")
+        nominal = robot.nominal_foot_body(leg)
+        ax.plot([nominal[0]], [nominal[2]], "k+", ms=12, label="nominal (x-z)")
+        ax.plot([nominal[1]], [nominal[2]], "kx", ms=8, label="nominal (y-z)")
+        ax.set_aspect("equal", adjustable="datalim")
+        ax.set_xlabel("x or y, body frame [m]")
+        ax.set_ylabel("z [m]")
+        ax.set_title("commanded path of foot %d, t = %g..%g s" % (leg, window[0], window[1]), fontsize=9)
+        ax.legend(fontsize=7)
+    fig.suptitle("Setpoint %g/%g/%g deg roll/pitch/yaw, simulation gains, rate-limited servos" % setpoint_deg,
+                 fontsize=10)
+    fig.tight_layout()
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
