@@ -18,9 +18,7 @@ from __future__ import annotations
 import json
 import math
 import os
-import sys
 import time
-from concurrent.futures import ProcessPoolExecutor, as_completed
 from typing import Any, Dict, List, Optional, Sequence, Tuple
 
 import numpy as np
@@ -57,7 +55,7 @@ def build_specs(perturbed: int = 1, gain_sets: Sequence[str] = ("simulation", "e
                             label="|".join((case.name, str(start_index), gains, servo, scheme)),
                             setpoint_rpy_deg=case.setpoint_rpy_deg, initial_rpy_deg=start, duration=case.duration,
                             gains=gains, servo_model=servo, quiet=True, robot_yaml=robot_yaml,
-                            config_overrides=overrides, scheme=scheme, scheme_metrics=True))
+                            config_overrides=overrides, scheme=scheme, scheme_metrics=True, keep_trace=False))
     return specs
 
 
@@ -182,36 +180,22 @@ def _figure(rows: Sequence[Dict[str, Any]], path: str) -> None:
     plt.close(fig)
 
 
-def main_study(out: str, jobs: int, perturbed: int, robot_yaml: Optional[str] = None) -> int:
-    from quadruped_control.simulate import run_trial
+def main_study(args: Any) -> int:
+    """The study of the module docstring with the CLI's arguments (``out``, ``jobs``, ``perturbed``,
+    ``robot_yaml``, and the study runner's ``dask_scheduler``, ``resume``, ``quiet``); trials run through
+    :func:`quadruped_control.studies.run_trials` (executor, progress bar, resume from ``out/trials``)."""
+    from quadruped_control.simulate import _run_many
 
+    out = args.out
     os.makedirs(out, exist_ok=True)
-    specs = build_specs(perturbed, robot_yaml=robot_yaml)
+    specs = build_specs(args.perturbed, robot_yaml=args.robot_yaml)
     start = time.perf_counter()
-    summaries = []
-    if jobs <= 1:
-        iterator = (run_trial(spec) for spec in specs)
-        pool = None
-    else:
-        pool = ProcessPoolExecutor(max_workers=jobs)
-        iterator = (f.result() for f in as_completed([pool.submit(run_trial, spec) for spec in specs]))
-    try:
-        for done, summary in enumerate(iterator, 1):
-            summary.pop("trace", None)
-            summaries.append(summary)
-            elapsed = time.perf_counter() - start
-            sys.stderr.write("\r[schemes] %d/%d trials, %.0f s elapsed, ETA %.0f s " % (
-                done, len(specs), elapsed, elapsed / done * (len(specs) - done)))
-            sys.stderr.flush()
-    finally:
-        if pool is not None:
-            pool.shutdown()
-    sys.stderr.write("\n")
+    summaries = _run_many(specs, args, "schemes")
     wall = time.perf_counter() - start
     rows = sorted((_row(s) for s in summaries), key=lambda r: (r["case"], r["start"], r["gains"], r["servo"],
                                                                 r["scheme"]))
     result = compare(rows)
-    result.update(study="schemes", wall_time=wall, trials=len(rows), perturbed_starts=perturbed,
+    result.update(study="schemes", wall_time=wall, trials=len(rows), perturbed_starts=args.perturbed,
                   perturbation_deg=PERTURBATION_DEG, plant="paper", rows=rows)
     with open(os.path.join(out, "schemes.json"), "w") as stream:
         json.dump(result, stream, indent=1, allow_nan=False)

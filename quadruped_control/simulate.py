@@ -425,7 +425,7 @@ def main(argv: Optional[Sequence[str]] = None) -> int:
             return study_robustness(args)
         if args.study == "schemes":
             from quadruped_control.scheme_study import main_study
-            return main_study(args.out, args.jobs, args.perturbed, args.robot_yaml)
+            return main_study(args)
         spec = TrialSpec(label="setpoint %s deg" % " ".join("%g" % v for v in args.rpy),
                          setpoint_rpy_deg=tuple(args.rpy), initial_rpy_deg=tuple(args.initial_rpy),
                          duration=args.duration, gains=GAIN_ALIASES[args.gains], servo_model=args.servo_model,
