@@ -269,3 +269,56 @@ def test_config_file_is_consistent():
         assert len(values) == 3 and all(0 < v < 1 for v in values)
     # Datasheet-derived: 1 deg roll/pitch, 2 deg heading (see the comments in the file).
     assert cfg["orientation_covariance_diagonal"][2] == pytest.approx(math.radians(2) ** 2, rel=0.01)
+
+
+def test_next_output_time_follows_the_configured_outputs():
+    device = FakeVn100(boot_time=10.0)
+    # Factory state: ASCII $VNYMR at 40 Hz (every 20th 800 Hz tick), binary off.
+    assert device.next_output_time() == pytest.approx(10.0)
+    device.advance(10.0)
+    assert device.next_output_time() == pytest.approx(10.025)
+    device.write(vp.ascii_command("VNWRG,06,0"))  # ASCII output off
+    device.write(vp.ascii_command("VNWRG,75,1,4,01,0131"))  # binary at 200 Hz
+    device.read(1 << 16)
+    assert device.next_output_time() == pytest.approx(10.005)
+    device.advance(10.005)
+    assert device.next_output_time() == pytest.approx(10.010)
+    device.disconnect()
+    assert device.next_output_time() is None
+
+
+def test_pty_on_a_simulated_clock_sends_only_what_is_due_when_woken(tmp_path):
+    pytest.importorskip("serial")
+    clock = ManualClock(0.0)
+    device = FakeVn100(boot_time=0.0)
+    link = str(tmp_path / "vn100")
+    with PtyFakeVn100(device, clock=clock, symlink_path=link, realtime=False, period=0.01) as pty:
+        driver = Vn100Driver(serial_port_factory(link, 921600, timeout=0.01), rate_hz=200.0,
+                             command_timeout=1.0)
+        try:
+            driver.connect()  # the handshake runs while the simulated clock stands still
+            samples = []
+            for k in range(1, 21):
+                clock.now = 0.01 * k
+                pty.wake()
+                deadline = time.monotonic() + 2.0
+                while len(samples) < 2 * k and time.monotonic() < deadline:
+                    samples += driver.read_samples()
+                assert len(samples) == 2 * k  # two 200 Hz packets per 10 ms of simulated time
+            assert [s.time_startup_ns for s in samples] == [5_000_000 * (i + 1) for i in range(40)]
+        finally:
+            driver.close()
+        assert pty.error is None
+
+
+def test_unplugged_time_is_not_sent_after_replug():
+    device = FakeVn100(boot_time=0.0)
+    device.write(vp.ascii_command("VNWRG,06,0") + vp.ascii_command("VNWRG,75,1,4,01,0131"))
+    device.advance(0.01)
+    device.read(1 << 16)
+    sent = device.packets_sent
+    device.disconnect()
+    device.advance(0.5)  # half a second unplugged
+    device.reconnect(power_cycle=False)
+    device.advance(0.51)
+    assert device.packets_sent - sent == 2  # only the 0.505 and 0.510 s packets

@@ -318,10 +318,11 @@ class FakeVn100:
             if self._now is not None and now <= self._now:
                 return
             self._now = now
-            if not self.connected:
-                return
             tick_now = int(math.floor((now - self.boot_time) * vp.IMU_RATE_HZ + 1e-9))
             if tick_now < 0:
+                return
+            if not self.connected:
+                self._next_tick = tick_now + 1  # unplugged: that output is gone, not sent on replug
                 return
             first = max(self._next_tick, tick_now - int(vp.IMU_RATE_HZ) + 1)
             self._next_tick = tick_now + 1
@@ -336,6 +337,21 @@ class FakeVn100:
                     self._emit_packet(tick, selection)
                 if ascii_divisor and tick % ascii_divisor == 0:
                     self._emit_ymr()
+
+    def next_output_time(self) -> Optional[float]:
+        """Device time of the next output (binary packet or ASCII line) :meth:`advance` would queue,
+        or ``None`` when nothing is due (unplugged, output paused or off). A pump sleeps until then."""
+        with self._lock:
+            if not self.connected or self.async_paused:
+                return None
+            mode, divisor, _selection = self.binary_config[75]
+            divisors = [divisor] if mode in (1, 3) and divisor > 0 else []
+            if self.ascii_output_type == _ADOR_YMR and self.ascii_rate_hz:
+                divisors.append(int(vp.IMU_RATE_HZ) // self.ascii_rate_hz)
+            if not divisors:
+                return None
+            tick = min(-(-self._next_tick // d) * d for d in divisors)  # next multiple >= _next_tick
+            return self.boot_time + tick / vp.IMU_RATE_HZ
 
     def _noisy_state(self) -> Tuple[np.ndarray, np.ndarray, np.ndarray]:
         q, w, a = self._q_vn, self._rate_vn, self._accel_vn
@@ -442,19 +458,27 @@ class PtyFakeVn100:
     """Serve a :class:`FakeVn100` on a pseudo-terminal so a real serial driver can open it.
 
     ``start()`` creates the pty pair (raw mode), optionally a symlink ``symlink_path`` -> slave
-    device (e.g. ``/tmp/sim/vn100``), and a thread that every ``period`` s advances the fake to
-    ``clock()``, writes its output to the master and feeds bytes read from the master (host
-    commands) to it. ``stop()`` ends the thread and removes the pty and the symlink.
+    device (e.g. ``/tmp/sim/vn100``), and a thread that advances the fake to ``clock()``, writes its
+    output to the master and feeds bytes read from the master (host commands) to it. The thread is
+    paced by the device: it sleeps until the fake's next output is due on ``clock`` (so a 200 Hz
+    stream costs 200 wake-ups a second and each packet leaves on time), until host bytes arrive, or
+    until :meth:`wake` (the owner moved a simulated ``clock``), but never longer than ``period``.
+    With ``realtime=False`` (``clock`` is a simulated clock that only the owner advances) it sleeps
+    until :meth:`wake` or host bytes, ``period`` at most. ``stop()`` ends the thread and removes the pty
+    and the symlink.
     """
 
     PENDING_LIMIT = 1 << 16
 
     def __init__(self, device: FakeVn100, clock: Callable[[], float] = time.monotonic,
-                 symlink_path: Optional[str] = None, period: float = 0.001) -> None:
+                 symlink_path: Optional[str] = None, period: float = 0.05, realtime: bool = True) -> None:
         self.device = device
         self.clock = clock
         self.symlink_path = symlink_path
         self.period = period
+        self.realtime = realtime
+        self._wake_r: Optional[int] = None
+        self._wake_w: Optional[int] = None
         self._master: Optional[int] = None
         self._slave: Optional[int] = None
         self._thread: Optional[threading.Thread] = None
@@ -470,6 +494,9 @@ class PtyFakeVn100:
         tty.setraw(slave)
         os.set_blocking(master, False)
         self._master, self._slave = master, slave
+        self._wake_r, self._wake_w = os.pipe()
+        os.set_blocking(self._wake_r, False)
+        os.set_blocking(self._wake_w, False)
         self.slave_path = os.ttyname(slave)
         path = self.slave_path
         if self.symlink_path:
@@ -489,9 +516,27 @@ class PtyFakeVn100:
     def path(self) -> Optional[str]:
         return self.symlink_path or self.slave_path
 
+    def wake(self) -> None:
+        """Make the pump thread advance the device to ``clock()`` now (call after moving the clock)."""
+        if self._wake_w is not None:
+            try:
+                os.write(self._wake_w, b"w")
+            except (BlockingIOError, OSError):
+                pass  # already woken (pipe full) or stopped
+
+    def _sleep_time(self, pending: bool) -> float:
+        if pending:
+            return min(self.period, 0.001)  # the pty buffer was full: retry soon
+        if not self.realtime:
+            return self.period
+        due = self.device.next_output_time()
+        if due is None:
+            return self.period
+        return min(self.period, max(0.0, due - self.clock()))
+
     def _run(self) -> None:
-        master = self._master
-        assert master is not None
+        master, wake = self._master, self._wake_r
+        assert master is not None and wake is not None
         pending = bytearray()
         try:
             while not self._stop.is_set():
@@ -508,8 +553,13 @@ class PtyFakeVn100:
                         del pending[:written]
                     except BlockingIOError:
                         pass
-                readable, _, _ = select.select([master], [], [], self.period)
-                if readable:
+                readable, _, _ = select.select([master, wake], [], [], self._sleep_time(bool(pending)))
+                if wake in readable:
+                    try:
+                        os.read(wake, 4096)
+                    except (BlockingIOError, InterruptedError):
+                        pass
+                if master in readable:
                     try:
                         data = os.read(master, 4096)
                     except (BlockingIOError, InterruptedError):
@@ -527,13 +577,13 @@ class PtyFakeVn100:
         if self._thread is not None:
             self._thread.join(timeout=2.0)
             self._thread = None
-        for fd in (self._master, self._slave):
+        for fd in (self._master, self._slave, self._wake_r, self._wake_w):
             if fd is not None:
                 try:
                     os.close(fd)
                 except OSError:
                     pass
-        self._master = self._slave = None
+        self._master = self._slave = self._wake_r = self._wake_w = None
         if self.symlink_path and os.path.islink(self.symlink_path):
             os.unlink(self.symlink_path)
 
