@@ -108,7 +108,12 @@ class AttitudeControllerNode:
         self.lock = threading.Lock()
         self.imu_count = 0
         self.last_step_wall: Optional[float] = None
-        self.last_step_time: Optional[float] = None  # ROS clock (simulated time under use_sim_time)
+        self.sim_time = bool(rospy.get_param("/use_sim_time", False))
+        if self.sim_time:
+            self._wait_for_clock()
+        # ROS clock (simulated time under use_sim_time) of the last step; the start counts as one, so
+        # the fallback timer's first step comes 1.5 periods after start-up (deterministic in lock-step).
+        self.last_step_time: float = rospy.get_time()
         self.hold_episodes = HoldEpisodes()
         self.jitter = WindowStatistics(2000)
         self.step_time = WindowStatistics(2000)
@@ -158,13 +163,27 @@ class AttitudeControllerNode:
             self.imu_count += 1
             due = self.imu_count % self.decimation == 0
         if due:
+            if self.sim_time:
+                self._wait_for_next_clock()
             self._step()
+
+    def _wait_for_clock(self) -> None:
+        """Under use_sim_time, wait for the first /clock so that timers start at a valid time."""
+        while not rospy.is_shutdown() and rospy.get_time() == 0.0:
+            time.sleep(0.01)
+
+    def _wait_for_next_clock(self, timeout: float = 1.0) -> None:
+        """Under use_sim_time, an IMU sample can overtake the /clock message of its step (different
+        connections): the step waits until the clock has moved past the previous step."""
+        deadline = time.monotonic() + timeout
+        while rospy.get_time() <= self.last_step_time and time.monotonic() < deadline \
+                and not rospy.is_shutdown():
+            time.sleep(0.0002)
 
     def _on_fallback_timer(self, _event) -> None:
         # Judged on the ROS clock, like the timer itself: under use_sim_time (lock-step simulation) a
         # slow machine must not make the fallback step in between two IMU-driven steps.
-        last = self.last_step_time
-        if last is None or rospy.get_time() - last > 1.5 * self.period:
+        if rospy.get_time() - self.last_step_time > 1.5 * self.period:
             self._step()
 
     def _on_joint_states(self, msg: JointState) -> None:

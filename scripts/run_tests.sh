@@ -47,6 +47,8 @@ for path in sys.argv[1:]:
 print(tests - bad, bad)
 PYEOF
 }
+# The lock-step closed-loop rostest saves its simulated trajectory here for the determinism check below.
+export UQ_TRAJECTORY_FILE="$RESULTS/closed_loop_trajectory.npz"
 for t in tests/rostest/*.test; do
   [ -e "$t" ] || continue
   name="$(basename "$t" .test)"
@@ -70,6 +72,18 @@ for t in tests/rostest/*.test; do
     tail -40 "$RESULTS/rostest-$name.log"
   fi
 done
+
+# Lock-step determinism: the closed loop again with both cores kept busy by other processes must give
+# the same simulated trajectory (to 1e-6) as the run above.
+echo "-- lock-step determinism (closed loop again under full CPU load)"
+if [ -s "$UQ_TRAJECTORY_FILE" ] && ROS_HOME="$ROS_HOME" bash scripts/check_lockstep_determinism.sh "$UQ_TRAJECTORY_FILE" \
+    >"$RESULTS/lockstep-determinism.log" 2>&1; then
+  rostest_passed=$((rostest_passed + 1)); echo "   ok ($(grep -h "common samples" "$RESULTS/lockstep-determinism.log"))"
+else
+  rostest_failed=$((rostest_failed + 1)); failures=$((failures + 1))
+  echo "   FAILED; last lines of $RESULTS/lockstep-determinism.log:"; tail -20 "$RESULTS/lockstep-determinism.log"
+fi
+unset UQ_TRAJECTORY_FILE
 
 # Count pytest cases from its JUnit file so that the closing line covers the whole run.
 read -r py_passed py_failed < <(python - "$RESULTS/pytest.xml" <<'PYEOF'

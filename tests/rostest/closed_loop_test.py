@@ -6,6 +6,9 @@ widths the fake PCA9685 really produces). Passes when the geodesic error, smooth
 centred 3 s moving average, enters the 6 degree band and stays in it for ~hold_duration seconds before
 ~settle_timeout; and no pulse width ever left its channel's limits; with ~expected_scheme, that the
 controller runs that stroke scheme (sim_coordinated.test).
+
+With ~trajectory_file set, the simulated trajectory (/sim/pose stamps and quaternions) up to the
+sensor-stall part is saved there (numpy .npz) for scripts/check_lockstep_determinism.sh.
 """
 import math
 import sys
@@ -19,6 +22,7 @@ from std_srvs.srv import SetBool
 
 from quadruped_control.metrics import moving_average_centered
 from quadruped_drivers.hardware_config import load_hardware_config
+from geometry_msgs.msg import PoseStamped
 from quadruped_msgs.msg import ControllerState, ServoCommand
 
 BAND = math.radians(6.0)
@@ -31,10 +35,27 @@ class ClosedLoopTest(unittest.TestCase):
         self.times, self.errors = [], []
         self.armed_seen = False
         self.width_violations = []
+        self.pose_t, self.pose_q = [], []
+        self.recording = True
         hardware = load_hardware_config(rospy.get_param("~hardware_yaml"))
         self.low, self.high = hardware.min_us, hardware.max_us
         rospy.Subscriber("controller_state", ControllerState, self.on_state, queue_size=100)
         rospy.Subscriber("sim/servo_output", ServoCommand, self.on_output, queue_size=100)
+        rospy.Subscriber("sim/pose", PoseStamped, self.on_pose, queue_size=1000)
+
+    def on_pose(self, msg):
+        with self.lock:
+            if self.recording:
+                o = msg.pose.orientation
+                self.pose_t.append(msg.header.stamp.to_nsec())
+                self.pose_q.append((o.x, o.y, o.z, o.w))
+
+    def save_trajectory(self):
+        with self.lock:
+            self.recording = False
+            path = rospy.get_param("~trajectory_file", "")
+            if path:
+                np.savez(path, stamp_ns=np.array(self.pose_t, dtype=np.int64), quaternion=np.array(self.pose_q))
 
     def on_state(self, msg):
         with self.lock:
@@ -90,6 +111,7 @@ class ClosedLoopTest(unittest.TestCase):
         scheme = rospy.get_param("~expected_scheme", "")
         if scheme:
             self.assertEqual(rospy.get_param("attitude_controller/stroke_scheme"), scheme)
+        self.save_trajectory()
 
         # The sensor stalls (fake VN-100 silent behind its pty): the controller must hold the safe pose
         # with a stale-IMU reason within ~imu_max_age, and stroke again when the samples return.
