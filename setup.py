@@ -4,6 +4,7 @@ from setuptools import setup
 
 setup(**generate_distutils_setup(
     packages=[
+        "quadruped_common",
         "quadruped_control",
         "quadruped_control.studies",
         "quadruped_control.strokes",

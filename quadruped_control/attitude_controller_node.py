@@ -18,7 +18,8 @@ Publishes
 Services
   ~arm                   std_srvs/SetBool   legs move only when armed
 Parameters
-  ~gain_set (experiment) ~controller_yaml ~robot_yaml ~hardware_yaml ~calibration_yaml (package config/)
+  ~gain_set (experiment) ~controller_yaml ~robot_yaml ~hardware_yaml ~calibration_yaml ~vn100_yaml
+                         (package config/; vn100.yaml gives the IMU's plausible ranges)
   ~loop_rate (100 Hz)    ~imu_rate (200 Hz: the loop steps on every imu_rate/loop_rate-th sample, so
                           the command leaves right after the sample that caused it)
   ~imu_max_age (0.05 s)  ~arm_on_start (false)   ~setpoint_rpy_deg ([0, 0, 0])
@@ -45,12 +46,13 @@ from std_srvs.srv import SetBool, SetBoolResponse
 
 from quadruped_control.controller import AttitudeController
 from quadruped_control.controller_config import Gains, load_controller_config
-from quadruped_control.monitoring import HoldEpisodes, RateMonitor, WindowStatistics
+from quadruped_control.monitoring import HoldEpisodes, ImuLimits, RateMonitor, WindowStatistics
 from quadruped_control.params import JOINT_NAMES, ParameterError, load_robot_params
 from quadruped_control.so3 import quat_to_rot, rot_to_quat, rpy_to_rot
 from quadruped_control.supervisor import ControlSupervisor
 from quadruped_drivers.calibration import load_servo_calibration
 from quadruped_drivers.hardware_config import load_hardware_config
+from quadruped_drivers.vn100.settings import load_vn100_settings
 from underwater_quadruped.cfg import AttitudeControllerConfig
 from quadruped_msgs.msg import ControllerState, ServoCommand
 
@@ -99,12 +101,19 @@ class AttitudeControllerNode:
         self.decimation = max(1, int(round(imu_rate / self.loop_rate)))
         self.period = 1.0 / self.loop_rate
 
+        # IMU plausibility: the sensor's ranges from vn100.yaml, the same values the driver checks.
+        vn100 = load_vn100_settings(_optional_path("~vn100_yaml"))
+        imu_limits = ImuLimits(max_angular_rate=vn100["max_angular_rate"], max_acceleration=vn100["max_acceleration"],
+                               quaternion_norm_tolerance=vn100["quaternion_norm_tolerance"])
+        self.config = self.config.replace(max_angular_rate=imu_limits.max_angular_rate)
         controller = AttitudeController(robot, self.config)
         roll, pitch, yaw = [math.radians(v) for v in rospy.get_param("~setpoint_rpy_deg", [0.0, 0.0, 0.0])]
         controller.set_setpoint(rpy_to_rot(roll, pitch, yaw))
         self.supervisor = ControlSupervisor(controller, make_pulse_map(calibration, hardware),
                                             max_imu_age=float(rospy.get_param("~imu_max_age", 0.05)),
-                                            armed=bool(rospy.get_param("~arm_on_start", False)))
+                                            armed=bool(rospy.get_param("~arm_on_start", False)),
+                                            imu_limits=imu_limits)
+        self.reported_imu_drops = 0
         self.lock = threading.Lock()
         self.imu_count = 0
         self.last_step_wall: Optional[float] = None
@@ -158,10 +167,14 @@ class AttitudeControllerNode:
     def _on_imu(self, msg: Imu) -> None:
         o, w = msg.orientation, msg.angular_velocity
         with self.lock:
-            self.supervisor.set_imu((o.x, o.y, o.z, o.w), (w.x, w.y, w.z), msg.header.stamp.to_sec())
+            a = msg.linear_acceleration
+            dropped = self.supervisor.set_imu((o.x, o.y, o.z, o.w), (w.x, w.y, w.z), msg.header.stamp.to_sec(),
+                                              (a.x, a.y, a.z))
             self.imu_monitor.tick(time.monotonic())
             self.imu_count += 1
             due = self.imu_count % self.decimation == 0
+        if dropped:
+            rospy.logwarn_throttle(1.0, "attitude controller: IMU sample dropped: %s" % dropped)
         if due:
             if self.sim_time:
                 self._wait_for_next_clock()
@@ -198,7 +211,7 @@ class AttitudeControllerNode:
             if k < len(msg.velocity):
                 velocities[i] = msg.velocity[k]
         with self.lock:
-            self.supervisor.set_joint_feedback(positions, velocities)
+            self.supervisor.set_joint_feedback(positions, velocities, msg.header.stamp.to_sec())
             self.joint_monitor.tick(time.monotonic())
 
     def _set_setpoint(self, R: np.ndarray, text: str) -> None:
@@ -227,15 +240,16 @@ class AttitudeControllerNode:
         return SetBoolResponse(success=True, message=message)
 
     def _on_reconfigure(self, config, _level):
-        """Validate and apply live gains/timing; an invalid combination is refused and reverted."""
+        """Validate and apply live gains/timing; an invalid update (NaN, out of range, t_rec < 2 t_pow_max)
+        is refused as a whole, logged and reverted; this callback never raises."""
         current = self.supervisor.controller.config
-        gains = Gains(k_p=config.k_p, k_i=config.k_i, k_d=config.k_d, k_aw=config.k_aw)
         try:
             # Validate the whole update first, so that it is applied completely or not at all.
+            gains = Gains(k_p=config.k_p, k_i=config.k_i, k_d=config.k_d, k_aw=config.k_aw)
             current.with_gains(gains).replace(t_rec=config.t_rec, t_pow_max=config.t_pow_max,
                                               tau_max=config.tau_max, stroke_scheme=config.stroke_scheme)
-        except ValueError as exc:
-            rospy.logerr("reconfigure refused: %s", exc)
+        except (ValueError, TypeError) as exc:
+            rospy.logerr("reconfigure refused (values kept): %s", exc)
             config.k_p, config.k_i, config.k_d, config.k_aw = (current.gains.k_p, current.gains.k_i,
                                                                current.gains.k_d, current.gains.k_aw)
             config.t_rec, config.t_pow_max, config.tau_max = current.t_rec, current.t_pow_max, current.tau_max
@@ -355,14 +369,25 @@ class AttitudeControllerNode:
         now = time.monotonic()
         problem = self.supervisor.imu_problem(rospy.get_time())
         joints = self.joint_monitor.rate(now)
+        drops = self.supervisor.imu_dropped
+        new_drops, self.reported_imu_drops = drops - self.reported_imu_drops, drops
         if problem:
             stat.summary(DiagnosticStatus.ERROR, problem)
+        elif new_drops:
+            stat.summary(DiagnosticStatus.WARN, "%d implausible IMU samples dropped (last: %s)"
+                         % (new_drops, self.supervisor.last_imu_drop))
         elif joints == 0.0:
             stat.summary(DiagnosticStatus.WARN, "no joint_states (torque estimate unavailable)")
         else:
             stat.summary(DiagnosticStatus.OK, "IMU and joint feedback fresh")
         stat.add("imu rate [Hz]", "%.1f" % self.imu_monitor.rate(now))
         stat.add("joint_states rate [Hz]", "%.1f" % joints)
+        stat.add("imu samples received", str(self.supervisor.imu_received))
+        stat.add("imu samples dropped (implausible)", str(drops))
+        for reason, count in sorted(self.supervisor.imu_drop_reasons.items()):
+            stat.add("dropped: %s" % reason, str(count))
+        stat.add("last dropped sample", self.supervisor.last_imu_drop)
+        stat.add("joint readings outside the servo range", str(self.supervisor.joint_readings_implausible))
         return stat
 
 

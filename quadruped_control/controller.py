@@ -19,14 +19,35 @@ Switching the stroke scheme at run time (:meth:`AttitudeController.set_stroke_sc
 current scheme holds (power strokes retrace, recoveries complete, the feet return to the nominal pose;
 the record shows 'hold' with the reason), then the new scheme starts from the nominal pose.
 
-Discretisation of the integral (the paper gives the continuous law): with h the elapsed time of this
-step, the integral is first advanced over the interval that just ended,
-    z_k = z_(k-1) + h (e_R,k + K_aw Delta_sat,(k-1)),
-using the current error and the saturation excess of the torque that was commanded during that
-interval (zero after start, reset and hold), then tau_cmd,k uses z_k. h is the actual elapsed time
+Discretisation of the integral (the paper gives the continuous law dz/dt = e_R + K_aw Delta_sat): with
+h the elapsed time of this step, backward (implicit) Euler,
+    z_k = z_(k-1) + h (e_R,k + K_aw Delta_sat,k),   Delta_sat,k = tau_cmd,k - sat(tau_cmd,k),
+    tau_cmd,k = c_k - K_i z_k   (c_k: the P, D and feedforward terms of eq. (pid) at this step),
+so the saturation excess fed back is that of the torque this step commands (the record's tau_cmd and
+tau_sat satisfy it exactly unless the integral limit acts). It has a closed form: with the predictor
+u = c_k - K_i (z_(k-1) + h e_R,k) and g = h K_aw K_i >= 0, tau_cmd,k = u when |u| <= tau_max and
+otherwise tau_cmd,k = u_hat (|u| + g tau_max) / (1 + g), i.e. Delta_sat,k = u_hat (|u| - tau_max) / (1 + g).
+Then z_k is clipped to the norm ``integral_limit`` (on by default). h is the actual elapsed time
 t_k - t_(k-1) clipped to [0, max_step_factor * dt]; the first step after construction/reset uses dt.
 While holding, the integral is frozen.
 
+Stability for EVERY gain and step the interfaces allow (K_p, K_i, K_d, K_aw >= 0, any h >= 0). The
+dead-zone phi(tau) = tau - sat(tau) = tau - P(tau), P the projection onto the ball |tau| <= tau_max, is
+the gradient of the convex function 1/2 dist(tau, ball)^2, so it is monotone and 1-Lipschitz. The step
+solves tau + g phi(tau) = u, i.e. tau_cmd,k = (I + g phi)^(-1)(u), the resolvent of a monotone
+operator, which is firmly non-expansive for every g >= 0: |tau_k - tau'_k| <= |u - u'|. For K_i > 0,
+z_k = (c_k - tau_k) / K_i, so two integral states z, z' fed the same measurements satisfy
+|z_k - z'_k| <= |tau_k - tau'_k| / K_i <= |u - u'| / K_i = |z_(k-1) - z'_(k-1)|: the update is
+non-expansive in z, whatever g is (no growth, no sign-alternating oscillation). For K_i = 0 the
+integral does not act on the torque. The clip to ``integral_limit`` is a projection onto a ball,
+non-expansive too, and bounds |z| absolutely. The explicit scheme z_k = z_(k-1) + h (e_k + K_aw
+Delta_(k-1)) used before multiplies the deviation by (1 - h K_aw K_i) in saturation and diverges once
+h K_aw K_i > 2 (e.g. K_i 20, K_aw 10 and h >= 12.5 ms: the integral passed 1e6 in under a second).
+
+No overflow, no NaN: step() refuses non-finite inputs and angular rates beyond ``max_angular_rate``
+(ValueError; the supervisor then holds), so with |e_R| <= 1, bounded gains (cfg bounds), |z| <=
+integral_limit, h <= max_step and the feet within the legs' reach every term of eq. (pid), the
+saturation and the allocation is bounded by a modest number (|omega x I omega| <= |I| w_max^2).
 The controller is pure Python/numpy (no ROS): the ROS node and the offline simulator wrap the same
 object. Bad measurements raise ValueError from :meth:`step` (the caller then calls :meth:`hold`); no
 output ever contains NaN, and joint targets are always within the servo ranges.
@@ -296,7 +317,6 @@ class AttitudeController:
         nominal pose: call :meth:`hold` first to retract them smoothly.
         """
         self._integral = [0.0, 0.0, 0.0]
-        self._delta_sat: Vec3 = (0.0, 0.0, 0.0)
         self._t_prev: Optional[float] = None
         self._e_R: Vec3 = (0.0, 0.0, 0.0)
         self._geodesic = 0.0
@@ -361,7 +381,7 @@ class AttitudeController:
         """One control step at time ``t`` (s) with the measured attitude R = R_B^W and rate omega_B^B (rad/s).
 
         Raises ValueError (without changing any state) for a non-finite time, a non-rotation R or a
-        non-finite omega; the caller should then :meth:`hold`. After a hold, the first step restarts the
+        non-finite omega or one beyond ``config.max_angular_rate``; the caller should then :meth:`hold`. After a hold, the first step restarts the
         stroke cycle (first pair: half recovery).
         """
         t = float(t)
@@ -370,6 +390,9 @@ class AttitudeController:
         config = self._config
         r00, r01, r02, r10, r11, r12, r20, r21, r22 = _rotation_floats(R, "attitude R", config.rotation_tolerance)
         wx, wy, wz = _vector_floats(omega, "angular velocity omega")
+        w_max = config.max_angular_rate
+        if not (abs(wx) <= w_max and abs(wy) <= w_max and abs(wz) <= w_max):
+            raise ValueError("angular velocity omega %r exceeds max_angular_rate %g rad/s" % ((wx, wy, wz), w_max))
         h = self._elapsed(t)
         if self._stroke.holding:
             self._hold_reason = ""
@@ -388,22 +411,6 @@ class AttitudeController:
             + (d02 * r02 + d12 * r12 + d22 * r22)
         self._e_R = (ex, ey, ez)
         self._geodesic = math.atan2(math.hypot(ex, ey, ez), 0.5 * (trace - 1.0))
-
-        # Integral of eq. (pid): z += h (e_R + K_aw Delta_sat of the torque applied over the last interval).
-        z = self._integral
-        ax, ay, az = self._delta_sat
-        k_aw = gains.k_aw
-        z[0] += h * (ex + k_aw * ax)
-        z[1] += h * (ey + k_aw * ay)
-        z[2] += h * (ez + k_aw * az)
-        limit = config.integral_limit
-        if limit is not None:
-            norm = math.hypot(z[0], z[1], z[2])
-            if norm > limit:
-                scale = limit / norm
-                z[0] *= scale
-                z[1] *= scale
-                z[2] *= scale
 
         # Feedforward: omega x (I omega) and -tau_buoyancy^B, eq. (pid), (buoy_torque).
         fx = fy = fz = 0.0
@@ -426,12 +433,31 @@ class AttitudeController:
             fy -= sz * ux - sx * uz
             fz -= sx * uy - sy * ux
 
-        k_p, k_i, k_d = gains.k_p, gains.k_i, gains.k_d
-        cx = -k_p * ex - k_i * z[0] - k_d * wx + fx
-        cy = -k_p * ey - k_i * z[1] - k_d * wy + fy
-        cz = -k_p * ez - k_i * z[2] - k_d * wz + fz
-        sx_, sy_, sz_, saturated = _saturate_f(cx, cy, cz, config.tau_max)  # eq. (sat)
-        self._delta_sat = (cx - sx_, cy - sy_, cz - sz_)
+        k_p, k_i, k_d, k_aw = gains.k_p, gains.k_i, gains.k_d, gains.k_aw
+        tau_max = config.tau_max
+        # P, D and feedforward terms c_k of eq. (pid); the integral term -K_i z_k is added below.
+        nx = -k_p * ex - k_d * wx + fx
+        ny = -k_p * ey - k_d * wy + fy
+        nz = -k_p * ez - k_d * wz + fz
+        # Integral of eq. (pid), backward Euler with the anti-windup excess of this step's command (module
+        # docstring): predictor z + h e_R, its command u; in saturation add h K_aw Delta_sat in closed form.
+        z = self._integral
+        zx, zy, zz = z[0] + h * ex, z[1] + h * ey, z[2] + h * ez
+        ux, uy, uz = nx - k_i * zx, ny - k_i * zy, nz - k_i * zz
+        norm_u = math.hypot(ux, uy, uz)
+        if norm_u > tau_max:
+            g = h * k_aw * k_i
+            step = h * k_aw * (norm_u - tau_max) / ((1.0 + g) * norm_u)  # h K_aw |Delta_sat| / |u|
+            zx, zy, zz = zx + step * ux, zy + step * uy, zz + step * uz
+        norm_z = math.hypot(zx, zy, zz)
+        limit = config.integral_limit
+        if norm_z > limit:
+            scale = limit / norm_z
+            zx, zy, zz = zx * scale, zy * scale, zz * scale
+        z[0], z[1], z[2] = zx, zy, zz
+
+        cx, cy, cz = nx - k_i * zx, ny - k_i * zy, nz - k_i * zz
+        sx_, sy_, sz_, saturated = _saturate_f(cx, cy, cz, tau_max)  # eq. (sat)
         self._tau_sat = (sx_, sy_, sz_)
         self._omega = (wx, wy, wz)
 
@@ -466,7 +492,6 @@ class AttitudeController:
         else:
             h = self._config.dt
         self._hold_reason = str(reason)
-        self._delta_sat = (0.0, 0.0, 0.0)
         self._tau_sat = (0.0, 0.0, 0.0)
         self._stroke.hold(h)
         zero = (0.0, 0.0, 0.0)

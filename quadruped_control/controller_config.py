@@ -30,7 +30,9 @@ import math
 from dataclasses import dataclass
 from typing import Any, Mapping, Optional, Tuple
 
-from quadruped_control.params import LEGS, ParameterError, load_config
+from quadruped_common.config import ParameterError, load_config, number
+from quadruped_common.tunables import bounds as tunable_bounds
+from quadruped_control.params import LEGS
 from quadruped_control.strokes import SCHEMES, CoordinatedParams
 
 __all__ = [
@@ -49,6 +51,15 @@ DEFAULT_GAIN_SET = "simulation"
 #: Keys a named gain set in controller.yaml may contain (gains plus timing overrides).
 GAIN_SET_KEYS = ("k_p", "k_i", "k_d", "k_aw", "t_rec", "t_pow_max", "tau_max")
 
+#: Bounds of the live-tunable values (gains, tau_max, t_rec, t_pow_max): one table for config files and
+#: dynamic_reconfigure.
+TUNABLE_BOUNDS = tunable_bounds()
+
+#: Default bound on |z|, rad s (see ControllerConfig.integral_limit and config/controller.yaml).
+DEFAULT_INTEGRAL_LIMIT = 10.0
+#: Default largest accepted |omega| per axis, rad/s: the VN-100's range, 2000 deg/s (datasheet), plus 5 %.
+DEFAULT_MAX_ANGULAR_RATE = 36.652
+
 #: Slack for the cross-parameter rule t_rec >= 2 t_pow_max (values typed in decimal).
 _TIMING_SLACK = 1e-9
 
@@ -56,21 +67,24 @@ _TIMING_SLACK = 1e-9
 def _finite(name: str, value: Any, low: float = 0.0, low_open: bool = False,
             high: float = math.inf) -> float:
     """``value`` as a float, with a ParameterError unless it is a finite number in range."""
-    if isinstance(value, bool) or not isinstance(value, (int, float)):
-        raise ParameterError("%s must be a number, got %r" % (name, value))
-    number = float(value)
-    if not math.isfinite(number):
-        raise ParameterError("%s must be finite, got %r" % (name, value))
-    if (number <= low if low_open else number < low) or number > high:
-        raise ParameterError("%s = %g is outside %s%g, %g]" % (name, number, "(" if low_open else "[", low, high))
-    return number
+    return number(value, name, low, high, low_open=low_open)
+
+
+def _tunable(name: str, value: Any, tunable: Optional[str] = None) -> float:
+    """A live-tunable value within the bounds of :data:`quadruped_common.tunables.TUNABLES` (the same
+    bounds as the dynamic_reconfigure definition cfg/AttitudeController.cfg); ``name`` is used in errors,
+    ``tunable`` (default ``name``) picks the bounds."""
+    low, high = TUNABLE_BOUNDS[tunable or name]
+    return number(value, name, low, high)
 
 
 @dataclass(frozen=True)
 class Gains:
     """Scalar gains of the control law eq. (pid): K_p (N m), K_i (N m / s), K_d (N m s), K_aw (1/(N m)).
 
-    All must be finite and non-negative (a negative gain destabilises the loop).
+    All must be finite and within the bounds of the live-tuning definition
+    (:data:`quadruped_common.tunables.TUNABLES`, also cfg/AttitudeController.cfg): non-negative (a
+    negative gain destabilises the loop) and below an upper bound (a gain of 1e300 overflows).
     """
 
     k_p: float
@@ -80,7 +94,7 @@ class Gains:
 
     def __post_init__(self) -> None:
         for name in ("k_p", "k_i", "k_d", "k_aw"):
-            object.__setattr__(self, name, _finite("gain %s" % name, getattr(self, name)))
+            object.__setattr__(self, name, _tunable(name, getattr(self, name)))
 
     def replace(self, **changes: float) -> "Gains":
         """A copy with some gains changed (validated)."""
@@ -125,8 +139,10 @@ class ControllerConfig:
       by that norm so every leg delivers |tau_i| (see :mod:`quadruped_control.allocation`).
     - ``gyroscopic_feedforward``, ``buoyancy_feedforward``: include the feedforward terms
       omega x I omega and -tau_buoyancy of eq. (pid) (paper: both on).
-    - ``integral_limit``: optional bound on the norm of the integral state of eq. (pid) (not in the paper,
-      which relies on K_aw only; None disables it), rad s.
+    - ``integral_limit``: bound on the norm of the integral state z of eq. (pid), rad s (not in the
+      paper, which relies on K_aw only). Always on: it bounds z whatever the gains and inputs.
+    - ``max_angular_rate``: largest |omega| per axis a step accepts, rad/s (a backstop behind the
+      supervisor's sensor-range check; it bounds omega x I omega).
     - ``max_step_factor``: irregular steps are integrated with the elapsed time clipped to
       [0, max_step_factor * dt] (a stalled loop must not inject a huge integral increment).
     - ``rotation_tolerance``: largest |R^T R - I| accepted for measured and desired attitudes.
@@ -143,7 +159,8 @@ class ControllerConfig:
     normalize_force_direction: bool = False
     gyroscopic_feedforward: bool = True
     buoyancy_feedforward: bool = True
-    integral_limit: Optional[float] = None
+    integral_limit: float = DEFAULT_INTEGRAL_LIMIT
+    max_angular_rate: float = DEFAULT_MAX_ANGULAR_RATE
     max_step_factor: float = 5.0
     rotation_tolerance: float = 1e-6
     stroke_scheme: str = "paper"
@@ -153,9 +170,9 @@ class ControllerConfig:
         if not isinstance(self.gains, Gains):
             raise ParameterError("gains must be a Gains instance, got %r" % (self.gains,))
         set_ = object.__setattr__
-        set_(self, "tau_max", _finite("tau_max", self.tau_max))
-        set_(self, "t_rec", _finite("t_rec", self.t_rec, low_open=True, high=3600.0))
-        set_(self, "t_pow_max", _finite("t_pow_max", self.t_pow_max, low_open=True, high=3600.0))
+        set_(self, "tau_max", _tunable("tau_max", self.tau_max))
+        set_(self, "t_rec", _tunable("t_rec", self.t_rec))
+        set_(self, "t_pow_max", _tunable("t_pow_max", self.t_pow_max))
         set_(self, "dt", _finite("dt", self.dt, low_open=True, high=1.0))
         set_(self, "max_step_factor", _finite("max_step_factor", self.max_step_factor, low=1.0, high=1000.0))
         set_(self, "rotation_tolerance", _finite("rotation_tolerance", self.rotation_tolerance,
@@ -174,8 +191,8 @@ class ControllerConfig:
             raise ParameterError("stroke.scheme must be one of %s, got %r" % (", ".join(SCHEMES), self.stroke_scheme))
         if not isinstance(self.coordinated, CoordinatedParams):
             raise ParameterError("coordinated must be a CoordinatedParams instance, got %r" % (self.coordinated,))
-        if self.integral_limit is not None:
-            set_(self, "integral_limit", _finite("integral_limit", self.integral_limit, low_open=True))
+        set_(self, "integral_limit", _finite("integral_limit", self.integral_limit, low_open=True, high=1e3))
+        set_(self, "max_angular_rate", _finite("max_angular_rate", self.max_angular_rate, low_open=True, high=100.0))
 
     @property
     def max_step(self) -> float:
@@ -201,33 +218,20 @@ def _bool(tree: Mapping[str, Any], key: str, default: bool) -> bool:
     return value
 
 
-def controller_config_from_dict(tree: Mapping[str, Any], gain_set: str = DEFAULT_GAIN_SET) -> ControllerConfig:
-    """Build a :class:`ControllerConfig` from a parsed controller.yaml mapping and a gain-set name.
-
-    Top-level keys give the defaults (``tau_max``, ``t_rec``, ``t_pow_max``, ``dt``, ``pairs``, ...);
-    ``gain_sets.<name>`` gives k_p, k_i, k_d, k_aw and may override t_rec, t_pow_max and tau_max.
-    """
-    sets = tree.get("gain_sets")
-    if not isinstance(sets, Mapping) or not sets:
-        raise ParameterError("missing parameter 'gain_sets' (a mapping of named gain sets)")
-    if gain_set not in sets:
-        raise ParameterError("unknown gain set %r; available: %s" % (gain_set, ", ".join(sorted(sets))))
-    chosen = sets[gain_set]
+def _config_for_set(tree: Mapping[str, Any], name: str, chosen: Any) -> ControllerConfig:
+    """The ControllerConfig of gain set ``name`` (its values named by their full key path in errors)."""
+    prefix = "gain_sets.%s" % name
     if not isinstance(chosen, Mapping):
-        raise ParameterError("gain set '%s' must be a mapping" % gain_set)
-    unknown = sorted(set(chosen) - set(GAIN_SET_KEYS))
-    if unknown:
-        raise ParameterError("gain set '%s' has unknown keys %s (allowed: %s)"
-                             % (gain_set, unknown, ", ".join(GAIN_SET_KEYS)))
+        raise ParameterError("parameter '%s' must be a mapping of gains" % prefix)
+    for key in chosen:
+        if key not in GAIN_SET_KEYS:
+            raise ParameterError("unknown parameter '%s.%s' (allowed: %s)" % (prefix, key, ", ".join(GAIN_SET_KEYS)))
     for key in ("k_p", "k_i", "k_d", "k_aw"):
         if key not in chosen:
-            raise ParameterError("missing parameter 'gain_sets.%s.%s'" % (gain_set, key))
-    known_top = {"gain_sets", "tau_max", "t_rec", "t_pow_max", "dt", "pairs", "normalize_force_direction",
-                 "gyroscopic_feedforward", "buoyancy_feedforward", "integral_limit", "max_step_factor",
-                 "rotation_tolerance", "stroke"}
-    unknown = sorted(set(tree) - known_top)
-    if unknown:
-        raise ParameterError("unknown controller parameters %s" % unknown)
+            raise ParameterError("missing parameter '%s.%s'" % (prefix, key))
+    for key in GAIN_SET_KEYS:  # every value of the set against the live-tuning bounds, by its own name
+        if key in chosen:
+            _tunable("%s.%s" % (prefix, key), chosen[key], key)
 
     stroke = tree.get("stroke", {}) or {}
     if not isinstance(stroke, Mapping) or sorted(set(stroke) - {"scheme", "coordinated"}):
@@ -244,9 +248,8 @@ def controller_config_from_dict(tree: Mapping[str, Any], gain_set: str = DEFAULT
         return chosen.get(key, tree.get(key, default))
 
     try:
-        gains = Gains(k_p=chosen["k_p"], k_i=chosen["k_i"], k_d=chosen["k_d"], k_aw=chosen["k_aw"])
         return ControllerConfig(
-            gains=gains,
+            gains=Gains(k_p=chosen["k_p"], k_i=chosen["k_i"], k_d=chosen["k_d"], k_aw=chosen["k_aw"]),
             tau_max=timing("tau_max", 2.0),
             t_rec=timing("t_rec", 1.5),
             t_pow_max=timing("t_pow_max", 0.5),
@@ -255,14 +258,37 @@ def controller_config_from_dict(tree: Mapping[str, Any], gain_set: str = DEFAULT
             normalize_force_direction=_bool(tree, "normalize_force_direction", False),
             gyroscopic_feedforward=_bool(tree, "gyroscopic_feedforward", True),
             buoyancy_feedforward=_bool(tree, "buoyancy_feedforward", True),
-            integral_limit=tree.get("integral_limit"),
+            integral_limit=tree.get("integral_limit", DEFAULT_INTEGRAL_LIMIT),
+            max_angular_rate=tree.get("max_angular_rate", DEFAULT_MAX_ANGULAR_RATE),
             max_step_factor=tree.get("max_step_factor", 5.0),
             rotation_tolerance=tree.get("rotation_tolerance", 1e-6),
             stroke_scheme=stroke.get("scheme", "paper"),
             coordinated=CoordinatedParams(**coordinated_tree),
         )
     except ParameterError as exc:
-        raise ParameterError("gain set '%s': %s" % (gain_set, exc)) from None
+        raise ParameterError("gain set '%s': %s" % (name, exc)) from None
+
+
+def controller_config_from_dict(tree: Mapping[str, Any], gain_set: str = DEFAULT_GAIN_SET) -> ControllerConfig:
+    """Build a :class:`ControllerConfig` from a parsed controller.yaml mapping and a gain-set name.
+
+    Top-level keys give the defaults (``tau_max``, ``t_rec``, ``t_pow_max``, ``dt``, ``pairs``, ...);
+    ``gain_sets.<name>`` gives k_p, k_i, k_d, k_aw and may override t_rec, t_pow_max and tau_max.
+    Every gain set of the file is validated (a bad set is an error even when another one is chosen).
+    """
+    known_top = {"gain_sets", "tau_max", "t_rec", "t_pow_max", "dt", "pairs", "normalize_force_direction",
+                 "gyroscopic_feedforward", "buoyancy_feedforward", "integral_limit", "max_angular_rate",
+                 "max_step_factor", "rotation_tolerance", "stroke"}
+    for key in tree:
+        if key not in known_top:
+            raise ParameterError("unknown controller parameter '%s'" % key)
+    sets = tree.get("gain_sets")
+    if not isinstance(sets, Mapping) or not sets:
+        raise ParameterError("missing parameter 'gain_sets' (a mapping of named gain sets)")
+    if gain_set not in sets:
+        raise ParameterError("unknown gain set %r; available: %s" % (gain_set, ", ".join(sorted(sets))))
+    configs = {name: _config_for_set(tree, name, chosen) for name, chosen in sets.items()}
+    return configs[gain_set]
 
 
 def load_controller_config(path: Optional[str] = None, gain_set: str = DEFAULT_GAIN_SET) -> ControllerConfig:

@@ -4,7 +4,9 @@
   diagnostics the nodes publish and for the latency benchmark.
 * :class:`RateMonitor`: message rate over a sliding time window.
 * :func:`imu_sample_problem`: why an IMU sample must not be used by the controller (NaN, non-unit
-  quaternion, too old), or ``None`` when it is fine. The controller node turns a problem into a hold.
+  quaternion, rate or acceleration beyond the sensor's range (:class:`ImuLimits`), non-finite or old
+  stamp), or ``None`` when it is fine; :func:`time_problem` is the one freshness check (a non-finite
+  stamp or clock is never fresh). The supervisor drops and counts implausible samples and holds.
 * :class:`LowPassDifferentiator`: filtered joint velocities from sampled positions (servo feedback).
 * :class:`HoldEpisodes`: hold episodes and time held (controller diagnostics), not just held steps.
 """
@@ -12,6 +14,7 @@ from __future__ import annotations
 
 import collections
 import math
+from dataclasses import dataclass
 from typing import Deque, Dict, Optional, Sequence
 
 import numpy as np
@@ -78,29 +81,85 @@ class RateMonitor:
         return (len(self._stamps) - 1) / span if span > 0 else 0.0
 
 
-def imu_sample_problem(orientation_xyzw: Sequence[float], angular_velocity: Sequence[float],
-                       sample_time: float, now: float, max_age: float) -> Optional[str]:
-    """Why an IMU sample is unusable for control, or ``None``.
+@dataclass(frozen=True)
+class ImuLimits:
+    """What a working IMU can report; anything outside is a corrupted sample, never a measurement.
 
-    Rejects non-finite values, a quaternion whose norm differs from 1 by more than
-    :data:`QUATERNION_NORM_TOLERANCE`, and samples older than ``max_age`` seconds (or stamped in the
-    future by more than ``max_age``: a clock jump is as untrustworthy as a stale sample).
+    Defaults: the VN-100's ranges (VN-100 datasheet, "IMU specifications": gyro +-2000 deg/s,
+    accelerometer +-16 g) plus 5 %, per axis, and a unit-quaternion tolerance far above float32
+    rounding. The controller node takes the values from config/vn100.yaml (``max_angular_rate``,
+    ``max_acceleration``, ``quaternion_norm_tolerance``), the same ones the driver checks.
     """
-    q = np.asarray(orientation_xyzw, dtype=float)
-    w = np.asarray(angular_velocity, dtype=float)
+
+    max_angular_rate: float = 36.652       # rad/s = 2000 deg/s * 1.05
+    max_acceleration: float = 164.75       # m/s^2 = 16 g * 1.05
+    quaternion_norm_tolerance: float = QUATERNION_NORM_TOLERANCE
+
+    def __post_init__(self) -> None:
+        for name in ("max_angular_rate", "max_acceleration", "quaternion_norm_tolerance"):
+            value = getattr(self, name)
+            if isinstance(value, bool) or not isinstance(value, (int, float)) or not (math.isfinite(value) and value > 0):
+                raise ValueError("ImuLimits.%s must be a positive finite number, got %r" % (name, value))
+
+
+def time_problem(stamp: float, now: float, max_age: float, what: str = "IMU sample") -> Optional[str]:
+    """Why a sample stamped ``stamp`` is not fresh at ``now``, or ``None``: a non-finite stamp or clock
+    (NaN, +-inf, both inf: the age would be NaN and every comparison false), older than ``max_age``, or
+    stamped more than ``max_age`` in the future (a clock jump is as untrustworthy as a stale sample)."""
+    try:
+        stamp, now = float(stamp), float(now)
+    except (TypeError, ValueError, OverflowError):
+        return "%s time is not a number (stamp %r, clock %r)" % (what, stamp, now)
+    if not (math.isfinite(stamp) and math.isfinite(now)):
+        return "%s time is not finite (stamp %r, clock %r)" % (what, stamp, now)
+    age = now - stamp
+    if not math.isfinite(age) or age > max_age:
+        return "%s is stale (%.0f ms old, limit %.0f ms)" % (what, age * 1e3, max_age * 1e3)
+    if age < -max_age:
+        return "%s is stamped %.0f ms in the future" % (what, -age * 1e3)
+    return None
+
+
+def imu_values_problem(orientation_xyzw: Sequence[float], angular_velocity: Sequence[float],
+                       linear_acceleration: Optional[Sequence[float]] = None,
+                       limits: ImuLimits = ImuLimits()) -> Optional[str]:
+    """Why an IMU sample's values cannot come from a working sensor, or ``None``: non-finite values, a
+    quaternion whose norm is off by more than the tolerance, a rate or an acceleration (when given)
+    beyond the sensor's range on any axis."""
+    try:
+        q = np.asarray(orientation_xyzw, dtype=float)
+        w = np.asarray(angular_velocity, dtype=float)
+        a = None if linear_acceleration is None else np.asarray(linear_acceleration, dtype=float)
+    except (TypeError, ValueError, OverflowError):
+        return "IMU sample is not numeric"
     if q.shape != (4,) or not np.all(np.isfinite(q)):
         return "IMU orientation is not finite"
     if w.shape != (3,) or not np.all(np.isfinite(w)):
         return "IMU angular velocity is not finite"
-    norm = float(np.linalg.norm(q))
-    if abs(norm - 1.0) > QUATERNION_NORM_TOLERANCE:
-        return "IMU quaternion is not unit (norm %.4f)" % norm
-    age = now - sample_time
-    if age > max_age:
-        return "IMU sample is stale (%.0f ms old, limit %.0f ms)" % (age * 1e3, max_age * 1e3)
-    if age < -max_age:
-        return "IMU sample is stamped %.0f ms in the future" % (-age * 1e3)
+    if a is not None and (a.shape != (3,) or not np.all(np.isfinite(a))):
+        return "IMU linear acceleration is not finite"
+    norm = math.sqrt(float(np.dot(q, q))) if float(np.max(np.abs(q))) < 1e150 else math.inf
+    if not abs(norm - 1.0) <= limits.quaternion_norm_tolerance:
+        return "IMU quaternion is not unit (norm %.4g)" % norm
+    rate = float(np.max(np.abs(w)))
+    if rate > limits.max_angular_rate:
+        return "IMU angular rate %.4g rad/s beyond the sensor range %.4g rad/s" % (rate, limits.max_angular_rate)
+    if a is not None:
+        accel = float(np.max(np.abs(a)))
+        if accel > limits.max_acceleration:
+            return "IMU acceleration %.4g m/s^2 beyond the sensor range %.4g m/s^2" % (accel, limits.max_acceleration)
     return None
+
+
+def imu_sample_problem(orientation_xyzw: Sequence[float], angular_velocity: Sequence[float],
+                       sample_time: float, now: float, max_age: float,
+                       linear_acceleration: Optional[Sequence[float]] = None,
+                       limits: ImuLimits = ImuLimits()) -> Optional[str]:
+    """Why an IMU sample is unusable for control, or ``None``: :func:`imu_values_problem` (non-finite,
+    non-unit quaternion, beyond the sensor's range) or :func:`time_problem` (non-finite stamp or clock,
+    stale, from the future)."""
+    return (imu_values_problem(orientation_xyzw, angular_velocity, linear_acceleration, limits)
+            or time_problem(sample_time, now, max_age))
 
 
 class LowPassDifferentiator:
@@ -120,6 +179,8 @@ class LowPassDifferentiator:
 
     def update(self, t: float, positions: Sequence[float]) -> np.ndarray:
         position = np.asarray(positions, dtype=float)
+        if not math.isfinite(t):  # a non-finite time cannot date anything: ignore the sample
+            return self.velocity.copy()
         if self._last_time is not None and t > self._last_time:
             dt = t - self._last_time
             alpha = dt / (self.time_constant + dt)

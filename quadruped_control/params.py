@@ -6,17 +6,20 @@ mirroring matrices M_i (eq. M_legs, ee_body), paw drag constant k = 1/2 rho C_D 
 paw buoyancy (eq. buoy_force), body mass and inertia (eq. trans, rot, inertia_box).
 
 Loading never returns a half-valid object: a missing key or an out-of-range value raises
-:class:`ParameterError` naming the key and the reason.
+:class:`ParameterError` naming the file, the key and the reason (the strict loader of
+:mod:`quadruped_common.config`).
 """
 from __future__ import annotations
 
 import math
-import os
 from dataclasses import dataclass, field
-from typing import Any, Callable, Dict, Mapping, Optional, Sequence, Tuple, TypeVar
+from typing import Any, Dict, Mapping, Optional, Tuple
 
 import numpy as np
-import yaml
+
+# The loader and its error live in the shared package (drivers use them too); re-exported here.
+from quadruped_common.config import (ParameterError, check_keys, config_path, load_config, load_yaml,  # noqa: F401
+                                     lookup, number, vector)
 
 LEGS: Tuple[int, ...] = (1, 2, 3, 4)
 """Leg numbers as in the paper."""
@@ -29,84 +32,13 @@ MIRROR_DIAG: Dict[int, Tuple[float, float, float]] = {
     4: (1.0, 1.0, 1.0),
 }
 
-#: Where the package keeps its configuration (the catkin package root's ``config/``).
-CONFIG_DIR = os.path.join(os.path.dirname(os.path.dirname(os.path.abspath(__file__))), "config")
-
-
-T = TypeVar("T")
-
-
-class ParameterError(ValueError):
-    """A configuration value is missing, malformed or physically impossible."""
-
-
-def config_path(name: str) -> str:
-    """Absolute path of a file in the package's ``config/`` folder."""
-    return os.path.join(CONFIG_DIR, name)
-
-
-def load_yaml(path: str) -> Dict[str, Any]:
-    """Read a YAML mapping, with a clear error for a missing file or a non-mapping document."""
-    try:
-        with open(path) as stream:
-            data = yaml.safe_load(stream)
-    except OSError as exc:
-        raise ParameterError("cannot read %s: %s" % (path, exc)) from exc
-    except yaml.YAMLError as exc:
-        raise ParameterError("%s is not valid YAML: %s" % (path, exc)) from exc
-    if not isinstance(data, dict):
-        raise ParameterError("%s must contain a mapping at the top level" % path)
-    return data
-
-
-def lookup(tree: Mapping[str, Any], dotted: str, what: str = "parameter") -> Any:
-    """The value at ``dotted`` ("a.b.c") in a parsed YAML tree; ParameterError "missing <what> ..." if absent."""
-    node: Any = tree
-    for part in dotted.split("."):
-        if not isinstance(node, Mapping) or part not in node:
-            raise ParameterError("missing %s '%s'" % (what, dotted))
-        node = node[part]
-    return node
-
-
-def load_config(path: Optional[str], default_name: str, build: Callable[[Dict[str, Any]], T]) -> T:
-    """Read ``path`` (default: ``default_name`` in the package's config/) and ``build`` the typed object
-    from it; every ParameterError names the file (once)."""
-    path = path or config_path(default_name)
-    try:
-        return build(load_yaml(path))
-    except ParameterError as exc:
-        if path in str(exc):
-            raise
-        raise ParameterError("%s: %s" % (path, exc)) from None
-
-
-
 def _number(tree: Mapping[str, Any], dotted: str, low: float = -math.inf, high: float = math.inf,
             low_open: bool = False) -> float:
-    value = lookup(tree, dotted)
-    if isinstance(value, bool) or not isinstance(value, (int, float)):
-        raise ParameterError("parameter '%s' must be a number, got %r" % (dotted, value))
-    value = float(value)
-    if not math.isfinite(value):
-        raise ParameterError("parameter '%s' must be finite, got %r" % (dotted, value))
-    too_low = value <= low if low_open else value < low
-    if too_low or value > high:
-        bracket = "(" if low_open else "["
-        raise ParameterError("parameter '%s' = %g is outside %s%g, %g]" % (dotted, value, bracket, low, high))
-    return value
+    return number(lookup(tree, dotted), dotted, low, high, low_open=low_open)
 
 
 def _vector(tree: Mapping[str, Any], dotted: str, length: int) -> np.ndarray:
-    value = lookup(tree, dotted)
-    if not isinstance(value, Sequence) or isinstance(value, str) or len(value) != length:
-        raise ParameterError("parameter '%s' must be a list of %d numbers, got %r" % (dotted, length, value))
-    out = []
-    for index, item in enumerate(value):
-        if isinstance(item, bool) or not isinstance(item, (int, float)) or not math.isfinite(float(item)):
-            raise ParameterError("parameter '%s'[%d] must be a finite number, got %r" % (dotted, index, item))
-        out.append(float(item))
-    return np.array(out)
+    return np.array(vector(lookup(tree, dotted), dotted, length))
 
 
 @dataclass(frozen=True)
@@ -209,15 +141,10 @@ def robot_params_from_dict(tree: Mapping[str, Any]) -> RobotParams:
     if not (math.isclose(five_bar.a1, five_bar.a2) and math.isclose(five_bar.a3, five_bar.a4)):
         raise ParameterError("the paper's five-bar kinematics need a1 == a2 and a3 == a4, got %s" % (five_bar,))
 
-    origins_raw = lookup(tree, "leg_origins")
-    if not isinstance(origins_raw, Mapping):
-        raise ParameterError("parameter 'leg_origins' must map leg numbers 1..4 to [x, y, z]")
-    leg_origins = {}
-    for leg in LEGS:
-        key = leg if leg in origins_raw else str(leg)
-        if key not in origins_raw:
-            raise ParameterError("missing parameter 'leg_origins.%d'" % leg)
-        leg_origins[leg] = _vector({"o": origins_raw[key]}, "o", 3)
+    # Keys are the leg numbers as strings ("1".."4"; the strict loader refuses non-string keys).
+    leg_keys = [str(leg) for leg in LEGS]
+    origins_raw = check_keys(lookup(tree, "leg_origins"), "leg_origins", leg_keys, leg_keys)
+    leg_origins = {leg: np.array(vector(origins_raw[str(leg)], "leg_origins.%d" % leg, 3)) for leg in LEGS}
 
     limits = {}
     for name in ("theta1", "theta2", "theta3"):

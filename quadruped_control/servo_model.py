@@ -25,7 +25,7 @@ from typing import Any, Mapping, Optional, Sequence, Union
 
 import numpy as np
 
-from quadruped_control.params import ParameterError, config_path, load_yaml
+from quadruped_common.config import ParameterError, check_keys, load_config, lookup, number
 
 ArrayLike = Union[Sequence[float], Sequence[Sequence[float]], np.ndarray]
 
@@ -196,20 +196,22 @@ class RateLimitedServo(ServoModel):
         return command - sign * new_magnitude
 
 
-def load_servo_params(path: Optional[str] = None, tree: Optional[Mapping[str, Any]] = None) -> ServoParams:
-    """:class:`ServoParams` from the ``simulation.servo`` section of ``config/simulation.yaml``."""
-    data = tree if tree is not None else load_yaml(path or config_path("simulation.yaml"))
-    try:
-        servo = data["simulation"]["servo"]
-        rpm = float(servo["no_load_speed_rpm"])
-        scale = float(servo.get("speed_scale", 1.0))
-        tau = float(servo["time_constant"])
-    except (KeyError, TypeError, ValueError) as exc:
-        raise ParameterError("%s: simulation.servo needs no_load_speed_rpm, time_constant (and optional "
-                             "speed_scale) numbers: %s" % (path or "simulation.yaml", exc)) from None
-    if not (math.isfinite(scale) and 0.0 < scale <= 1.0):
-        raise ParameterError("simulation.servo.speed_scale must be in (0, 1], got %r" % (scale,))
+def servo_params_from_dict(tree: Mapping[str, Any]) -> ServoParams:
+    """:class:`ServoParams` from a parsed simulation.yaml tree (its ``simulation.servo`` section)."""
+    key = "simulation.servo"
+    servo = check_keys(lookup(tree, key), key, ("no_load_speed_rpm", "speed_scale", "time_constant"),
+                       ("no_load_speed_rpm", "time_constant"))
+    rpm = number(servo["no_load_speed_rpm"], key + ".no_load_speed_rpm", 0.0, 1000.0, low_open=True)
+    scale = number(servo.get("speed_scale", 1.0), key + ".speed_scale", 0.0, 1.0, low_open=True)
+    tau = number(servo["time_constant"], key + ".time_constant", 0.0, 10.0)
     return ServoParams(max_speed=rpm * scale * 2.0 * math.pi / 60.0, time_constant=tau)
+
+
+def load_servo_params(path: Optional[str] = None, tree: Optional[Mapping[str, Any]] = None) -> ServoParams:
+    """:class:`ServoParams` from the ``simulation.servo`` section of ``config/simulation.yaml`` (or of ``tree``)."""
+    if tree is not None:
+        return servo_params_from_dict(tree)
+    return load_config(path, "simulation.yaml", servo_params_from_dict)
 
 
 def make_servo_model(name: str, params: Optional[ServoParams] = None) -> ServoModel:

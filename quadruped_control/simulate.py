@@ -42,9 +42,10 @@ from typing import Any, Dict, List, Optional, Sequence, Tuple
 import numpy as np
 
 from quadruped_control.controller_config import load_controller_config
-from quadruped_control.params import ParameterError, config_path, load_robot_params, load_yaml
+from quadruped_control.params import ParameterError, config_path, load_robot_params
 from quadruped_control.servo_model import make_servo_model
-from quadruped_control.simulation import ClosedLoopSimulation, SimulationError, SimulationResult, load_simulation_settings
+from quadruped_control.simulation import (ClosedLoopSimulation, SimulationError, SimulationResult, load_simulation_settings,
+                                          load_simulation_tree)
 from quadruped_control.so3 import rpy_to_rot
 from quadruped_control.studies import StudyError, run_trials
 from quadruped_control.strokes import SCHEMES
@@ -221,7 +222,7 @@ def _strip(summary: Dict[str, Any]) -> Dict[str, Any]:
 
 
 def _study_config() -> Dict[str, Any]:
-    return load_yaml(config_path("simulation.yaml"))
+    return load_simulation_tree()
 
 
 def _paper_sim_specs(args: argparse.Namespace, tree: Dict[str, Any], out: Optional[str],

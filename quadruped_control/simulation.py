@@ -27,7 +27,7 @@ import csv
 import math
 import time
 from dataclasses import dataclass, field
-from typing import Any, Callable, Dict, List, Optional, Sequence, Tuple, Union
+from typing import Any, Callable, Dict, List, Mapping, Optional, Sequence, Tuple, Union
 
 import numpy as np
 
@@ -36,8 +36,9 @@ from quadruped_control.controller_config import ControllerConfig
 from quadruped_control.dynamics import FloatingBaseModel, RigidBodyState
 from quadruped_control.kinematics import UnreachableError, joint_angles
 from quadruped_control.metrics import compute_metrics, moving_average_centered
-from quadruped_control.params import LEGS, ParameterError, RobotParams, config_path, load_yaml
-from quadruped_control.servo_model import IdealServo, ServoModel, ServoParams, load_servo_params, make_servo_model
+from quadruped_common.config import ParameterError, check_keys, integer, load_config, lookup, number, string, vector
+from quadruped_control.params import LEGS, RobotParams
+from quadruped_control.servo_model import IdealServo, ServoModel, ServoParams, make_servo_model, servo_params_from_dict
 from quadruped_control.so3 import exp_so3, is_rotation
 
 ArrayLike = Union[Sequence[float], Sequence[Sequence[float]], np.ndarray]
@@ -83,36 +84,46 @@ class SimulationSettings:
     gyro_noise: float = 0.0
 
 
+def simulation_settings_from_dict(tree: Mapping[str, Any]) -> SimulationSettings:
+    """Validate a parsed simulation.yaml tree: the ``simulation:`` section (typed result) and the study
+    sections ``paper_sim`` and ``robustness`` when present (read by the simulate CLI)."""
+    key = "simulation"
+    section = check_keys(lookup(tree, key), key, ("dt", "servo_model", "servo", "sensor_noise"))
+    noise = check_keys(section.get("sensor_noise", {}), key + ".sensor_noise", ("attitude_deg", "gyro"))
+    if "paper_sim" in tree:
+        paper = check_keys(tree["paper_sim"], "paper_sim", ("setpoints_deg", "initial_rpy_deg", "duration", "gains"))
+        vector(paper.get("setpoints_deg", [0.0]), "paper_sim.setpoints_deg", low=-360.0, high=360.0)
+        vector(paper.get("initial_rpy_deg", [0.0] * 3), "paper_sim.initial_rpy_deg", 3, -360.0, 360.0)
+        number(paper.get("duration", 1.0), "paper_sim.duration", 0.0, 1e5, low_open=True)
+        string(paper.get("gains", "simulation"), "paper_sim.gains")
+    if "robustness" in tree:
+        robust = check_keys(tree["robustness"], "robustness", ("initial_perturbation_deg", "seeds"))
+        number(robust.get("initial_perturbation_deg", 0.0), "robustness.initial_perturbation_deg", 0.0, 90.0)
+        seeds = robust.get("seeds", [1])
+        if not isinstance(seeds, list) or not seeds:
+            raise ParameterError("parameter 'robustness.seeds' must be a non-empty list of integers, got %r" % (seeds,))
+        for index, seed in enumerate(seeds):
+            integer(seed, "robustness.seeds[%d]" % index, 0, 2 ** 32 - 1)
+    return SimulationSettings(
+        dt=number(section.get("dt", 0.01), key + ".dt", 0.0, 1.0, low_open=True),
+        servo_model=string(section.get("servo_model", "ideal"), key + ".servo_model", ("ideal", "rate-limited")),
+        servo=servo_params_from_dict(tree),
+        attitude_noise=math.radians(number(noise.get("attitude_deg", 0.0), key + ".sensor_noise.attitude_deg", 0.0, 90.0)),
+        gyro_noise=number(noise.get("gyro", 0.0), key + ".sensor_noise.gyro", 0.0, 10.0),
+    )
+
+
 def load_simulation_settings(path: Optional[str] = None) -> SimulationSettings:
     """Load and validate the ``simulation:`` section (default file: the package's config/simulation.yaml)."""
-    path = path or config_path("simulation.yaml")
-    tree = load_yaml(path)
-    section = tree.get("simulation")
-    if not isinstance(section, dict):
-        raise ParameterError("%s: missing 'simulation' section" % path)
+    return load_config(path, "simulation.yaml", simulation_settings_from_dict)
 
-    def number(value: Any, name: str, low: float, low_open: bool = False) -> float:
-        if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(float(value)):
-            raise ParameterError("%s: simulation.%s must be a finite number, got %r" % (path, name, value))
-        value = float(value)
-        if value < low or (low_open and value == low):
-            raise ParameterError("%s: simulation.%s = %g must be %s %g" % (path, name, value,
-                                                                           ">" if low_open else ">=", low))
-        return value
 
-    noise = section.get("sensor_noise") or {}
-    if not isinstance(noise, dict):
-        raise ParameterError("%s: simulation.sensor_noise must be a mapping" % path)
-    model = section.get("servo_model", "ideal")
-    if model not in ("ideal", "rate-limited"):
-        raise ParameterError("%s: simulation.servo_model must be 'ideal' or 'rate-limited', got %r" % (path, model))
-    return SimulationSettings(
-        dt=number(section.get("dt", 0.01), "dt", 0.0, low_open=True),
-        servo_model=model,
-        servo=load_servo_params(path, tree),
-        attitude_noise=math.radians(number(noise.get("attitude_deg", 0.0), "sensor_noise.attitude_deg", 0.0)),
-        gyro_noise=number(noise.get("gyro", 0.0), "sensor_noise.gyro", 0.0),
-    )
+def load_simulation_tree(path: Optional[str] = None) -> Dict[str, Any]:
+    """The whole simulation.yaml (study sections included), validated by :func:`simulation_settings_from_dict`."""
+    def build(tree: Dict[str, Any]) -> Dict[str, Any]:
+        simulation_settings_from_dict(tree)
+        return tree
+    return load_config(path, "simulation.yaml", build)
 
 
 def nominal_joint_angles(robot: RobotParams) -> np.ndarray:

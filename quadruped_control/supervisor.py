@@ -14,19 +14,29 @@ with pytest:
   :func:`~quadruped_control.monitoring.imu_sample_problem`) or a controller error: the controller's
   hold (no stroking, integral frozen, feet at the nominal pose) and the reason in the output.
 
+Input plausibility. Every IMU sample is checked when it arrives (:meth:`ControlSupervisor.set_imu`)
+against what a working sensor can report (:class:`~quadruped_control.monitoring.ImuLimits`: finite,
+unit quaternion, rate and acceleration within the sensor's range): an implausible sample is dropped
+(never stored, so it never reaches the controller), counted per reason and reported; the previous
+sample stays in use while it is fresh, and ``max_implausible_run`` implausible samples in a row make
+the controller hold until a plausible one arrives. Time is checked at every tick
+(:func:`~quadruped_control.monitoring.time_problem`): a non-finite stamp or clock is never fresh.
+Joint feedback outside the servo ranges (``config/robot.yaml`` joint limits widened by
+``joint_margin``) or older than ``max_joint_age`` is unusable (NaN) and counted.
+
 The torque estimated from measured joint motion (eq. torque_leg summed over the legs) is computed
-from the latest joint feedback for telemetry.
+from the latest usable joint feedback for telemetry.
 """
 from __future__ import annotations
 
 import math
 from dataclasses import dataclass
-from typing import Callable, Optional, Sequence
+from typing import Callable, Dict, Optional, Sequence
 
 import numpy as np
 
 from quadruped_control.controller import AttitudeController, ControllerOutput, estimate_body_torque
-from quadruped_control.monitoring import imu_sample_problem
+from quadruped_control.monitoring import ImuLimits, imu_values_problem, time_problem
 from quadruped_control.so3 import quat_to_rot
 
 #: Maps 12 joint angles (rad, JOINT_NAMES order) to 12 pulse widths (us), clamped to the limits.
@@ -62,22 +72,45 @@ class SupervisorOutput:
 
 
 class ControlSupervisor:
-    """Decides per tick between stroking, holding and staying passive; see the module docstring."""
+    """Decides per tick between stroking, holding and staying passive; see the module docstring.
+
+    ``imu_limits``: the sensor's plausible ranges; ``max_implausible_run``: this many implausible IMU
+    samples in a row hold the controller; ``joint_margin`` (rad): how far beyond the servo range a joint
+    reading is still plausible; ``max_joint_age`` (s): older joint feedback is not used.
+    """
 
     def __init__(self, controller: AttitudeController, pulse_map: PulseMap, max_imu_age: float = 0.05,
-                 armed: bool = False) -> None:
+                 armed: bool = False, imu_limits: Optional[ImuLimits] = None, max_implausible_run: int = 3,
+                 joint_margin: float = math.radians(15.0), max_joint_age: float = 0.1) -> None:
         if not (math.isfinite(max_imu_age) and max_imu_age > 0):
             raise ValueError("max_imu_age must be a positive number of seconds, got %r" % (max_imu_age,))
+        if not (isinstance(max_implausible_run, int) and max_implausible_run >= 1):
+            raise ValueError("max_implausible_run must be a positive integer, got %r" % (max_implausible_run,))
+        if not (math.isfinite(joint_margin) and joint_margin >= 0 and math.isfinite(max_joint_age) and max_joint_age > 0):
+            raise ValueError("joint_margin must be >= 0 and max_joint_age > 0, got %r, %r" % (joint_margin, max_joint_age))
         self.controller = controller
         self.pulse_map = pulse_map
         self.max_imu_age = float(max_imu_age)
+        self.imu_limits = imu_limits or ImuLimits()
+        self.max_implausible_run = max_implausible_run
+        self.max_joint_age = float(max_joint_age)
+        limits = controller.robot.joint_limits.as_array()  # rows theta1..3, columns low, high
+        self._joint_low = np.tile(limits[:, 0] - joint_margin, 4)
+        self._joint_high = np.tile(limits[:, 1] + joint_margin, 4)
         self._armed = bool(armed)
         self._imu: Optional[ImuInput] = None
         self._joint_positions: Optional[np.ndarray] = None
         self._joint_velocities: Optional[np.ndarray] = None
+        self._joint_stamp: Optional[float] = None
         self.ticks = 0
         self.holds = 0
         self.controller_errors = 0
+        self.imu_received = 0
+        self.imu_dropped = 0
+        self.imu_drop_reasons: Dict[str, int] = {}
+        self.last_imu_drop = ""
+        self.implausible_run = 0
+        self.joint_readings_implausible = 0
 
     @property
     def armed(self) -> bool:
@@ -95,25 +128,57 @@ class ControlSupervisor:
         return "already %s" % ("armed" if armed else "disarmed")
 
     def set_imu(self, orientation_xyzw: Sequence[float], angular_velocity: Sequence[float],
-                stamp: float) -> None:
-        """Store the latest IMU sample (checked at the next tick, not here: a stale sample is a
-        property of time, not of the message)."""
-        self._imu = ImuInput(np.array(orientation_xyzw, dtype=float),
-                             np.array(angular_velocity, dtype=float), float(stamp))
+                stamp: float, linear_acceleration: Optional[Sequence[float]] = None) -> Optional[str]:
+        """Check an IMU sample's values and store it, or drop and count it; returns the reason for a drop.
 
-    def set_joint_feedback(self, positions: Sequence[float], velocities: Sequence[float]) -> None:
-        """Store measured joint positions and velocities (12, JOINT_NAMES order; NaN where unknown)."""
+        Freshness is checked at each tick instead (a stale sample is a property of time, not of the
+        message).
+        """
+        self.imu_received += 1
+        problem = imu_values_problem(orientation_xyzw, angular_velocity, linear_acceleration, self.imu_limits)
+        if problem is not None:
+            self.imu_dropped += 1
+            self.implausible_run += 1
+            kind = problem.split(" (")[0].split(" %")[0]
+            kind = " ".join(word for word in kind.split() if not any(ch.isdigit() for ch in word))
+            self.imu_drop_reasons[kind] = self.imu_drop_reasons.get(kind, 0) + 1
+            self.last_imu_drop = problem
+            return problem
+        self.implausible_run = 0
+        try:
+            stamp_value = float(stamp)
+        except (TypeError, ValueError, OverflowError):
+            stamp_value = math.nan
+        self._imu = ImuInput(np.array(orientation_xyzw, dtype=float),
+                             np.array(angular_velocity, dtype=float), stamp_value)
+        return None
+
+    def set_joint_feedback(self, positions: Sequence[float], velocities: Sequence[float],
+                           stamp: Optional[float] = None) -> None:
+        """Store measured joint positions and velocities (12, JOINT_NAMES order; NaN where unknown).
+
+        A position outside its servo range (plus ``joint_margin``) cannot be a real reading: that joint
+        is marked unusable (NaN) and counted. ``stamp``: time of the reading (the clock of ``tick``'s
+        ``now``); without it the feedback is taken as fresh.
+        """
         p = np.array(positions, dtype=float)
         v = np.array(velocities, dtype=float)
         if p.shape != (12,) or v.shape != (12,):
             raise ValueError("joint feedback needs 12 positions and 12 velocities")
+        implausible = np.isfinite(p) & ((p < self._joint_low) | (p > self._joint_high))
+        if np.any(implausible):
+            self.joint_readings_implausible += int(np.count_nonzero(implausible))
+            p[implausible] = np.nan
+            v[implausible] = np.nan
         self._joint_positions, self._joint_velocities = p, v
+        self._joint_stamp = None if stamp is None else float(stamp)
 
     def imu_problem(self, now: float) -> Optional[str]:
+        if self.implausible_run >= self.max_implausible_run:
+            return "%d implausible IMU samples in a row (last: %s)" % (self.implausible_run, self.last_imu_drop)
         if self._imu is None:
             return "no IMU sample received yet"
-        return imu_sample_problem(self._imu.orientation_xyzw, self._imu.angular_velocity,
-                                  self._imu.stamp, now, self.max_imu_age)
+        return time_problem(self._imu.stamp, now, self.max_imu_age)
 
     def tick(self, t: float, now: float) -> SupervisorOutput:
         """One control tick at controller time ``t``; ``now`` is the clock the IMU stamps use."""
@@ -144,13 +209,15 @@ class ControlSupervisor:
             pulses = np.asarray(self.pulse_map(targets), dtype=float)
         return SupervisorOutput(output=output, armed=self._armed, problem=problem or "",
                                 pulse_widths_us=pulses, joint_targets=targets,
-                                torque_estimated=self._estimated_torque(R, omega),
+                                torque_estimated=self._estimated_torque(R, omega, now),
                                 imu_stamp=None if imu is None else imu.stamp)
 
-    def _estimated_torque(self, R: Optional[np.ndarray], omega: Optional[np.ndarray]) -> np.ndarray:
-        """eq. (torque_leg) from measured joint motion; NaN when an input is missing or invalid."""
+    def _estimated_torque(self, R: Optional[np.ndarray], omega: Optional[np.ndarray], now: float) -> np.ndarray:
+        """eq. (torque_leg) from measured joint motion; NaN when an input is missing, stale or invalid."""
         nan = np.full(3, np.nan)
         if R is None or omega is None or self._joint_positions is None or self._joint_velocities is None:
+            return nan
+        if self._joint_stamp is not None and time_problem(self._joint_stamp, now, self.max_joint_age, "joint feedback"):
             return nan
         q = self._joint_positions.reshape(4, 3)
         q_dot = self._joint_velocities.reshape(4, 3)

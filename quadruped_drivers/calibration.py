@@ -23,7 +23,8 @@ from typing import Any, Mapping, Optional, Sequence, Tuple
 
 import numpy as np
 
-from quadruped_control.params import JOINT_NAMES, ParameterError, load_config
+from quadruped_common.config import ParameterError, boolean, check_keys, integer, load_config, number
+from quadruped_control.params import JOINT_NAMES
 
 
 @dataclass(frozen=True)
@@ -95,56 +96,47 @@ class ServoCalibration:
         return ServoCalibration(joints)
 
 
-def _number(tree: Mapping[str, Any], key: str, dotted: str) -> float:
-    if key not in tree:
-        raise ParameterError("missing calibration parameter '%s.%s'" % (dotted, key))
-    value = tree[key]
-    if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(float(value)):
-        raise ParameterError("calibration parameter '%s.%s' must be a finite number, got %r" % (dotted, key, value))
-    return float(value)
+#: Keys of one joint's entry: (low, high) bounds of the numbers; the others are checked below.
+_JOINT_NUMBERS = {
+    "neutral_angle_deg": (-360.0, 360.0),   # a joint angle
+    "neutral_us": (500.0, 2500.0),          # inside the servos' pulse range
+    "us_per_deg": (1.0, 50.0),              # 180 deg over 2000 us is 11.1
+    "feedback_deg_per_v": (-1e4, 1e4),      # |slope| of a 3.3 V potentiometer over ~180 deg is ~75
+    "feedback_offset_deg": (-1e5, 1e5),
+    "feedback_rms_deg": (0.0, 90.0),        # an RMS is non-negative
+}
+_JOINT_KEYS = tuple(_JOINT_NUMBERS) + ("direction", "feedback_fitted")
+_JOINT_REQUIRED = ("neutral_angle_deg", "neutral_us", "direction", "us_per_deg", "feedback_deg_per_v",
+                   "feedback_offset_deg")
 
 
 def servo_calibration_from_dict(tree: Mapping[str, Any]) -> ServoCalibration:
     """Validate a parsed ``servo_calibration.yaml`` tree (degrees on disk, radians inside)."""
-    joints_tree = tree.get("joints")
-    if not isinstance(joints_tree, Mapping):
-        raise ParameterError("calibration needs a 'joints' mapping")
-    unknown = sorted(set(joints_tree) - set(JOINT_NAMES))
-    if unknown:
-        raise ParameterError("calibration has unknown joints %s" % unknown)
+    check_keys(tree, "", ("joints",), ("joints",), what="calibration parameter")
+    joints_tree = check_keys(tree["joints"], "joints", JOINT_NAMES, JOINT_NAMES, what="calibration parameter")
     joints = []
     for name in JOINT_NAMES:
         dotted = "joints.%s" % name
-        entry = joints_tree.get(name)
-        if not isinstance(entry, Mapping):
-            raise ParameterError("missing calibration parameter '%s'" % dotted)
-        direction = entry.get("direction")
-        if direction not in (1, -1) or isinstance(direction, bool):
-            raise ParameterError("calibration parameter '%s.direction' must be 1 or -1, got %r" % (dotted, direction))
-        us_per_deg = _number(entry, "us_per_deg", dotted)
-        if not 1.0 <= us_per_deg <= 50.0:
-            raise ParameterError("calibration parameter '%s.us_per_deg' = %g is outside [1, 50]" % (dotted, us_per_deg))
-        neutral_us = _number(entry, "neutral_us", dotted)
-        if not 500.0 <= neutral_us <= 2500.0:
-            raise ParameterError("calibration parameter '%s.neutral_us' = %g is outside [500, 2500]"
-                                 % (dotted, neutral_us))
-        slope = _number(entry, "feedback_deg_per_v", dotted)
-        if slope == 0.0:
+        entry = check_keys(joints_tree[name], dotted, _JOINT_KEYS, _JOINT_REQUIRED, what="calibration parameter")
+        values = {key: number(entry[key], "%s.%s" % (dotted, key), low, high, what="calibration parameter")
+                  for key, (low, high) in _JOINT_NUMBERS.items() if key in entry}
+        direction = integer(entry["direction"], dotted + ".direction", -1, 1, what="calibration parameter")
+        if direction == 0:
+            raise ParameterError("calibration parameter '%s.direction' must be 1 or -1, got 0" % dotted)
+        if values["feedback_deg_per_v"] == 0.0:
             raise ParameterError("calibration parameter '%s.feedback_deg_per_v' must not be 0" % dotted)
-        fitted = entry.get("feedback_fitted", False)
-        if not isinstance(fitted, bool):
-            raise ParameterError("calibration parameter '%s.feedback_fitted' must be true or false" % dotted)
-        rms = entry.get("feedback_rms_deg")
+        fitted = boolean(entry.get("feedback_fitted", False), dotted + ".feedback_fitted", what="calibration parameter")
+        rms = values.get("feedback_rms_deg")
         joints.append(JointCalibration(
             name=name,
-            neutral_angle_rad=math.radians(_number(entry, "neutral_angle_deg", dotted)),
-            neutral_us=neutral_us,
-            direction=int(direction),
-            us_per_rad=us_per_deg * 180.0 / math.pi,
-            feedback_slope=math.radians(slope),
-            feedback_offset=math.radians(_number(entry, "feedback_offset_deg", dotted)),
+            neutral_angle_rad=math.radians(values["neutral_angle_deg"]),
+            neutral_us=values["neutral_us"],
+            direction=direction,
+            us_per_rad=values["us_per_deg"] * 180.0 / math.pi,
+            feedback_slope=math.radians(values["feedback_deg_per_v"]),
+            feedback_offset=math.radians(values["feedback_offset_deg"]),
             feedback_fitted=fitted,
-            feedback_rms_rad=None if rms is None else math.radians(_number(entry, "feedback_rms_deg", dotted)),
+            feedback_rms_rad=None if rms is None else math.radians(rms),
         ))
     return ServoCalibration(joints)
 

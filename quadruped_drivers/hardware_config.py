@@ -16,7 +16,8 @@ from typing import Any, Dict, Mapping, Optional, Tuple
 
 import numpy as np
 
-from quadruped_control.params import JOINT_NAMES, ParameterError, load_config, lookup
+from quadruped_common.config import ParameterError, boolean, integer, load_config, lookup, number
+from quadruped_control.params import JOINT_NAMES
 
 #: Failsafe actions of a PWM channel when the command watchdog trips.
 FAILSAFE_ACTIONS: Tuple[str, ...] = ("hold", "neutral", "off")
@@ -125,28 +126,15 @@ def _get(tree: Mapping[str, Any], dotted: str) -> Any:
 
 
 def _int(tree: Mapping[str, Any], dotted: str, low: int, high: int) -> int:
-    value = _get(tree, dotted)
-    if isinstance(value, bool) or not isinstance(value, int):
-        raise ParameterError("hardware parameter '%s' must be an integer, got %r" % (dotted, value))
-    if not low <= value <= high:
-        raise ParameterError("hardware parameter '%s' = %d is outside [%d, %d]" % (dotted, value, low, high))
-    return value
+    return integer(_get(tree, dotted), dotted, low, high, what="hardware parameter")
 
 
 def _float(tree: Mapping[str, Any], dotted: str, low: float, high: float) -> float:
-    value = _get(tree, dotted)
-    if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(float(value)):
-        raise ParameterError("hardware parameter '%s' must be a finite number, got %r" % (dotted, value))
-    if not low <= float(value) <= high:
-        raise ParameterError("hardware parameter '%s' = %g is outside [%g, %g]" % (dotted, value, low, high))
-    return float(value)
+    return number(_get(tree, dotted), dotted, low, high, what="hardware parameter")
 
 
 def _bool(tree: Mapping[str, Any], dotted: str) -> bool:
-    value = _get(tree, dotted)
-    if not isinstance(value, bool):
-        raise ParameterError("hardware parameter '%s' must be true or false, got %r" % (dotted, value))
-    return value
+    return boolean(_get(tree, dotted), dotted, what="hardware parameter")
 
 
 def hardware_config_from_dict(tree: Mapping[str, Any]) -> HardwareConfig:

@@ -31,37 +31,39 @@ from diagnostic_updater import DiagnosticStatusWrapper, Updater
 from sensor_msgs.msg import Imu
 
 from quadruped_control.monitoring import RateMonitor
-from quadruped_control.params import ParameterError, config_path, load_yaml
+from quadruped_common.config import ParameterError
 from quadruped_drivers.vn100.conversions import SensorLimits
 from quadruped_drivers.vn100.driver import Vn100Driver, serial_port_factory
 from quadruped_drivers.vn100.sample_gate import DROP_REASONS, TIME_ANOMALY, SampleGate
+from quadruped_drivers.vn100.settings import VN100_KEYS, load_vn100_settings
 
 
-def _diagonal(values: Sequence[float], name: str) -> List[float]:
+def _diagonal(values: Sequence[float]) -> List[float]:
+    """A checked covariance (3 variances or 9 values, see vn100/settings.py) as the message's 9 values."""
     values = [float(v) for v in values]
     if len(values) == 9:
         return values
-    if len(values) != 3 or any(v < 0 for v in values):
-        raise ParameterError("%s must be 3 non-negative variances (diagonal) or 9 values" % name)
     return [values[0], 0.0, 0.0, 0.0, values[1], 0.0, 0.0, 0.0, values[2]]
 
 
 class Vn100Node:
     def __init__(self) -> None:
-        defaults = load_yaml(rospy.get_param("~config_yaml", "") or config_path("vn100.yaml"))
+        # Every value checked against the vn100.yaml schema (quadruped_drivers/vn100/settings.py); a
+        # ~param overrides the file's value of the same name (~rate overrides rate_hz).
+        overrides = {name: rospy.get_param("~" + name) for name in VN100_KEYS if rospy.has_param("~" + name)}
+        if rospy.has_param("~rate"):
+            overrides["rate_hz"] = rospy.get_param("~rate")
+        settings = load_vn100_settings(rospy.get_param("~config_yaml", "") or None, overrides)
 
         def param(name: str):
-            value = rospy.get_param("~" + name, defaults.get(name))
-            if value is None:
-                raise ParameterError("vn100 parameter %r missing (not in ~%s nor config_yaml)" % (name, name))
-            return value
+            return settings[name]
 
         self.port = param("port")
         self.baud = int(param("baud"))
-        self.rate_hz = float(param("rate_hz") if not rospy.has_param("~rate") else rospy.get_param("~rate"))
+        self.rate_hz = float(param("rate_hz"))
         self.frame_id = param("frame_id")
         self.covariances = {
-            key: _diagonal(param(key + "_covariance_diagonal"), key + "_covariance_diagonal")
+            key: _diagonal(param(key + "_covariance_diagonal"))
             for key in ("orientation", "angular_velocity", "linear_acceleration")}
         self.driver = Vn100Driver(serial_port_factory(self.port, self.baud, float(param("read_timeout"))),
                                   rate_hz=self.rate_hz,

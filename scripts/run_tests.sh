@@ -12,7 +12,7 @@ rm -rf "$RESULTS"; mkdir -p "$RESULTS"
 failures=0
 
 echo "== Python 3.8 compatibility (vermin) =="
-PY_SOURCES=(quadruped_control quadruped_drivers nodes cfg/AttitudeController.cfg setup.py)
+PY_SOURCES=(quadruped_common quadruped_control quadruped_drivers nodes cfg/AttitudeController.cfg setup.py)
 if ! vermin -q -t=3.8- --no-tips --violations --eval-annotations \
      --exclude-regex '\.venv|build/' "${PY_SOURCES[@]}"; then
   echo "vermin: sources need a Python newer than 3.8"; failures=$((failures + 1))

@@ -85,7 +85,7 @@ def test_hardware_config_values():
     (("adc", "full_scale_v"), 3.3, "not an ADS1115 range"),
     (("adc", "data_rate_sps"), 100, "not an ADS1115 rate"),
     (("adc", "failed_after_s"), 0.01, "must exceed"),
-    (("pca9685", "frequency_hz"), "fifty", "must be a finite number"),
+    (("pca9685", "frequency_hz"), "fifty", "must be a number"),
     (("i2c", "bus"), -1, "outside"),
 ])
 def test_hardware_config_errors(path, value, message):

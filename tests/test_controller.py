@@ -100,15 +100,21 @@ def test_saturated_step_and_anti_windup_term_by_hand():
     R = rot_x(angle)
     e = np.array([math.sin(angle), 0.0, 0.0])
     s1 = ctl.step(0.0, R, np.zeros(3)).state
-    tau1 = -5.0 * e - 0.15 * DT * e
+    tau1 = s1.tau_cmd
     assert s1.saturated
-    np.testing.assert_allclose(s1.tau_cmd, tau1, rtol=1e-14)
     np.testing.assert_allclose(s1.tau_sat, 2.0 * tau1 / np.linalg.norm(tau1), rtol=1e-14)
     assert np.linalg.norm(s1.tau_sat) == pytest.approx(2.0)
-    delta = s1.tau_cmd - s1.tau_sat
+    # Backward Euler (controller docstring): z_1 = dt (e + K_aw Delta_sat,1), with the excess of the
+    # torque commanded by this very step, tau_cmd,1 = -K_p e - K_i z_1.
+    delta1 = s1.tau_cmd - s1.tau_sat
+    np.testing.assert_allclose(s1.integral, DT * (e + 0.25 * delta1), rtol=1e-13)
+    np.testing.assert_allclose(s1.tau_cmd, -5.0 * e - 0.15 * s1.integral, rtol=1e-14)
+    # Closed form: |Delta_sat| = (|u| - tau_max) / (1 + h K_aw K_i), u the command without the excess term.
+    u = -5.0 * e - 0.15 * DT * e
+    assert np.linalg.norm(delta1) == pytest.approx((np.linalg.norm(u) - 2.0) / (1.0 + DT * 0.25 * 0.15), rel=1e-13)
     s2 = ctl.step(DT, R, np.zeros(3)).state
-    # z_2 = z_1 + dt (e + K_aw Delta_sat of step 1), eq. (pid)
-    np.testing.assert_allclose(s2.integral, s1.integral + DT * (e + 0.25 * delta), rtol=1e-14)
+    # z_2 = z_1 + dt (e + K_aw Delta_sat of step 2), eq. (pid)
+    np.testing.assert_allclose(s2.integral, s1.integral + DT * (e + 0.25 * (s2.tau_cmd - s2.tau_sat)), rtol=1e-13)
 
 
 def test_anti_windup_stops_the_integral_growing_under_saturation():
@@ -119,17 +125,20 @@ def test_anti_windup_stops_the_integral_growing_under_saturation():
     angle = math.radians(90.0)
     R = rot_x(angle)
     ctl = AttitudeController(PARAMS, plain_config(gains=gains))
-    windup = AttitudeController(PARAMS, plain_config(gains=gains.replace(k_aw=0.0)))
+    windup = AttitudeController(PARAMS, plain_config(gains=gains.replace(k_aw=0.0), integral_limit=1000.0))
+    limited = AttitudeController(PARAMS, plain_config(gains=gains.replace(k_aw=0.0)))
     history = []
     for k in range(3000):
         s = ctl.step(k * DT, R, np.zeros(3)).state
         history.append(s.integral[0])
         w = windup.step(k * DT, R, np.zeros(3)).state
+        bounded = limited.step(k * DT, R, np.zeros(3)).state
         assert s.saturated
     z_star = (2.0 + 1.0 / 0.5 - 5.0 * 1.0) / 1.0      # |e| = sin(90 deg) = 1
     assert history[-1] == pytest.approx(z_star, abs=1e-3)
     assert abs(history[-1] - history[-500]) < 1e-3       # stopped growing
     assert w.integral[0] == pytest.approx(30.0, rel=1e-9)  # 3000 steps of dt * 1
+    assert bounded.integral[0] == pytest.approx(10.0)      # the default integral_limit
 
 
 def test_paper_gains_integral_bounded_under_saturation():
@@ -153,12 +162,16 @@ def test_gyroscopic_and_buoyancy_feedforward():
     omega = np.array([0.5, -0.7, 0.3])
     base = controller().step(0.0, R, omega).state
     gyro = AttitudeController(PARAMS, plain_config(gyroscopic_feedforward=True)).step(0.0, R, omega).state
-    np.testing.assert_allclose(gyro.tau_cmd - base.tau_cmd, np.cross(omega, PARAMS.inertia @ omega), atol=1e-15)
+    # (both saturate: compare without the integral term, whose anti-windup excess differs)
+    def no_integral(state):
+        return state.tau_cmd + GAINS.k_i * state.integral
+    np.testing.assert_allclose(no_integral(gyro) - no_integral(base), np.cross(omega, PARAMS.inertia @ omega),
+                               atol=1e-15)
     buoy = AttitudeController(PARAMS, plain_config(buoyancy_feedforward=True)).step(0.0, R, omega).state
     # Buoyancy torque of eq. (buoy_torque) at the foot positions commanded before the step (nominal).
     _, tau_b = hd.paw_buoyancy(NOMINAL_FEET, R, PARAMS)
     assert np.linalg.norm(tau_b) > 1e-4
-    np.testing.assert_allclose(buoy.tau_cmd - base.tau_cmd, -tau_b, atol=1e-15)
+    np.testing.assert_allclose(no_integral(buoy) - no_integral(base), -tau_b, atol=1e-15)
     np.testing.assert_allclose(buoy.tau_feedforward, -tau_b, atol=1e-15)
     inertia = PARAMS.inertia
     np.testing.assert_allclose(control_torque(base.e_R, omega, base.integral, GAINS, inertia, tau_b),
@@ -325,7 +338,7 @@ def test_hold_freezes_integral_retracts_feet_and_restarts_cleanly():
     s = ctl.step(3.0, R, np.zeros(3)).state
     assert not s.holding and s.hold_reason == ""
     assert s.pair_phase == ("recovery", "power")
-    np.testing.assert_allclose(s.integral, frozen + DT * (s.e_R), rtol=1e-12)
+    np.testing.assert_allclose(s.integral, frozen + DT * (s.e_R + 0.25 * (s.tau_cmd - s.tau_sat)), rtol=1e-12)
 
 
 def test_hold_never_raises_and_works_before_any_step():

@@ -67,7 +67,7 @@ def test_joint_names_and_indices():
     (lambda t: t["body"].__setitem__("inertia_diag", [0.1, 0.1]), "list of 3"),
     (lambda t: t["fluid"].__setitem__("density", float("nan")), "finite"),
     (lambda t: t["five_bar"].__setitem__("a2", 0.09), "a1 == a2"),
-    (lambda t: t["leg_origins"].pop(3), "leg_origins.3"),
+    (lambda t: t["leg_origins"].pop("3"), "leg_origins.3"),
     (lambda t: t["joint_limits_deg"].__setitem__("theta3", [90.0, 0.0]), "low < high"),
     (lambda t: t["hip"].__setitem__("l_z", 0.0), "hip.l_z"),
 ])

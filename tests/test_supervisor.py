@@ -70,13 +70,18 @@ def test_invalid_imu_holds_the_safe_pose(supervisor, quaternion, reason):
     supervisor.arm(True)
     run(supervisor, 1.0)
     outputs = run(supervisor, 2.5, quaternion=quaternion, start=1.0)
-    assert all(reason in o.problem for o in outputs)
-    assert all(o.output.state.holding for o in outputs)
+    # Each bad sample is dropped; the last good one is still fresh for the first two ticks, the third
+    # implausible sample in a row holds the controller.
+    assert [o.problem for o in outputs[:2]] == ["", ""]
+    assert all(reason in o.problem and "3 implausible IMU samples in a row" in outputs[2].problem
+               for o in outputs[2:])
+    assert all(o.output.state.holding for o in outputs[2:])
+    assert supervisor.imu_dropped == len(outputs) and supervisor.implausible_run == len(outputs)
     assert all(o.pulse_widths_us is not None for o in outputs)  # the safe pose is still commanded
     # The feet retrace to the nominal pose over t_rec (1.5 s), then stay: no stroking.
     assert stroke_amplitude(outputs[160:]) < 1e-9
     integral = [o.output.state.integral for o in outputs]
-    np.testing.assert_allclose(integral[0], integral[-1])  # frozen while holding
+    np.testing.assert_allclose(integral[2], integral[-1])  # frozen while holding
 
 
 def test_stale_imu_holds_and_resumes(supervisor):

@@ -158,7 +158,7 @@ def test_robot_yaml_argument_changes_the_drawing(tmp_path, params):
     with open(config_path("robot.yaml")) as stream:
         tree = yaml.safe_load(stream)
     tree["five_bar"]["a3"] = tree["five_bar"]["a4"] = 0.125
-    tree["leg_origins"][3] = [0.25, 0.15, -0.03]
+    tree["leg_origins"]["3"] = [0.25, 0.15, -0.03]
     changed = tmp_path / "robot.yaml"
     changed.write_text(yaml.safe_dump(tree))
     urdf = run_xacro("robot_yaml:=%s" % changed)
