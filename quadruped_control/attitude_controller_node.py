@@ -45,7 +45,7 @@ from sensor_msgs.msg import Imu, JointState
 from std_srvs.srv import SetBool, SetBoolResponse
 
 from quadruped_control.controller import AttitudeController
-from quadruped_control.controller_config import Gains, load_controller_config
+from quadruped_control.controller_config import TUNABLE_BOUNDS, apply_tunables, load_controller_config
 from quadruped_control.monitoring import HoldEpisodes, ImuLimits, RateMonitor, WindowStatistics
 from quadruped_control.params import JOINT_NAMES, ParameterError, load_robot_params
 from quadruped_control.so3 import quat_to_rot, rot_to_quat, rpy_to_rot
@@ -244,30 +244,26 @@ class AttitudeControllerNode:
         is refused as a whole, logged and reverted; this callback never raises."""
         current = self.supervisor.controller.config
         try:
-            # Validate the whole update first, so that it is applied completely or not at all.
-            gains = Gains(k_p=config.k_p, k_i=config.k_i, k_d=config.k_d, k_aw=config.k_aw)
-            current.with_gains(gains).replace(t_rec=config.t_rec, t_pow_max=config.t_pow_max,
-                                              tau_max=config.tau_max, stroke_scheme=config.stroke_scheme)
-        except (ValueError, TypeError) as exc:
+            updated = apply_tunables(current, {name: getattr(config, name) for name in TUNABLE_BOUNDS})
+            updated = updated.replace(stroke_scheme=config.stroke_scheme)
+        except (ValueError, TypeError, AttributeError) as exc:
             rospy.logerr("reconfigure refused (values kept): %s", exc)
-            config.k_p, config.k_i, config.k_d, config.k_aw = (current.gains.k_p, current.gains.k_i,
-                                                               current.gains.k_d, current.gains.k_aw)
-            config.t_rec, config.t_pow_max, config.tau_max = current.t_rec, current.t_pow_max, current.tau_max
+            for name in TUNABLE_BOUNDS:
+                setattr(config, name, getattr(current.gains if name.startswith("k_") else current, name))
             config.stroke_scheme = current.stroke_scheme
             return config
         with self.lock:
-            self.supervisor.controller.set_gains(gains)
-            self.supervisor.controller.set_timing(t_rec=config.t_rec, t_pow_max=config.t_pow_max,
-                                                  tau_max=config.tau_max)
-            self.supervisor.controller.set_stroke_scheme(config.stroke_scheme)
-        changed = ["%s %.4g -> %.4g" % (name, old, new) for name, old, new in (
-            ("k_p", current.gains.k_p, gains.k_p), ("k_i", current.gains.k_i, gains.k_i),
-            ("k_d", current.gains.k_d, gains.k_d), ("k_aw", current.gains.k_aw, gains.k_aw),
-            ("tau_max", current.tau_max, config.tau_max), ("t_rec", current.t_rec, config.t_rec),
-            ("t_pow_max", current.t_pow_max, config.t_pow_max)) if abs(old - new) > 1e-12]
-        if config.stroke_scheme != current.stroke_scheme:
+            self.supervisor.controller.set_gains(updated.gains)
+            self.supervisor.controller.set_timing(t_rec=updated.t_rec, t_pow_max=updated.t_pow_max,
+                                                  tau_max=updated.tau_max)
+            self.supervisor.controller.set_stroke_scheme(updated.stroke_scheme)
+        old_values = dict(vars(current.gains), tau_max=current.tau_max, t_rec=current.t_rec, t_pow_max=current.t_pow_max)
+        new_values = dict(vars(updated.gains), tau_max=updated.tau_max, t_rec=updated.t_rec, t_pow_max=updated.t_pow_max)
+        changed = ["%s %.4g -> %.4g" % (name, old_values[name], new_values[name]) for name in TUNABLE_BOUNDS
+                   if abs(old_values[name] - new_values[name]) > 1e-12]
+        if updated.stroke_scheme != current.stroke_scheme:
             changed.append("stroke_scheme %s -> %s (switching once the feet are at the nominal pose)"
-                           % (current.stroke_scheme, config.stroke_scheme))
+                           % (current.stroke_scheme, updated.stroke_scheme))
         if changed:
             rospy.loginfo("reconfigure: %s", ", ".join(changed))
         return config

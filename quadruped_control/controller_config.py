@@ -40,6 +40,7 @@ __all__ = [
     "DEFAULT_GAIN_SET",
     "Gains",
     "GAIN_SET_KEYS",
+    "apply_tunables",
     "ParameterError",
     "controller_config_from_dict",
     "load_controller_config",
@@ -211,6 +212,18 @@ class ControllerConfig:
         return dataclasses.replace(self, gains=new_gains)
 
 
+def apply_tunables(config: ControllerConfig, values: Mapping[str, Any]) -> ControllerConfig:
+    """``config`` with the live-tunable values (k_p, k_i, k_d, k_aw, tau_max, t_rec, t_pow_max; any
+    subset) replaced, validated as a whole: a ParameterError for NaN, out-of-range values (the
+    reconfigure bounds) or t_rec < 2 t_pow_max, and then nothing is changed."""
+    unknown = sorted(set(values) - set(TUNABLE_BOUNDS))
+    if unknown:
+        raise ParameterError("not live-tunable: %s" % ", ".join(unknown))
+    gains = {k: v for k, v in values.items() if k in ("k_p", "k_i", "k_d", "k_aw")}
+    timing = {k: v for k, v in values.items() if k not in gains}
+    return config.with_gains(config.gains.replace(**gains)).replace(**timing)
+
+
 def _bool(tree: Mapping[str, Any], key: str, default: bool) -> bool:
     value = tree.get(key, default)
     if not isinstance(value, bool):
@@ -287,6 +300,9 @@ def controller_config_from_dict(tree: Mapping[str, Any], gain_set: str = DEFAULT
         raise ParameterError("missing parameter 'gain_sets' (a mapping of named gain sets)")
     if gain_set not in sets:
         raise ParameterError("unknown gain set %r; available: %s" % (gain_set, ", ".join(sorted(sets))))
+    for key in ("tau_max", "t_rec", "t_pow_max"):  # top-level defaults, even where every set overrides them
+        if key in tree:
+            _tunable(key, tree[key])
     configs = {name: _config_for_set(tree, name, chosen) for name, chosen in sets.items()}
     return configs[gain_set]
 

@@ -37,8 +37,9 @@ def _number(tree: Mapping[str, Any], dotted: str, low: float = -math.inf, high: 
     return number(lookup(tree, dotted), dotted, low, high, low_open=low_open)
 
 
-def _vector(tree: Mapping[str, Any], dotted: str, length: int) -> np.ndarray:
-    return np.array(vector(lookup(tree, dotted), dotted, length))
+def _vector(tree: Mapping[str, Any], dotted: str, length: int, low: float = -math.inf,
+            high: float = math.inf) -> np.ndarray:
+    return np.array(vector(lookup(tree, dotted), dotted, length, low, high))
 
 
 @dataclass(frozen=True)
@@ -117,7 +118,7 @@ class RobotParams:
 
 def robot_params_from_dict(tree: Mapping[str, Any]) -> RobotParams:
     """Validate a parsed ``robot.yaml`` mapping and build :class:`RobotParams`."""
-    inertia_diag = _vector(tree, "body.inertia_diag", 3)
+    inertia_diag = _vector(tree, "body.inertia_diag", 3, -100.0, 100.0)  # kg m^2
     if np.any(inertia_diag <= 0.0):
         raise ParameterError("parameter 'body.inertia_diag' must be positive, got %s" % inertia_diag)
     ixx, iyy, izz = inertia_diag
@@ -126,7 +127,7 @@ def robot_params_from_dict(tree: Mapping[str, Any]) -> RobotParams:
     if ixx > iyy + izz or iyy > izz + ixx or izz > ixx + iyy:
         raise ParameterError("parameter 'body.inertia_diag' %s violates the triangle inequality of "
                              "principal moments (no physical body has it)" % inertia_diag)
-    dims = _vector(tree, "body.dimensions", 3)
+    dims = _vector(tree, "body.dimensions", 3, -5.0, 5.0)  # m
     if np.any(dims <= 0.0):
         raise ParameterError("parameter 'body.dimensions' must be positive, got %s" % dims)
 
@@ -144,11 +145,11 @@ def robot_params_from_dict(tree: Mapping[str, Any]) -> RobotParams:
     # Keys are the leg numbers as strings ("1".."4"; the strict loader refuses non-string keys).
     leg_keys = [str(leg) for leg in LEGS]
     origins_raw = check_keys(lookup(tree, "leg_origins"), "leg_origins", leg_keys, leg_keys)
-    leg_origins = {leg: np.array(vector(origins_raw[str(leg)], "leg_origins.%d" % leg, 3)) for leg in LEGS}
+    leg_origins = {leg: np.array(vector(origins_raw[str(leg)], "leg_origins.%d" % leg, 3, -2.0, 2.0)) for leg in LEGS}
 
     limits = {}
     for name in ("theta1", "theta2", "theta3"):
-        low, high = _vector(tree, "joint_limits_deg." + name, 2)
+        low, high = _vector(tree, "joint_limits_deg." + name, 2, -360.0, 360.0)
         if not low < high:
             raise ParameterError("parameter 'joint_limits_deg.%s' needs low < high, got [%g, %g]" % (name, low, high))
         if high - low > 360.0:
@@ -171,7 +172,7 @@ def robot_params_from_dict(tree: Mapping[str, Any]) -> RobotParams:
         l_z=_number(tree, "hip.l_z", 0.0, 1.0, low_open=True),
         leg_origins=leg_origins,
         joint_limits=JointLimits(**limits),
-        nominal_foot_leg=_vector(tree, "nominal_foot_leg", 3),
+        nominal_foot_leg=_vector(tree, "nominal_foot_leg", 3, -1.0, 1.0),
         servo_stall_torque=_number(tree, "servo.stall_torque", 0.0, 100.0, low_open=True),
         servo_no_load_speed=_number(tree, "servo.no_load_speed_rpm", 0.0, 10000.0, low_open=True)
         * 2.0 * math.pi / 60.0,
