@@ -381,8 +381,8 @@ class AttitudeController:
         """One control step at time ``t`` (s) with the measured attitude R = R_B^W and rate omega_B^B (rad/s).
 
         Raises ValueError (without changing any state) for a non-finite time, a non-rotation R or a
-        non-finite omega or one beyond ``config.max_angular_rate``; the caller should then :meth:`hold`. After a hold, the first step restarts the
-        stroke cycle (first pair: half recovery).
+        non-finite omega or one beyond ``config.max_angular_rate``; the caller should then :meth:`hold`.
+        After a hold, the first step restarts the stroke cycle (first pair: half recovery).
         """
         t = float(t)
         if not math.isfinite(t):
