@@ -6,6 +6,7 @@ setup(**generate_distutils_setup(
     packages=[
         "quadruped_common",
         "quadruped_control",
+        "quadruped_control.plants",
         "quadruped_control.studies",
         "quadruped_control.strokes",
         "quadruped_drivers",

@@ -433,6 +433,9 @@ class FloatingBaseModel:
     torque r_cb x (R^T [0, 0, B]) acts. A centre of buoyancy above the centre of mass rights the robot.
     """
 
+    #: Plant name (:mod:`quadruped_control.plants`).
+    name = "paper"
+
     def __init__(self, params: RobotParams, restoring_offset: Optional[ArrayLike] = None,
                  restoring_force: Optional[float] = None) -> None:
         self.params = params
@@ -467,6 +470,10 @@ class FloatingBaseModel:
                                  + (1.0 / self.mass, self._paw_buoyancy_force))
 
     # ---- inputs ------------------------------------------------------------------------------
+
+    def attach(self, state: RigidBodyState) -> None:
+        """Fix whatever the plant ties to the world at the start ``state`` (nothing here; the tank plant's
+        rope anchor)."""
 
     def leg_input(self, q: ArrayLike, q_dot: ArrayLike) -> LegInput:
         """:class:`LegInput` (foot positions and joint-induced foot velocities) for q, q_dot (4 x 3)."""
@@ -515,17 +522,17 @@ class FloatingBaseModel:
         flat = _leg_kinematics_flat(q.tolist(), q_dot.tolist(), self.params)
         return _StepContext.from_flat(flat, self.net_paw_buoyancy, self._restoring)
 
-    def _accelerations(self, context: _StepContext, v: Sequence[float], R: Mat3,
-                       omega: Sequence[float]) -> Tuple[float, float, float, float, float, float]:
-        """(dv/dt, domega/dt) of eq. (trans), (rot), on floats.
+    def _body_wrench(self, context: _StepContext, bx: float, by: float, bz: float, R: Mat3,
+                     wx: float, wy: float, wz: float) -> Tuple[float, float, float, float, float, float]:
+        """Force (body axes) and torque (body, about the centre of mass) of the paw drag, body drag,
+        paw buoyancy and restoring terms of eq. (trans), (rot), on floats, for the body-axes velocity
+        (bx, by, bz) = R^T v and rate omega. The one readable implementation of the paper's forces,
+        used by :meth:`_accelerations` and by the tank plant (:mod:`quadruped_control.plants.tank`).
 
         Leg forces are formed in body axes (|R u| = |u|, so R^T F_i^W = -k |u| u with
-        u = R^T v_e,i^W = R^T v + omega x r_i + J q_dot_i) and summed before one rotation to the world.
+        u = R^T v_e,i^W = R^T v + omega x r_i + J q_dot_i). Paw buoyancy's force is left to the caller.
         """
-        r0, r1, r2, r3, r4, r5, r6, r7, r8 = R
-        vx, vy, vz = v
-        wx, wy, wz = omega
-        bx, by, bz = r0 * vx + r3 * vy + r6 * vz, r1 * vx + r4 * vy + r7 * vz, r2 * vx + r5 * vy + r8 * vz
+        r6, r7, r8 = R[6], R[7], R[8]
         k = self.drag_constant
         fx = fy = fz = tx = ty = tz = 0.0
         for px, py, pz, cx, cy, cz in context.feet:
@@ -553,6 +560,16 @@ class FloatingBaseModel:
         tx += u0 * r6 + u1 * r7 + u2 * r8
         ty += u3 * r6 + u4 * r7 + u5 * r8
         tz += u6 * r6 + u7 * r7 + u8 * r8
+        return fx, fy, fz, tx, ty, tz
+
+    def _accelerations(self, context: _StepContext, v: Sequence[float], R: Mat3,
+                       omega: Sequence[float]) -> Tuple[float, float, float, float, float, float]:
+        """(dv/dt, domega/dt) of eq. (trans), (rot), on floats (forces from :meth:`_body_wrench`)."""
+        r0, r1, r2, r3, r4, r5, r6, r7, r8 = R
+        vx, vy, vz = v
+        wx, wy, wz = omega
+        bx, by, bz = r0 * vx + r3 * vy + r6 * vz, r1 * vx + r4 * vy + r7 * vz, r2 * vx + r5 * vy + r8 * vz
+        fx, fy, fz, tx, ty, tz = self._body_wrench(context, bx, by, bz, R, wx, wy, wz)
         # I domega/dt = tau - omega x I omega, eq. (rot).
         i0, i1, i2, i3, i4, i5, i6, i7, i8 = self._inertia
         hx, hy, hz = i0 * wx + i1 * wy + i2 * wz, i3 * wx + i4 * wy + i5 * wz, i6 * wx + i7 * wy + i8 * wz

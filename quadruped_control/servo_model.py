@@ -196,22 +196,26 @@ class RateLimitedServo(ServoModel):
         return command - sign * new_magnitude
 
 
-def servo_params_from_dict(tree: Mapping[str, Any]) -> ServoParams:
-    """:class:`ServoParams` from a parsed simulation.yaml tree (its ``simulation.servo`` section)."""
+def servo_params_from_dict(tree: Mapping[str, Any], robot_yaml: Optional[str] = None) -> ServoParams:
+    """:class:`ServoParams` from a parsed simulation.yaml tree (its ``simulation.servo`` section: load
+    scale and lag) and the no-load speed ``servo.no_load_speed_rpm`` of ``config/robot.yaml`` (or
+    ``robot_yaml``), the one place the servo speed is kept."""
+    from quadruped_control.params import load_robot_params
+
     key = "simulation.servo"
-    servo = check_keys(lookup(tree, key), key, ("no_load_speed_rpm", "speed_scale", "time_constant"),
-                       ("no_load_speed_rpm", "time_constant"))
-    rpm = number(servo["no_load_speed_rpm"], key + ".no_load_speed_rpm", 0.0, 1000.0, low_open=True)
+    servo = check_keys(lookup(tree, key), key, ("speed_scale", "time_constant"), ("time_constant",))
     scale = number(servo.get("speed_scale", 1.0), key + ".speed_scale", 0.0, 1.0, low_open=True)
     tau = number(servo["time_constant"], key + ".time_constant", 0.0, 10.0)
-    return ServoParams(max_speed=rpm * scale * 2.0 * math.pi / 60.0, time_constant=tau)
+    return ServoParams(max_speed=load_robot_params(robot_yaml).servo_no_load_speed * scale, time_constant=tau)
 
 
-def load_servo_params(path: Optional[str] = None, tree: Optional[Mapping[str, Any]] = None) -> ServoParams:
-    """:class:`ServoParams` from the ``simulation.servo`` section of ``config/simulation.yaml`` (or of ``tree``)."""
+def load_servo_params(path: Optional[str] = None, tree: Optional[Mapping[str, Any]] = None,
+                      robot_yaml: Optional[str] = None) -> ServoParams:
+    """:class:`ServoParams` from ``config/simulation.yaml`` (or ``tree``) and the servo speed of
+    ``config/robot.yaml`` (or ``robot_yaml``)."""
     if tree is not None:
-        return servo_params_from_dict(tree)
-    return load_config(path, "simulation.yaml", servo_params_from_dict)
+        return servo_params_from_dict(tree, robot_yaml)
+    return load_config(path, "simulation.yaml", lambda data: servo_params_from_dict(data, robot_yaml))
 
 
 def make_servo_model(name: str, params: Optional[ServoParams] = None) -> ServoModel:

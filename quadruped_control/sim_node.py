@@ -30,6 +30,7 @@ Publishes (ground truth, for tests and reports; nothing in the control path subs
 Parameters
   ~robot_yaml ~hardware_yaml ~calibration_yaml ~simulation_yaml (package config/)
   ~servo_model (rate-limited | ideal)  ~initial_rpy_deg ([0, 0, 0])  ~restoring_offset ([]: off)
+  ~plant (paper | tank: the robot on its rope in the test tank, ~tank_yaml default config/tank.yaml)
   ~physics_rate (100 Hz)  ~bus_socket (/tmp/uq_sim_i2c.sock)  ~imu_port (/tmp/uq_sim_vn100)
   ~imu_pump_period (0.05 s: longest sleep of the fake VN-100's pty pump; it wakes when the next packet
   is due, when the driver writes, or when the simulated clock moves)
@@ -61,6 +62,7 @@ from quadruped_control.lockstep import AnswerTracker, SimClock
 
 from quadruped_control.params import JOINT_NAMES, ParameterError, load_robot_params
 from quadruped_control.servo_model import make_servo_model
+from quadruped_control.plants import load_tank_params, make_plant
 from quadruped_control.simulation import PlantSimulator, SimulationError, load_simulation_settings
 from quadruped_control.so3 import rot_to_quat, rpy_to_rot
 from quadruped_drivers.bus_bridge import BusBridgeServer
@@ -93,9 +95,13 @@ class SimNode:
         offset = rospy.get_param("~restoring_offset", [])
         settings = load_simulation_settings(optional("~simulation_yaml"))
         servo = make_servo_model(rospy.get_param("~servo_model", "rate-limited"), settings.servo)
+        plant = str(rospy.get_param("~plant", "paper"))
+        model = None
+        if plant != "paper":
+            model = make_plant(plant, self.robot, load_tank_params(optional("~tank_yaml")))
         self.plant = PlantSimulator(self.robot, servo,
                                     initial_rotation=rpy_to_rot(roll, pitch, yaw),
-                                    restoring_offset=offset if offset else None)
+                                    restoring_offset=offset if offset else None, model=model)
         self.commanded = self.plant.joint_positions.reshape(12).copy()
         self.previous_velocity = self.plant.state.velocity.copy()
 

@@ -43,7 +43,8 @@ import numpy as np
 
 from quadruped_control.controller_config import load_controller_config
 from quadruped_control.params import ParameterError, config_path, load_robot_params
-from quadruped_control.servo_model import make_servo_model
+from quadruped_control.plants import PLANTS, load_tank_params, make_plant
+from quadruped_control.servo_model import load_servo_params, make_servo_model
 from quadruped_control.simulation import (ClosedLoopSimulation, SimulationError, SimulationResult, load_simulation_settings,
                                           load_simulation_tree)
 from quadruped_control.so3 import rpy_to_rot
@@ -75,6 +76,13 @@ class TrialSpec:
     controller_yaml: Optional[str] = None
     simulation_yaml: Optional[str] = None
     quiet: bool = False
+    #: plant (:mod:`quadruped_control.plants`): "paper" or "tank"; ``tank_yaml`` replaces config/tank.yaml
+    plant: str = "paper"
+    tank_yaml: Optional[str] = None
+    #: (field, value) pairs replaced in TankParams (identification).
+    tank_overrides: Tuple[Tuple[str, Any], ...] = ()
+    #: "on", or "off": legs held at the nominal pose (passive dynamics)
+    controller: str = "on"
     #: keep the attitude traces in the summary (figures); studies that only need metrics drop them.
     keep_trace: bool = True
     #: (field, value) pairs replaced in RobotParams / ControllerConfig (sensitivity studies).
@@ -116,13 +124,27 @@ def run_trial(spec: TrialSpec) -> Dict[str, Any]:
     settings = load_simulation_settings(spec.simulation_yaml)
     if abs(settings.dt - config.dt) > 1e-12:
         raise ParameterError("simulation dt %g s differs from the controller period %g s" % (settings.dt, config.dt))
-    servo = make_servo_model(spec.servo_model, settings.servo)
+    # The servo speed is robot.yaml's (after overrides: identification varies servo_no_load_speed).
+    servo_params = load_servo_params(spec.simulation_yaml, robot_yaml=spec.robot_yaml)
+    nominal_speed = load_robot_params(spec.robot_yaml).servo_no_load_speed
+    servo_params = dataclasses.replace(servo_params,
+                                       max_speed=servo_params.max_speed * robot.servo_no_load_speed / nominal_speed)
+    servo = make_servo_model(spec.servo_model, servo_params)
+    model = None
+    if spec.plant != "paper":
+        tank = load_tank_params(spec.tank_yaml)
+        if spec.tank_overrides:
+            tank = tank.with_values(**{k: (tuple(v) if isinstance(v, list) else v) for k, v in spec.tank_overrides})
+        model = make_plant(spec.plant, robot, tank)
+    if spec.controller not in ("on", "off"):
+        raise ValueError("controller must be 'on' or 'off', got %r" % (spec.controller,))
     sim = ClosedLoopSimulation(
         robot, config, servo,
         initial_R=rpy_to_rot(*np.radians(spec.initial_rpy_deg)),
         setpoint_R=rpy_to_rot(*np.radians(spec.setpoint_rpy_deg)),
         restoring_offset=spec.restoring_offset, seed=spec.seed,
-        attitude_noise=math.radians(spec.attitude_noise_deg), gyro_noise=spec.gyro_noise)
+        attitude_noise=math.radians(spec.attitude_noise_deg), gyro_noise=spec.gyro_noise,
+        model=model, controller_enabled=spec.controller == "on")
     result = sim.run(spec.duration, progress=_progress_printer(spec.label, spec.quiet))
     metrics = result.metrics()
     summary: Dict[str, Any] = {
@@ -131,6 +153,7 @@ def run_trial(spec: TrialSpec) -> Dict[str, Any]:
         "initial_rpy_deg": list(spec.initial_rpy_deg),
         "gains": GAIN_ALIASES.get(spec.gains, spec.gains),
         "scheme": config.stroke_scheme,
+        "plant": spec.plant,
         "robot_yaml": spec.robot_yaml or config_path("robot.yaml"),
         "nominal_foot_leg": [float(v) for v in robot.nominal_foot_leg],
         "metrics": metrics,
@@ -250,7 +273,8 @@ def study_paper_sim(args: argparse.Namespace) -> int:
     os.makedirs(args.out, exist_ok=True)
     tree = _study_config()
     specs = _paper_sim_specs(args, tree, args.out, gains=GAIN_ALIASES[args.gains], servo_model=args.servo_model,
-                             normalize_force=args.normalize_force, scheme=args.scheme)
+                             normalize_force=args.normalize_force, scheme=args.scheme, plant=args.plant or "paper",
+                             tank_yaml=args.tank_yaml)
     start = time.perf_counter()
     summaries = _run_many(specs, args, "paper-sim")
     wall = time.perf_counter() - start
@@ -375,6 +399,13 @@ def build_parser() -> argparse.ArgumentParser:
                         help="normalise the allocation's force direction tau_hat x r_hat (not in the paper)")
     parser.add_argument("--restoring-offset", nargs=3, type=float, metavar=("X", "Y", "Z"), default=None,
                         help="centre of buoyancy relative to the centre of mass, body frame, m (default: none)")
+    parser.add_argument("--plant", choices=PLANTS, default=None,
+                        help="plant model: paper (the paper's idealised model; default) or tank (the robot on "
+                             "its rope in the test tank, config/tank.yaml)")
+    parser.add_argument("--tank-yaml", default=None, metavar="PATH",
+                        help="tank parameters for --plant tank (default: the package's config/tank.yaml)")
+    parser.add_argument("--controller", choices=("on", "off"), default="on",
+                        help="off holds the legs at the nominal pose (passive dynamics, ballast checks)")
     parser.add_argument("--robot-yaml", default=None, metavar="PATH",
                         help="robot model parameters for plant and controller (default: the package's "
                              "config/robot.yaml); the robustness study varies its estimates around this file")
@@ -405,6 +436,9 @@ def main(argv: Optional[Sequence[str]] = None) -> int:
         parser.error("--duration must be a positive number of seconds")
     if args.jobs < 1:
         parser.error("--jobs must be at least 1")
+    if args.plant == "tank" and args.restoring_offset is not None:
+        parser.error("--restoring-offset is the paper plant's option; the tank plant's centre of buoyancy "
+                     "is hydrostatics.center_of_buoyancy in config/tank.yaml (--tank-yaml)")
     for name in ("rpy", "initial_rpy", "restoring_offset"):
         value = getattr(args, name)
         if value is not None and not all(math.isfinite(v) for v in value):
@@ -433,13 +467,14 @@ def main(argv: Optional[Sequence[str]] = None) -> int:
                          seed=args.seed, normalize_force=args.normalize_force,
                          restoring_offset=tuple(args.restoring_offset) if args.restoring_offset else None,
                          attitude_noise_deg=attitude_noise, gyro_noise=gyro_noise, out_dir=args.out,
-                         robot_yaml=args.robot_yaml, quiet=args.quiet, scheme=args.scheme)
+                         robot_yaml=args.robot_yaml, quiet=args.quiet, scheme=args.scheme, plant=args.plant or "paper",
+                         tank_yaml=args.tank_yaml, controller=args.controller)
         summary = run_trial(spec)
     except (ParameterError, SimulationError, StudyError, ValueError) as exc:
         sys.stderr.write("simulate: error: %s\n" % exc)
         return 1
-    print(format_metrics_table(summary["metrics"], "%s, %s gains, %s servos, %s strokes, %.0f s (%.0fx real time)"
-                               % (spec.label, spec.gains, spec.servo_model, summary["scheme"], spec.duration,
+    print(format_metrics_table(summary["metrics"], "%s, %s plant, %s gains, %s servos, %s strokes, %.0f s (%.0fx real time)"
+                               % (spec.label, spec.plant, spec.gains, spec.servo_model, summary["scheme"], spec.duration,
                                   summary["real_time_factor"])))
     print("wrote %s/{timeseries.csv, metrics.json, attitude.png}" % args.out)
     return 0

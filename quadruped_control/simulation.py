@@ -150,7 +150,8 @@ class PlantSimulator:
     R_B^W at rest (default level); ``restoring_offset``: optional centre of buoyancy relative to the
     centre of mass in the body frame (m), see :class:`~quadruped_control.dynamics.FloatingBaseModel`;
     ``initial_joints``: (4, 3) or (12,) servo angles at start (default: feet at the nominal position);
-    ``dt``: default step (s).
+    ``dt``: default step (s); ``model``: the plant's equations of motion (default the paper's
+    :class:`~quadruped_control.dynamics.FloatingBaseModel`; :mod:`quadruped_control.plants`).
 
     :meth:`step` takes the 12 commanded joint angles (JOINT_NAMES order, or (4, 3)). Commands outside a
     servo's range are clamped to it (a servo cannot turn further; ``clamped_joints`` counts them).
@@ -161,9 +162,12 @@ class PlantSimulator:
 
     def __init__(self, robot: RobotParams, servo_model: Optional[ServoModel] = None,
                  initial_rotation: Optional[ArrayLike] = None, restoring_offset: Optional[ArrayLike] = None,
-                 initial_joints: Optional[ArrayLike] = None, dt: float = 0.01) -> None:
+                 initial_joints: Optional[ArrayLike] = None, dt: float = 0.01,
+                 model: Optional[FloatingBaseModel] = None) -> None:
         self.robot = robot
-        self.model = FloatingBaseModel(robot, restoring_offset=restoring_offset)
+        if model is not None and restoring_offset is not None:
+            raise ValueError("give either a plant model or a restoring_offset, not both")
+        self.model = model if model is not None else FloatingBaseModel(robot, restoring_offset=restoring_offset)
         self.servo = servo_model if servo_model is not None else IdealServo()
         dt = float(dt)
         if not (math.isfinite(dt) and dt > 0.0):
@@ -189,6 +193,7 @@ class PlantSimulator:
         else:
             R = np.eye(3) if rotation is None else _rotation(rotation, "initial rotation")
             self._state = RigidBodyState(rotation=R)
+        self.model.attach(self._state)
         q = nominal_joint_angles(self.robot) if joints is None else self._command(joints)
         # The initial pose must be one the legs can take.
         self.model.leg_input(q, np.zeros((4, 3)))
@@ -367,8 +372,12 @@ class SimulationResult:
     setpoint: np.ndarray
     info: Dict[str, Any]
     wall_time: float = 0.0
+    #: (N, 3) centre-of-mass position in the world frame, m (zeros if not recorded).
+    position: Optional[np.ndarray] = None
 
     def __post_init__(self) -> None:
+        if self.position is None:
+            self.position = np.zeros((self.t.size, 3))
         self.quaternion = rotations_to_quaternions(self.rotation)
         self.rpy = rotations_to_rpy(self.rotation)
         self.setpoint_rpy = rotations_to_rpy(self.setpoint[None, :, :])[0]
@@ -396,7 +405,7 @@ class SimulationResult:
         "t", "qx", "qy", "qz", "qw", "roll_deg", "pitch_deg", "yaw_deg",
         "roll_setpoint_deg", "pitch_setpoint_deg", "yaw_setpoint_deg", "omega_x", "omega_y", "omega_z",
         "tau_cmd_x", "tau_cmd_y", "tau_cmd_z", "tau_sat_x", "tau_sat_y", "tau_sat_z", "saturated",
-        "geodesic_deg", "geodesic_smoothed_deg")
+        "geodesic_deg", "geodesic_smoothed_deg", "com_x", "com_y", "com_z")
 
     def write_csv(self, path: str) -> None:
         """Time series as CSV: :attr:`CSV_COLUMNS`, then ``phase_pair<i>`` per leg pair and ``holding``."""
@@ -405,7 +414,7 @@ class SimulationResult:
         numeric = np.column_stack((
             self.t, self.quaternion, np.degrees(self.rpy), np.tile(np.degrees(self.setpoint_rpy), (self.t.size, 1)),
             self.omega, self.tau_cmd, self.tau_sat, self.saturated.astype(float), np.degrees(self.geodesic),
-            np.degrees(self.geodesic_smoothed())))
+            np.degrees(self.geodesic_smoothed()), self.position))
         with open(path, "w", newline="") as stream:
             writer = csv.writer(stream)
             writer.writerow(header)
@@ -427,13 +436,17 @@ class ClosedLoopSimulation:
     mismatch); ``controller_config``: gains etc.; ``servo_model``: a ServoModel or a name ('ideal',
     'rate-limited'), default ideal; ``initial_R``, ``setpoint_R``: rotations; ``restoring_offset``:
     optional centre of buoyancy offset (m, body frame); ``seed``: seeds the IMU noise;
-    ``attitude_noise`` (rad), ``gyro_noise`` (rad/s): IMU noise std (default 0, the paper).
+    ``attitude_noise`` (rad), ``gyro_noise`` (rad/s): IMU noise std (default 0, the paper);
+    ``model``: the plant's equations of motion (default the paper's, :mod:`quadruped_control.plants`);
+    ``controller_enabled`` False keeps the controller in its hold state, so the legs stay at the
+    nominal pose (passive dynamics: ballast checks, physics tests).
     """
 
     def __init__(self, robot: RobotParams, controller_config: ControllerConfig,
                  servo_model: Union[ServoModel, str, None] = None, initial_R: Optional[ArrayLike] = None,
                  setpoint_R: Optional[ArrayLike] = None, restoring_offset: Optional[ArrayLike] = None,
-                 seed: int = 0, attitude_noise: float = 0.0, gyro_noise: float = 0.0) -> None:
+                 seed: int = 0, attitude_noise: float = 0.0, gyro_noise: float = 0.0,
+                 model: Optional[FloatingBaseModel] = None, controller_enabled: bool = True) -> None:
         if isinstance(servo_model, str):
             servo_model = make_servo_model(servo_model)
         for name, value in (("attitude_noise", attitude_noise), ("gyro_noise", gyro_noise)):
@@ -450,8 +463,9 @@ class ClosedLoopSimulation:
         self.gyro_noise = float(gyro_noise)
         self.controller = AttitudeController(robot, controller_config)
         self.controller.set_setpoint(self.setpoint_R)
+        self.controller_enabled = bool(controller_enabled)
         self.plant = PlantSimulator(robot, servo_model, initial_rotation=self.initial_R,
-                                    restoring_offset=self.restoring_offset, dt=self.dt)
+                                    restoring_offset=self.restoring_offset, dt=self.dt, model=model)
         self._rng = np.random.default_rng(self.seed)
         self.k = 0
         self.holds = 0
@@ -478,11 +492,14 @@ class ClosedLoopSimulation:
         t = self.time
         state = self.plant._state  # noqa: SLF001 (read-only use; the plant never mutates states)
         R, omega = self._measure(state)
-        try:
-            output = self.controller.step(t, R, omega)
-        except ValueError as exc:
-            self.holds += 1
-            output = self.controller.hold(t, "bad measurement: %s" % exc)
+        if not self.controller_enabled:
+            output = self.controller.hold(t, "controller off")
+        else:
+            try:
+                output = self.controller.step(t, R, omega)
+            except ValueError as exc:
+                self.holds += 1
+                output = self.controller.hold(t, "bad measurement: %s" % exc)
         targets = output.joint_targets
         plant = self.plant
         # The controller guarantees (4, 3) finite targets; a target inside its servo range is finite.
@@ -524,6 +541,8 @@ class ClosedLoopSimulation:
                 state = self.plant._state  # noqa: SLF001
                 R, w = self._measure(state)
                 try:
+                    if not self.controller_enabled:
+                        raise ValueError("controller off")
                     output = self.controller.step(self.time, R, w)
                 except ValueError as exc:
                     output = self.controller.hold(self.time, "bad measurement: %s" % exc)
@@ -541,6 +560,7 @@ class ClosedLoopSimulation:
         t_rec = np.array(times)
         rotation = np.array([s.rotation for s in states])
         omega = np.array([s.omega for s in states])
+        position = np.array([s.position for s in states])
         tau_cmd = np.array([r.tau_cmd for r in records], dtype=float).reshape(n, 3)
         tau_sat = np.array([r.tau_sat for r in records], dtype=float).reshape(n, 3)
         saturated = np.array([bool(r.saturated) for r in records])
@@ -565,8 +585,10 @@ class ClosedLoopSimulation:
             "gyro_noise": self.gyro_noise,
             "clamped_joint_commands": self.plant.clamped_joints,
             "controller_holds": self.holds,
+            "plant": getattr(self.plant.model, "name", "paper"),
+            "controller": "on" if self.controller_enabled else "off",
         }
-        return SimulationResult(t=t_rec, rotation=rotation, omega=omega, tau_cmd=tau_cmd, tau_sat=tau_sat,
+        return SimulationResult(t=t_rec, rotation=rotation, omega=omega, position=position, tau_cmd=tau_cmd, tau_sat=tau_sat,
                                 saturated=saturated, pair_phase=np.array(phases, dtype=str), holding=holding,
                                 joint_targets=target_array, joint_positions=position_array,
                                 setpoint=self.setpoint_R.copy(),

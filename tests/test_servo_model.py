@@ -122,8 +122,9 @@ def test_params_validation_and_config_loading() -> None:
     with pytest.raises(ParameterError):
         load_servo_params(tree={"simulation": {}})
     with pytest.raises(ParameterError):
-        load_servo_params(tree={"simulation": {"servo": {"no_load_speed_rpm": 95, "time_constant": 0.1,
-                                                          "speed_scale": 2.0}}})
+        load_servo_params(tree={"simulation": {"servo": {"time_constant": 0.1, "speed_scale": 2.0}}})
+    with pytest.raises(ParameterError, match="no_load_speed_rpm"):  # one place for the servo speed: robot.yaml
+        load_servo_params(tree={"simulation": {"servo": {"no_load_speed_rpm": 95, "time_constant": 0.1}}})
     assert isinstance(make_servo_model("ideal"), IdealServo)
     assert isinstance(make_servo_model("rate-limited"), RateLimitedServo)
     with pytest.raises(ValueError):

@@ -151,3 +151,18 @@ def test_bad_robot_yaml_is_a_clear_error(tmp_path, capsys) -> None:
     assert code == 1
     assert "unreachable" in capsys.readouterr().err
     assert not os.path.exists(str(tmp_path / "s" / "study.json"))
+
+
+def test_tank_plant_controller_off_and_com_columns(tmp_path) -> None:
+    out = str(tmp_path / "tank")
+    assert simulate.main(["--plant", "tank", "--controller", "off", "--initial-rpy", "20", "0", "0",
+                          "--duration", "2", "--out", out, "--quiet"]) == 0
+    with open(os.path.join(out, "timeseries.csv")) as stream:
+        rows = list(csv.DictReader(stream))
+    assert {"com_x", "com_y", "com_z"} <= set(rows[0])
+    assert float(rows[-1]["roll_deg"]) < 20.0  # swung back, passively
+    with open(os.path.join(out, "metrics.json")) as stream:
+        info = json.load(stream)["info"]
+    assert info["plant"] == "tank" and info["controller"] == "off"
+    with pytest.raises(SystemExit):
+        simulate.main(["--plant", "tank", "--restoring-offset", "0", "0", "0.01", "--out", out])

@@ -1,0 +1,303 @@
+"""The tank plant: added-mass closed forms, rope and hydrostatics, and passive physics of the robot hanging
+in the tank (controller off, legs at the nominal pose)."""
+from __future__ import annotations
+
+import dataclasses
+import math
+
+import numpy as np
+import pytest
+from scipy.integrate import solve_ivp
+
+from quadruped_control.controller_config import load_controller_config
+from quadruped_control.dynamics import FloatingBaseModel, RigidBodyState
+from quadruped_control.params import ParameterError, load_robot_params
+from quadruped_control.plants import TankModel, TankParams, load_tank_params, make_plant
+from quadruped_control.plants.added_mass import (ellipsoid_added_mass, ellipsoid_coefficients, kirchhoff_terms,
+                                                 point_mass_matrix)
+from quadruped_control.plants.tank import _solve_mass, hydrostatic_wrench, rope_force, torso_ellipsoid
+from quadruped_control.simulation import ClosedLoopSimulation, PlantSimulator, nominal_joint_angles
+from quadruped_control.so3 import rpy_to_rot
+
+ROBOT = load_robot_params()
+TANK = load_tank_params()
+OFF = TankParams(suspension=False, hydrostatics=False, torso_added_mass=False, paw_added_mass=False)
+DT = 0.01
+
+
+# ---- added mass: closed forms ----------------------------------------------------------------------
+
+def test_sphere_coefficients_and_added_mass() -> None:
+    assert ellipsoid_coefficients(0.1, 0.1, 0.1) == pytest.approx((2 / 3,) * 3, abs=1e-9)
+    M = ellipsoid_added_mass(0.1, 0.1, 0.1, 1000.0)
+    m_f = 1000.0 * 4 / 3 * math.pi * 0.1 ** 3
+    np.testing.assert_allclose(np.diag(M), [m_f / 2] * 3 + [0.0] * 3, atol=1e-9)
+
+
+@pytest.mark.parametrize("a, b", [(0.3, 0.1), (0.2, 0.15), (1.0, 0.1)])
+def test_prolate_spheroid_matches_fossen_closed_form(a: float, b: float) -> None:
+    """Fossen (2011) section 6.4.1: prolate spheroid, e = sqrt(1 - (b/a)^2)."""
+    e = math.sqrt(1.0 - (b / a) ** 2)
+    log = math.log((1 + e) / (1 - e))
+    alpha = 2 * (1 - e * e) / e ** 3 * (0.5 * log - e)
+    beta = 1 / e ** 2 - (1 - e * e) / (2 * e ** 3) * log
+    assert ellipsoid_coefficients(a, b, b) == pytest.approx((alpha, beta, beta), rel=1e-8)
+    m_f = 1000.0 * 4 / 3 * math.pi * a * b * b
+    M = ellipsoid_added_mass(a, b, b, 1000.0)
+    n_rdot = 0.2 * m_f * (b * b - a * a) ** 2 * (alpha - beta) / (2 * (b * b - a * a) + (b * b + a * a) * (beta - alpha))
+    np.testing.assert_allclose(np.diag(M), [alpha / (2 - alpha) * m_f, beta / (2 - beta) * m_f,
+                                            beta / (2 - beta) * m_f, 0.0, n_rdot, n_rdot], rtol=1e-8, atol=1e-12)
+    assert sum(ellipsoid_coefficients(a, 0.7 * b, b)) == pytest.approx(2.0, rel=1e-9)
+
+
+def test_bad_ellipsoid_input_is_rejected() -> None:
+    with pytest.raises(ValueError):
+        ellipsoid_coefficients(0.1, -0.1, 0.1)
+    with pytest.raises(ValueError):
+        ellipsoid_added_mass(0.1, 0.1, 0.1, 0.0)
+
+
+def test_kirchhoff_terms_do_no_work_and_give_rigid_body_gyroscopics() -> None:
+    rng = np.random.default_rng(3)
+    M = ellipsoid_added_mass(0.3, 0.17, 0.08, 1000.0) + point_mass_matrix(0.1, [0.2, -0.1, -0.1])
+    for _ in range(20):
+        nu = rng.normal(size=6)
+        assert float(nu @ kirchhoff_terms(M, nu)) == pytest.approx(0.0, abs=1e-10)
+    rigid = np.diag([4.9] * 3 + [0.05, 0.15, 0.19])
+    nu = rng.normal(size=6)
+    v, w = nu[:3], nu[3:]
+    np.testing.assert_allclose(kirchhoff_terms(rigid, nu),
+                               np.concatenate((4.9 * np.cross(w, v), np.cross(w, rigid[3:, 3:] @ w))), atol=1e-12)
+
+
+def test_torso_ellipsoid_displaces_the_robots_volume() -> None:
+    a, b, c = torso_ellipsoid(ROBOT)
+    assert 4 / 3 * math.pi * a * b * c == pytest.approx(ROBOT.mass / ROBOT.rho)
+    assert a / b == pytest.approx(ROBOT.body_dimensions[0] / ROBOT.body_dimensions[1])
+
+
+def test_body_accelerated_from_rest_by_its_net_weight() -> None:
+    """Released at rest with no rope: the only force is the net weight, so a_z = -W_net / (m + A_33)."""
+    neutral_paws = dataclasses.replace(ROBOT, paw_mass=ROBOT.rho * ROBOT.paw_volume)
+    tank = TANK.with_values(suspension=False, paw_added_mass=False, center_of_buoyancy=(0.0, 0.0, 0.0))
+    model = TankModel(neutral_paws, tank)
+    q = nominal_joint_angles(neutral_paws)
+    state = model.step(RigidBodyState(), q, np.zeros((4, 3)), 1e-4)
+    a33 = model.torso_added_mass[2, 2]
+    assert a33 > 1.0  # a flat ellipsoid has a large heave added mass
+    assert state.velocity[2] / 1e-4 == pytest.approx(-tank.net_weight / (ROBOT.mass + a33), rel=1e-6)
+    np.testing.assert_allclose(state.omega, 0.0, atol=1e-12)
+
+
+def test_schur_mass_solve_matches_numpy() -> None:
+    model = TankModel(ROBOT, TANK)
+    rng = np.random.default_rng(0)
+    for _ in range(5):
+        feet = rng.normal(scale=0.2, size=(4, 3))
+        g = rng.normal(size=6)
+        solver = model._mass_solver(tuple(feet.sum(axis=0)), tuple((feet.T @ feet).ravel()))
+        np.testing.assert_allclose(_solve_mass(solver, g), np.linalg.solve(model.mass_matrix(feet.tolist()), g),
+                                   rtol=1e-10, atol=1e-12)
+
+
+# ---- rope and hydrostatics ---------------------------------------------------------------------------
+
+def test_rope_pulls_only_when_taut() -> None:
+    anchor = (0.0, 0.0, 1.0)
+    assert rope_force((0, 0, 0.6), (0, 0, 0), anchor, 0.5, 100.0, 10.0) == (0.0, 0.0, 0.0)  # slack
+    assert rope_force((0, 0, 0.4), (0, 0, 0), anchor, 0.5, 100.0, 10.0) == pytest.approx((0, 0, 10.0))
+    # moving up fast while taut: damping would push; a rope cannot
+    assert rope_force((0, 0, 0.49), (0, 0, 5.0), anchor, 0.5, 100.0, 10.0) == (0.0, 0.0, 0.0)
+    assert rope_force((0, 0, 0.4), (0, 0, -1.0), anchor, 0.5, 100.0, 10.0)[2] == pytest.approx(20.0)
+
+
+def test_hydrostatic_wrench_rights_a_robot_with_buoyancy_above() -> None:
+    force, torque = hydrostatic_wrench(rpy_to_rot(0.3, 0, 0), 48.0, 47.0, (0, 0, 0.01))
+    np.testing.assert_allclose(force, [0, 0, -1.0])
+    assert torque[0] == pytest.approx(-47.0 * 0.01 * math.sin(0.3))  # rolls back
+    assert np.allclose(hydrostatic_wrench(np.eye(3), 48.0, 48.0, (0, 0, 0.01))[1], 0.0)
+
+
+def test_tank_params_are_validated() -> None:
+    with pytest.raises(ParameterError):
+        TankParams(rope_length=0.0)
+    with pytest.raises(ParameterError):
+        TankParams(hook=(0.0, float("nan"), 0.0))
+    with pytest.raises(ParameterError):
+        load_tank_params(tree={"suspension": {}})
+    with pytest.raises(ValueError):
+        make_plant("ocean", ROBOT)
+
+
+def test_all_effects_off_is_the_paper_model() -> None:
+    rng = np.random.default_rng(1)
+    q = nominal_joint_angles(ROBOT) + rng.normal(scale=0.05, size=(4, 3))
+    q_dot = rng.normal(scale=2.0, size=(4, 3))
+    state = RigidBodyState(velocity=np.array([0.1, -0.05, 0.02]), rotation=rpy_to_rot(0.3, -0.2, 1.0),
+                           omega=np.array([0.4, -0.3, 0.2]))
+    paper = FloatingBaseModel(ROBOT).step(state, q, q_dot, DT)
+    tank = TankModel(ROBOT, OFF).step(state, q, q_dot, DT)
+    np.testing.assert_allclose(tank.to_vector(), paper.to_vector(), rtol=0, atol=1e-12)
+
+
+# ---- passive physics in the tank -----------------------------------------------------------------
+
+def _hang(model: TankModel, roll_deg: float, seconds: float, robot=ROBOT):
+    plant = PlantSimulator(robot, initial_rotation=rpy_to_rot(math.radians(roll_deg), 0, 0), model=model, dt=DT)
+    q = nominal_joint_angles(robot).ravel()
+    states = [plant.state]
+    for _ in range(int(round(seconds / DT))):
+        states.append(plant.step(q))
+    return plant, states
+
+
+def _roll(states) -> np.ndarray:
+    return np.array([math.atan2(s.rotation[2, 1], s.rotation[2, 2]) for s in states])
+
+
+def _reduced_roll_model(model: TankModel, robot=ROBOT):
+    """Roll-swing prediction from the restoring torque and the total (rigid + added) inertia.
+
+    Coordinates (y, theta): sideways position of the centre of mass and roll. The stiff rope holds the
+    hook at its depth, so the centre of mass rises and falls with z = z_hook - h cos(theta) (h: hook
+    height above it). Body-axes velocity nu = J(theta) (y', theta') with v^W = (0, y', h sin(theta)
+    theta'); kinetic energy 1/2 nu^T M nu with M the total mass matrix (rigid + torso and paw added
+    mass), so Lagrange's equations read
+
+        M_q q'' + (dM_q/dtheta theta') q' - 1/2 (q'^T dM_q/dtheta q') e_theta + grad V = Q_drag,
+        M_q = J^T M J,
+
+    V: torso weight and buoyancy, paw net buoyancy and the rope's pendulum term T0 (y_hook - y_anchor)^2 / (2 L);
+    Q_drag = J^T (drag wrench): the paper's paw and body drag (:mod:`quadruped_control.hydrodynamics`,
+    the readable functions) for that motion."""
+    from quadruped_control import hydrodynamics
+
+    q = nominal_joint_angles(robot)
+    feet = model.leg_input(q, np.zeros((4, 3))).foot_positions
+    M = model.mass_matrix(feet.tolist())
+    hydro = TankModel(robot, model.tank.with_values(suspension=False))
+    h = float(model.hook[2])
+    tension = model.static_rope_tension()
+    length = model.tank.rope_length
+
+    def jacobian(theta: float) -> np.ndarray:
+        R = rpy_to_rot(theta, 0.0, 0.0)
+        J = np.zeros((6, 2))
+        J[:3, 0] = R.T @ [0.0, 1.0, 0.0]
+        J[:3, 1] = R.T @ [0.0, 0.0, h * math.sin(theta)]
+        J[3, 1] = 1.0
+        return J
+
+    def mass(theta: float) -> np.ndarray:
+        J = jacobian(theta)
+        return J.T @ M @ J
+
+    def potential(y: float, theta: float) -> float:
+        R = rpy_to_rot(theta, 0.0, 0.0)
+        position = np.array([0.0, y, h - float(R[2, :] @ model.hook)])  # hook at its depth
+        hook_y = y + float(R[1, :] @ model.hook) - float(model.anchor[1])  # the anchor is above the start
+        return hydro.potential_energy(RigidBodyState(position=position, rotation=R), q) \
+            + 0.5 * tension * hook_y ** 2 / length
+
+    def gradient(y: float, theta: float) -> np.ndarray:
+        e = 1e-6
+        return np.array([(potential(y + e, theta) - potential(y - e, theta)) / (2 * e),
+                         (potential(y, theta + e) - potential(y, theta - e)) / (2 * e)])
+
+    def drag(theta: float, rates: np.ndarray) -> np.ndarray:
+        if not model.tank.drag:
+            return np.zeros(2)
+        R = rpy_to_rot(theta, 0.0, 0.0)
+        nu = jacobian(theta) @ rates
+        v, omega = R @ nu[:3], nu[3:]
+        feet_velocity = v + np.cross(omega, feet) @ R.T
+        forces, torques = hydrodynamics.leg_wrench(feet_velocity, feet, R, robot)
+        body_force, body_torque = hydrodynamics.body_drag(nu[:3], omega, robot)
+        wrench = np.concatenate((R.T @ forces.sum(axis=0) + body_force, torques.sum(axis=0) + body_torque))
+        return jacobian(theta).T @ wrench
+
+    def rhs(_t, x):
+        y, theta, rates = x[0], x[1], np.array(x[2:])
+        e = 1e-6
+        dM = (mass(theta + e) - mass(theta - e)) / (2 * e)
+        force = drag(theta, rates) - gradient(y, theta) - dM @ rates * rates[1] \
+            + np.array([0.0, 0.5 * float(rates @ dM @ rates)])
+        return list(rates) + list(np.linalg.solve(mass(theta), force))
+    return rhs, mass(0.0)
+
+
+def _extrema(t: np.ndarray, x: np.ndarray):
+    """Times and values of the local extrema of x (parabolic refinement)."""
+    out = []
+    for k in range(1, x.size - 1):
+        if (x[k] - x[k - 1]) * (x[k + 1] - x[k]) < 0:
+            a, b, c = x[k - 1], x[k], x[k + 1]
+            d = a - 2 * b + c
+            off = 0.5 * (a - c) / d if d != 0 else 0.0
+            out.append((t[k] + off * (t[1] - t[0]), b - 0.25 * (a - c) * off))
+    return out
+
+
+def test_suspended_robot_swings_back_with_the_predicted_period_and_decay() -> None:
+    model = TankModel(ROBOT, TANK)
+    seconds = 12.0
+    _, states = _hang(model, 30.0, seconds)
+    t = np.arange(len(states)) * DT
+    roll = _roll(states)
+    rhs, mass = _reduced_roll_model(model)
+    assert mass[1, 1] > ROBOT.inertia[0, 0] * 1.3  # added inertia counts
+    ref = solve_ivp(rhs, (0, seconds), [0.0, math.radians(30.0), 0.0, 0.0], t_eval=t, rtol=1e-8, atol=1e-10)
+    sim_ext, ref_ext = _extrema(t, roll), _extrema(t, ref.y[1])
+    assert len(sim_ext) >= 3 and len(ref_ext) >= 3
+    # period: twice the time between the first two extrema (after release)
+    sim_period, ref_period = 2 * (sim_ext[1][0] - sim_ext[0][0]), 2 * (ref_ext[1][0] - ref_ext[0][0])
+    assert sim_period == pytest.approx(ref_period, rel=0.05)
+    # decay: the first overshoot and the next extremum
+    for k in (0, 1):
+        assert abs(sim_ext[k][1]) == pytest.approx(abs(ref_ext[k][1]), rel=0.05)
+    assert abs(roll[-1]) < math.radians(5.0)
+
+
+def test_buoyancy_equal_to_weight_at_the_same_point_gives_no_torque_and_a_slack_rope() -> None:
+    robot = dataclasses.replace(ROBOT, paw_mass=ROBOT.rho * ROBOT.paw_volume)  # neutral paws
+    model = TankModel(robot, TANK.with_values(net_weight=0.0, center_of_buoyancy=(0.0, 0.0, 0.0)))
+    assert model.static_rope_tension() == 0.0
+    _, states = _hang(model, 30.0, 5.0, robot)
+    roll = _roll(states)
+    assert np.max(np.abs(roll - math.radians(30.0))) < 1e-9
+    for s in states:
+        hook = s.position + s.rotation @ model.hook
+        assert np.linalg.norm(model.anchor - hook) <= model.tank.rope_length + 1e-9  # never stretched
+
+
+def test_energy_never_grows_with_drag_off() -> None:
+    model = TankModel(ROBOT, TANK.with_values(drag=False, rope_damping=0.0))
+    q = nominal_joint_angles(ROBOT)
+    _, states = _hang(model, 30.0, 6.0)
+    energy = np.array([model.kinetic_energy(s, q) + model.potential_energy(s, q) for s in states])
+    swing = energy[0] - np.min([model.potential_energy(s, q) for s in states])  # energy in the swing
+    assert swing > 0.01
+    assert np.max(energy - energy[0]) < 1e-6 * swing  # never grows (beyond rounding)
+    assert np.max(np.abs(energy - energy[0])) < 1e-5 * swing  # RK4 conserves it closely
+
+
+def test_depth_stays_at_the_rope_length_in_closed_loop() -> None:
+    config = load_controller_config(None, "experiment")
+    model = TankModel(ROBOT, TANK)
+    sim = ClosedLoopSimulation(ROBOT, config, "rate-limited", setpoint_R=rpy_to_rot(math.radians(45), 0, 0),
+                               model=model)
+    result = sim.run(20.0)
+    hook_z = np.array([(p + R @ model.hook)[2] for p, R in zip(result.position, result.rotation)])
+    assert np.max(np.abs(hook_z - hook_z[0])) < 0.03
+    assert result.info["plant"] == "tank"
+    assert np.ptp(result.rpy[:, 0]) > math.radians(10)  # it did move
+
+
+def test_controller_off_holds_the_nominal_pose() -> None:
+    config = load_controller_config(None, "experiment")
+    sim = ClosedLoopSimulation(ROBOT, config, setpoint_R=rpy_to_rot(1.0, 0, 0), model=TankModel(ROBOT, TANK),
+                               controller_enabled=False, initial_R=rpy_to_rot(0.2, 0, 0))
+    result = sim.run(2.0)
+    np.testing.assert_allclose(result.joint_targets, np.tile(nominal_joint_angles(ROBOT).ravel(), (201, 1)))
+    assert result.info["controller"] == "off"
+    assert abs(result.rpy[-1, 0]) < 0.2  # swung back towards level, not driven to the setpoint
