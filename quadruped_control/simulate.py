@@ -85,6 +85,8 @@ class TrialSpec:
     controller: str = "on"
     #: keep the attitude traces in the summary (figures); studies that only need metrics drop them.
     keep_trace: bool = True
+    #: keep every n-th sample of the traces (long studies)
+    trace_stride: int = 1
     #: (field, value) pairs replaced in RobotParams / ControllerConfig (sensitivity studies).
     robot_overrides: Tuple[Tuple[str, Any], ...] = ()
     config_overrides: Tuple[Tuple[str, Any], ...] = ()
@@ -167,8 +169,9 @@ def run_trial(spec: TrialSpec) -> Dict[str, Any]:
         write_trial(result, metrics, spec.out_dir, title=spec.label)
         summary["out_dir"] = spec.out_dir
     if spec.keep_trace:
-        summary["trace"] = {"t": result.t, "rpy": result.rpy, "setpoint": result.setpoint_rpy,
-                            "geodesic": result.geodesic}
+        k = max(1, int(spec.trace_stride))
+        summary["trace"] = {"t": result.t[::k], "rpy": result.rpy[::k], "setpoint": result.setpoint_rpy,
+                            "geodesic": result.geodesic[::k]}
     return summary
 
 
@@ -377,6 +380,49 @@ def study_robustness(args: argparse.Namespace) -> int:
     return 0
 
 
+def study_paper_experiments(args: argparse.Namespace) -> int:
+    """The paper's 15 experiments (Table 1) on the chosen plant and gains: table (markdown + JSON) with
+    the paper's values beside the simulated ones, and figures shaped like the paper's."""
+    from quadruped_control.studies import paper_experiments as pe
+
+    os.makedirs(args.out, exist_ok=True)
+    plant = args.plant or "tank"
+    gains = GAIN_ALIASES[args.gains]
+    # The tank stands for the real robot: its servos are rate-limited; the paper's plant keeps the
+    # configured default (the paper's ideal servos) unless --servo-model says otherwise.
+    servo = args.servo_model_given or ("rate-limited" if plant == "tank" else args.servo_model)
+    duration = args.duration if args.duration_given else pe.DURATION
+    rows = list(pe.PAPER_TABLE)
+    specs, tilts = [], []
+    for row in rows:
+        initial, tilt = pe.initial_attitude(pe.setpoint_rpy_deg(row), row["theta_init"], row["psi_init"])
+        tilts.append(tilt)
+        overrides = (("t_rec", float(row["t_rec"])),) if gains == "experiment" and row["t_rec"] != 1.5 else ()
+        specs.append(TrialSpec(label=pe.case_label(row), setpoint_rpy_deg=pe.setpoint_rpy_deg(row),
+                               initial_rpy_deg=tuple(round(v, 9) for v in initial), duration=duration,
+                               gains=gains, servo_model=servo, seed=args.seed, plant=plant, tank_yaml=args.tank_yaml,
+                               robot_yaml=args.robot_yaml, quiet=True, config_overrides=overrides,
+                               trace_stride=5))
+    start = time.perf_counter()
+    results = _run_many(specs, args, "paper-experiments")
+    wall = time.perf_counter() - start
+    for result, tilt in zip(results, tilts):
+        result["tilt_deg"] = tilt
+    table_rows = pe.comparison_rows(rows, results)
+    title = "%s plant, %s gains, %s servos, %g s trials" % (plant, gains, servo, duration)
+    figures = pe.plot_sets(results, rows, os.path.join(args.out, "paper_experiments"), title)
+    markdown = pe.format_table(table_rows, title)
+    with open(os.path.join(args.out, "paper_experiments.md"), "w") as stream:
+        stream.write(markdown)
+    with open(os.path.join(args.out, "paper_experiments.json"), "w") as stream:
+        json.dump({"study": "paper-experiments", "plant": plant, "gains": gains, "servo_model": servo,
+                   "duration": duration, "wall_time": wall, "agreement": pe.agreement(table_rows),
+                   "figures": figures, "rows": table_rows}, stream, indent=2, allow_nan=False)
+    print(markdown)
+    print("figures: %s\n%d trials in %.1f s wall" % (", ".join(figures), len(specs), wall))
+    return 0
+
+
 def build_parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(prog="python3 -m quadruped_control.simulate",
                                      description="Offline closed-loop simulation of the underwater quadruped's "
@@ -386,8 +432,9 @@ def build_parser() -> argparse.ArgumentParser:
     parser.add_argument("--initial-rpy", nargs=3, type=float, metavar=("R", "P", "Y"), default=[0.0, 0.0, 0.0],
                         help="initial roll pitch yaw, degrees (default level)")
     parser.add_argument("--duration", type=float, default=None, help="trial length, s (default 120)")
-    parser.add_argument("--gains", choices=("sim", "experiment"), default="sim",
-                        help="paper gain set: sim (K_p 5, K_i 0.15, K_d 1) or experiment (K_p 10, K_i 3, K_d 0.5)")
+    parser.add_argument("--gains", choices=("sim", "experiment"), default=None,
+                        help="paper gain set: sim (K_p 5, K_i 0.15, K_d 1) or experiment (K_p 10, K_i 3, K_d 0.5); "
+                             "default sim, experiment for --study paper-experiments")
     parser.add_argument("--servo-model", choices=("ideal", "rate-limited"), default=None,
                         help="servo model (default from config/simulation.yaml: ideal, the paper's)")
     parser.add_argument("--seed", type=int, default=0, help="seed of the IMU noise (default 0)")
@@ -411,7 +458,9 @@ def build_parser() -> argparse.ArgumentParser:
                              "config/robot.yaml); the robustness study varies its estimates around this file")
     parser.add_argument("--scheme", choices=SCHEMES, default=None,
                         help="stroke scheme (default: stroke.scheme of config/controller.yaml, 'paper')")
-    parser.add_argument("--study", choices=("paper-sim", "robustness", "schemes"), default=None, help="run a study")
+    parser.add_argument("--study", choices=("paper-sim", "robustness", "schemes", "paper-experiments"), default=None,
+                        help="run a study (paper-experiments: Table 1's 15 experiments, default on the tank plant "
+                             "with the experiment gains and rate-limited servos)")
     parser.add_argument("--perturbed", type=int, default=1,
                         help="schemes study: perturbed (+-0.5 deg) starts per case besides the nominal one (default 1)")
     parser.add_argument("--jobs", type=int, default=min(2, os.cpu_count() or 1),
@@ -430,6 +479,9 @@ def main(argv: Optional[Sequence[str]] = None) -> int:
     parser = build_parser()
     args = parser.parse_args(argv)
     args.duration_given = args.duration is not None
+    if args.gains is None:
+        args.gains = "experiment" if args.study == "paper-experiments" else "sim"
+    args.servo_model_given = args.servo_model
     if args.duration is None:
         args.duration = 120.0
     if not (math.isfinite(args.duration) and args.duration > 0.0):
@@ -461,6 +513,8 @@ def main(argv: Optional[Sequence[str]] = None) -> int:
         if args.study == "schemes":
             from quadruped_control.scheme_study import main_study
             return main_study(args)
+        if args.study == "paper-experiments":
+            return study_paper_experiments(args)
         spec = TrialSpec(label="setpoint %s deg" % " ".join("%g" % v for v in args.rpy),
                          setpoint_rpy_deg=tuple(args.rpy), initial_rpy_deg=tuple(args.initial_rpy),
                          duration=args.duration, gains=GAIN_ALIASES[args.gains], servo_model=args.servo_model,
