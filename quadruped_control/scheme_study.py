@@ -5,7 +5,7 @@ axes), the 15 experiments of Table 1 (reconstructed initial attitudes, t_rec = 1
 it, 180 s), 20 seeded random setpoint / initial-attitude pairs (120 s); each from its initial attitude and
 from ``perturbed`` starts with every initial Euler angle perturbed uniformly by +-0.5 degrees (numpy
 default_rng(1000 + case index * 10 + repeat)); both gain sets; ideal and rate-limited servos; plant: the
-paper's model. Every start runs with both schemes.
+paper's model (default) or the tank (``--plant tank``). Every start runs with both schemes.
 
 Per trial: geodesic settling time (3 s centred average, 6 degree band, held 30 s; ``None`` if it never
 settles), the worst smoothed geodesic error over the last 30 s, the torque delivered (eq. torque_leg from
@@ -33,7 +33,7 @@ PERTURBATION_DEG = 0.5
 
 def build_specs(perturbed: int = 1, gain_sets: Sequence[str] = ("simulation", "experiment"),
                 servos: Sequence[str] = ("ideal", "rate-limited"), robot_yaml: Optional[str] = None,
-                cases: Optional[list] = None) -> List[Any]:
+                cases: Optional[list] = None, plant: str = "paper", tank_yaml: Optional[str] = None) -> List[Any]:
     """TrialSpecs of the ensemble (module docstring); labels 'case|start|gains|servo|scheme'."""
     from quadruped_control.simulate import TrialSpec
 
@@ -55,7 +55,8 @@ def build_specs(perturbed: int = 1, gain_sets: Sequence[str] = ("simulation", "e
                             label="|".join((case.name, str(start_index), gains, servo, scheme)),
                             setpoint_rpy_deg=case.setpoint_rpy_deg, initial_rpy_deg=start, duration=case.duration,
                             gains=gains, servo_model=servo, quiet=True, robot_yaml=robot_yaml,
-                            config_overrides=overrides, scheme=scheme, scheme_metrics=True, keep_trace=False))
+                            config_overrides=overrides, scheme=scheme, scheme_metrics=True, keep_trace=False,
+                            **({} if plant == "paper" else {"plant": plant, "tank_yaml": tank_yaml})))
     return specs
 
 
@@ -188,7 +189,8 @@ def main_study(args: Any) -> int:
 
     out = args.out
     os.makedirs(out, exist_ok=True)
-    specs = build_specs(args.perturbed, robot_yaml=args.robot_yaml)
+    plant = args.plant or "paper"
+    specs = build_specs(args.perturbed, robot_yaml=args.robot_yaml, plant=plant, tank_yaml=args.tank_yaml)
     start = time.perf_counter()
     summaries = _run_many(specs, args, "schemes")
     wall = time.perf_counter() - start
@@ -196,7 +198,7 @@ def main_study(args: Any) -> int:
                                                                 r["scheme"]))
     result = compare(rows)
     result.update(study="schemes", wall_time=wall, trials=len(rows), perturbed_starts=args.perturbed,
-                  perturbation_deg=PERTURBATION_DEG, plant="paper", rows=rows)
+                  perturbation_deg=PERTURBATION_DEG, plant=plant, rows=rows)
     with open(os.path.join(out, "schemes.json"), "w") as stream:
         json.dump(result, stream, indent=1, allow_nan=False)
     text = _markdown(result, rows)
