@@ -5,7 +5,8 @@
 #
 # Usage: scripts/sim_maneuver.sh OUT DURATION
 #   env: ROLL (deg), UQ_ROS_PORT (master port), DESCRIPTION (default false: headless, no robot_state_publisher/visualization),
-#        UQ_LAUNCH_PREFIX (launch-prefix of the control-path nodes; default "chrt -f 20" where permitted)
+#        UQ_LAUNCH_PREFIX (launch-prefix of the control-path nodes; default "chrt -f 20" where permitted),
+#        UQ_SIM_LAUNCH_PREFIX (launch-prefix of sim_node; default "chrt -f 30" where permitted)
 set -euo pipefail
 OUT="$1"; DURATION="$2"; ROLL="${ROLL:-45}"
 BAGS="$OUT/bags"
@@ -20,8 +21,14 @@ LOG="$OUT/launch.log"
 if [ -z "${UQ_LAUNCH_PREFIX+x}" ]; then
   if chrt -f 20 true 2>/dev/null; then UQ_LAUNCH_PREFIX="chrt -f 20"; else UQ_LAUNCH_PREFIX=""; fi
 fi
+# The simulated hardware runs above the control path: a real IMU and a real PCA9685 never wait for the
+# stack, so the simulation must not be starved by it (stale-IMU holds that only the simulation causes).
+if [ -z "${UQ_SIM_LAUNCH_PREFIX+x}" ]; then
+  if chrt -f 30 true 2>/dev/null; then UQ_SIM_LAUNCH_PREFIX="chrt -f 30"; else UQ_SIM_LAUNCH_PREFIX=""; fi
+fi
 timeout $((DURATION + 180)) roslaunch -p "$PORT" underwater_quadruped sim_maneuver.launch \
-  bag_dir:="$BAGS" duration:="$DURATION" roll:="$ROLL" description:="${DESCRIPTION:-false}" launch_prefix:="$UQ_LAUNCH_PREFIX" >"$LOG" 2>&1 &
+  bag_dir:="$BAGS" duration:="$DURATION" roll:="$ROLL" description:="${DESCRIPTION:-false}" launch_prefix:="$UQ_LAUNCH_PREFIX" \
+  sim_launch_prefix:="$UQ_SIM_LAUNCH_PREFIX" >"$LOG" 2>&1 &
 LAUNCH_PID=$!
 trap 'kill -INT $LAUNCH_PID 2>/dev/null || true' EXIT
 # Progress from the maneuver node while the launch runs (tail ends with the launch, then grep sees EOF:
