@@ -190,7 +190,12 @@ def main_study(args: Any) -> int:
     out = args.out
     os.makedirs(out, exist_ok=True)
     plant = args.plant or "paper"
-    specs = build_specs(args.perturbed, robot_yaml=args.robot_yaml, plant=plant, tank_yaml=args.tank_yaml)
+    groups = args.scheme_groups.split(",")
+    cases = [c for c in paper_sim_cases() + table1_cases() + random_cases() if c.group in groups]
+    if not cases:
+        raise ValueError("--scheme-groups %r selects no case (groups: paper-sim, table1, random)" % args.scheme_groups)
+    specs = build_specs(args.perturbed, gain_sets=args.scheme_gains.split(","), servos=args.scheme_servos.split(","),
+                        robot_yaml=args.robot_yaml, cases=cases, plant=plant, tank_yaml=args.tank_yaml)
     start = time.perf_counter()
     summaries = _run_many(specs, args, "schemes")
     wall = time.perf_counter() - start

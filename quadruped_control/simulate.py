@@ -463,6 +463,12 @@ def build_parser() -> argparse.ArgumentParser:
                              "with the experiment gains and rate-limited servos)")
     parser.add_argument("--perturbed", type=int, default=1,
                         help="schemes study: perturbed (+-0.5 deg) starts per case besides the nominal one (default 1)")
+    parser.add_argument("--scheme-groups", default="paper-sim,table1,random",
+                        help="schemes study: case groups (default %(default)s)")
+    parser.add_argument("--scheme-gains", default="simulation,experiment",
+                        help="schemes study: gain sets (default %(default)s)")
+    parser.add_argument("--scheme-servos", default="ideal,rate-limited",
+                        help="schemes study: servo models (default %(default)s)")
     parser.add_argument("--jobs", type=int, default=min(2, os.cpu_count() or 1),
                         help="worker processes for studies (default %(default)s)")
     parser.add_argument("--dask-scheduler", default=None, metavar="ADDRESS",
