@@ -23,6 +23,7 @@ Where the files live is decided by :func:`config_dir` alone.
 """
 from __future__ import annotations
 
+import functools
 import math
 import os
 from typing import Any, Callable, Collection, Dict, List, Mapping, Optional, Sequence, TypeVar
@@ -64,9 +65,38 @@ class ParameterError(ValueError):
     """A configuration value is missing, malformed or physically impossible."""
 
 
+#: The catkin package whose ``config/`` folder holds the default configuration files.
+PACKAGE = "underwater_quadruped"
+
+
+@functools.lru_cache(maxsize=None)
 def config_dir() -> str:
-    """The folder with the package's configuration files (the catkin package root's ``config/``)."""
-    return os.path.join(os.path.dirname(os.path.dirname(os.path.abspath(__file__))), "config")
+    """The package's ``config/`` folder: the one place that decides where configuration files live.
+
+    Found through the ROS package path first (rospkg, as roslaunch's ``$(find underwater_quadruped)``):
+    the source tree from a devel space, ``<prefix>/share/underwater_quadruped`` from an install space.
+    Without a ROS environment (rospkg missing, or the package not on ROS_PACKAGE_PATH: the offline
+    simulator, pytest, a laptop with only the venv) the source tree this module was imported from.
+    """
+    tried = []
+    try:
+        import rospkg  # pylint: disable=import-outside-toplevel (optional: ROS's package path)
+    except ImportError:
+        tried.append("rospkg not importable")
+    else:
+        try:
+            candidate = os.path.join(rospkg.RosPack().get_path(PACKAGE), "config")
+        except rospkg.ResourceNotFound:
+            tried.append("package %s not on ROS_PACKAGE_PATH" % PACKAGE)
+        else:
+            if os.path.isdir(candidate):
+                return candidate
+            tried.append("%s has no config/ folder" % os.path.dirname(candidate))
+    source_tree = os.path.join(os.path.dirname(os.path.dirname(os.path.abspath(__file__))), "config")
+    if os.path.isdir(source_tree):
+        return source_tree
+    tried.append("no source tree at %s" % source_tree)
+    raise ParameterError("cannot find the config/ folder of %s (%s)" % (PACKAGE, "; ".join(tried)))
 
 
 def config_path(name: str) -> str:

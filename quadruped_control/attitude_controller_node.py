@@ -8,7 +8,7 @@ Subscribes
   imu/data               sensor_msgs/Imu                 world ENU <- base_link FLU (REP-145)
   joint_states           sensor_msgs/JointState          measured joint angles / velocities
   attitude_setpoint      geometry_msgs/QuaternionStamped R_d, world ENU <- body FLU
-  attitude_setpoint_rpy  geometry_msgs/Vector3Stamped   R_d as roll, pitch, yaw in DEGREES
+  attitude_setpoint_rpy_deg  geometry_msgs/Vector3Stamped  R_d as roll, pitch, yaw in DEGREES (unit in the name, REP-103)
                                                          (R = Rz(yaw) Ry(pitch) Rx(roll))
 Publishes
   servo_command          quadruped_msgs/ServoCommand   12 pulse widths (us) + joint targets,
@@ -153,7 +153,7 @@ class AttitudeControllerNode:
         rospy.Service("~arm", SetBool, self._on_arm)
         rospy.Subscriber("joint_states", JointState, self._on_joint_states, queue_size=5)
         rospy.Subscriber("attitude_setpoint", QuaternionStamped, self._on_setpoint, queue_size=1)
-        rospy.Subscriber("attitude_setpoint_rpy", Vector3Stamped, self._on_setpoint_rpy, queue_size=1)
+        rospy.Subscriber("attitude_setpoint_rpy_deg", Vector3Stamped, self._on_setpoint_rpy, queue_size=1)
         rospy.Subscriber("imu/data", Imu, self._on_imu, queue_size=5, tcp_nodelay=True)
         # Fallback: when IMU samples stop, this timer still ticks the supervisor so that it holds.
         self.fallback_timer = rospy.Timer(rospy.Duration(self.period), self._on_fallback_timer)

@@ -2,7 +2,7 @@
 
 Used by the main job (launch/sim_maneuver.launch): waits until the controller is armed and streaming,
 holds the initial setpoint for ~delay seconds, publishes the maneuver setpoint on
-``attitude_setpoint_rpy`` (degrees), prints the geodesic error every 10 s and shuts down after
+``attitude_setpoint_rpy_deg``, prints the geodesic error every 10 s and shuts down after
 ~duration seconds (it is a required node, so roslaunch then stops the whole graph and rosbag closes
 its bag cleanly).
 
@@ -30,7 +30,7 @@ class ManeuverNode:
         self.timeout = float(rospy.get_param("~timeout", 60.0))
         self.armed = threading.Event()
         self.last_error = math.nan
-        self.publisher = rospy.Publisher("attitude_setpoint_rpy", Vector3Stamped, queue_size=1, latch=True)
+        self.publisher = rospy.Publisher("attitude_setpoint_rpy_deg", Vector3Stamped, queue_size=1, latch=True)
         rospy.Subscriber("controller_state", ControllerState, self._on_state, queue_size=1)
 
     def _on_state(self, msg: ControllerState) -> None:

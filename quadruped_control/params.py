@@ -93,6 +93,7 @@ class RobotParams:
     nominal_foot_leg: np.ndarray
     servo_stall_torque: float
     servo_no_load_speed: float  # rad/s
+    imu_mount_xyz: np.ndarray  # m, origin of imu_link in base_link (axes aligned with base_link)
     mirror: Dict[int, np.ndarray] = field(default_factory=lambda: {
         leg: np.diag(diag) for leg, diag in MIRROR_DIAG.items()})
 
@@ -176,7 +177,17 @@ def robot_params_from_dict(tree: Mapping[str, Any]) -> RobotParams:
         servo_stall_torque=_number(tree, "servo.stall_torque", 0.0, 100.0, low_open=True),
         servo_no_load_speed=_number(tree, "servo.no_load_speed_rpm", 0.0, 10000.0, low_open=True)
         * 2.0 * math.pi / 60.0,
+        imu_mount_xyz=_imu_mount(tree, dims),
     )
+
+
+def _imu_mount(tree: Mapping[str, Any], dims: np.ndarray) -> np.ndarray:
+    """``imu.mount_xyz``: where the IMU sits in base_link; it must lie inside the body's box."""
+    xyz = _vector(tree, "imu.mount_xyz", 3)
+    if np.any(np.abs(xyz) > 0.5 * dims):
+        raise ParameterError("parameter 'imu.mount_xyz' %s lies outside the body (half extents %s)"
+                             % (xyz.tolist(), (0.5 * dims).tolist()))
+    return xyz
 
 
 def load_robot_params(path: Optional[str] = None) -> RobotParams:

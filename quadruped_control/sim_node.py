@@ -24,7 +24,7 @@ Two clocks (``~lockstep``):
   as fast as the machine allows. The drivers run their real byte-level code on the simulated clock.
 
 Publishes (ground truth, for tests and reports; nothing in the control path subscribes to these)
-  sim/pose          geometry_msgs/PoseStamped  world ENU <- base_link, true attitude
+  sim/pose          geometry_msgs/PoseStamped  odom (ENU, REP-105) <- base_link, true attitude
   sim/servo_output  quadruped_msgs/ServoCommand  pulse widths the fake PCA9685 really produces and
                                                        the joint angles they command
 Parameters
@@ -297,7 +297,7 @@ class SimNode:
         stamp = rospy.Time.now() if stamp is None else _ros_time(stamp)
         pose = PoseStamped()
         pose.header.stamp = stamp
-        pose.header.frame_id = "world"
+        pose.header.frame_id = "odom"  # REP-105 fixed frame, as the visualization node's
         (pose.pose.orientation.x, pose.pose.orientation.y, pose.pose.orientation.z,
          pose.pose.orientation.w) = [float(v) for v in rot_to_quat(state.rotation)]
         self.pose_pub.publish(pose)

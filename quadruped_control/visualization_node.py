@@ -8,9 +8,10 @@ Publishes:
   joint_states_visual  sensor_msgs/JointState        actuated + passive five-bar angles, for
                                                      robot_state_publisher (remapped)
   foot_target_markers  visualization_msgs/MarkerArray  one sphere per foot target, frame base_link
-  TF  world -> base_link (IMU orientation), world -> setpoint (R_d), both at ~base_position
+  TF  odom -> base_link (IMU orientation), odom -> setpoint (R_d), both at ~base_position
 Parameters:
-  ~world_frame (world), ~base_frame (base_link), ~setpoint_frame (setpoint),
+  ~world_frame (odom: REP-105's fixed frame, ENU, no position estimate), ~base_frame (base_link),
+  ~imu_frame (imu_link: the URDF fixes it to base_link with aligned axes), ~setpoint_frame (setpoint),
   ~base_position ([0, 0, 0], m, where the body is drawn in the world frame: the robot has no position
   estimate), ~marker_rate (20 Hz, cap on marker updates), ~draw_rate (30 Hz, cap on joint state and TF
   updates), ~robot_yaml (package config/robot.yaml).
@@ -51,8 +52,9 @@ def _publish(publisher: rospy.Publisher, msg) -> None:
 
 class VisualizationNode:
     def __init__(self) -> None:
-        self.world_frame = rospy.get_param("~world_frame", "world")
+        self.world_frame = rospy.get_param("~world_frame", "odom")
         self.base_frame = rospy.get_param("~base_frame", "base_link")
+        self.imu_frame = rospy.get_param("~imu_frame", "imu_link")
         self.setpoint_frame = rospy.get_param("~setpoint_frame", "setpoint")
         position = rospy.get_param("~base_position", [0.0, 0.0, 0.0])
         if len(position) != 3:
@@ -130,9 +132,9 @@ class VisualizationNode:
         if orientation is None:
             rospy.logwarn_throttle(30.0, "IMU message carries no orientation (covariance[0] = -1)")
             return
-        if msg.header.frame_id and msg.header.frame_id.lstrip("/") != self.base_frame:
-            rospy.logwarn_once("IMU frame '%s' is drawn as '%s' (the IMU is mounted in the body frame)"
-                               % (msg.header.frame_id, self.base_frame))
+        if msg.header.frame_id and msg.header.frame_id.lstrip("/") not in (self.base_frame, self.imu_frame):
+            rospy.logwarn_once("IMU frame '%s' is neither '%s' nor '%s' (URDF): drawn as '%s'"
+                               % (msg.header.frame_id, self.imu_frame, self.base_frame, self.base_frame))
         stamp = msg.header.stamp if not msg.header.stamp.is_zero() else rospy.Time.now()
         self.broadcast(stamp, self.base_frame, orientation)
 

@@ -281,8 +281,7 @@ def main(argv: Optional[Sequence[str]] = None) -> int:
     if args.fake:
         rig = SimulatedServoRig(hardware, calibration, seed=args.seed)
         bus, clock, sleep = rig.bus, rig.clock, rig.sleep
-        out = args.out or os.path.join(os.path.dirname(os.path.dirname(os.path.abspath(__file__))), "out",
-                                       "servo_calibration.fake.yaml")
+        out = args.out or os.path.join("out", "servo_calibration.fake.yaml")
     else:
         from quadruped_drivers.i2c.real_bus import I2CBackendError, open_i2c_bus
         try:

@@ -18,6 +18,27 @@ if ! vermin -q -t=3.8- --no-tips --violations --eval-annotations \
   echo "vermin: sources need a Python newer than 3.8"; failures=$((failures + 1))
 fi
 
+# Steps that are not pytest or rostest cases each count as one case of the closing line.
+steps_passed=0; steps_failed=0
+run_step() {  # run_step NAME COMMAND...: output to the console and to $RESULTS/NAME.log
+  local name="$1"; shift
+  if "$@" 2>&1 | tee "$RESULTS/$name.log"; then
+    steps_passed=$((steps_passed + 1)); echo "   $name: ok"
+  else
+    steps_failed=$((steps_failed + 1)); failures=$((failures + 1)); echo "   $name: FAILED"
+  fi
+}
+
+echo "== catkin_lint -W2 (both packages, as the workspace sees them) =="
+if command -v catkin_lint >/dev/null; then
+  run_step catkin_lint catkin_lint -W2 --strict "$UQ_WS/src/underwater_quadruped" "$UQ_WS/src/quadruped_msgs"
+else
+  echo "catkin_lint: SKIPPED: not installed (scripts/setup.sh installs Debian's catkin-lint; pip install catkin-lint)"
+fi
+
+echo "== pure core under Python 3.8 with requirements-jetson.txt =="
+run_step python38 bash tests/python38.sh
+
 echo "== pytest (pure modules) =="
 python -m pytest -q -p no:cacheprovider --junitxml="$RESULTS/pytest.xml" tests "$@"
 pytest_rc=$?
@@ -85,6 +106,9 @@ else
 fi
 unset UQ_TRAJECTORY_FILE
 
+echo "== install space: catkin_make install into a temporary prefix, sim.launch from there =="
+run_step install_space bash tests/install_space.sh
+
 # Count pytest cases from its JUnit file so that the closing line covers the whole run.
 read -r py_passed py_failed < <(python - "$RESULTS/pytest.xml" <<'PYEOF'
 import sys, xml.etree.ElementTree as ET
@@ -100,5 +124,6 @@ print(tests - bad - skipped, bad)
 PYEOF
 )
 echo "rostest: $rostest_passed passed, $rostest_failed failed"
-echo "$((py_passed + rostest_passed)) passed, $((py_failed + rostest_failed)) failed"
+echo "steps (catkin_lint, python38, install_space): $steps_passed passed, $steps_failed failed"
+echo "$((py_passed + rostest_passed + steps_passed)) passed, $((py_failed + rostest_failed + steps_failed)) failed"
 [ "$failures" -eq 0 ]

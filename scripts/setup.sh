@@ -37,6 +37,7 @@ DEBIAN_PACKAGES=(
   ros-robot-state-publisher python3-tf2-ros python3-visualization-msgs ros-visualization-msgs
   python3-dynamic-reconfigure python3-rosbag
   python3-venv python3-dev build-essential cmake
+  catkin-lint
 )
 
 if [ -f /opt/ros/noetic/setup.bash ]; then

@@ -1,10 +1,12 @@
 """Loading and validation of config/robot.yaml (quadruped_control.params)."""
 import copy
 import math
+import os
 
 import numpy as np
 import pytest
 
+from quadruped_common import config as common
 from quadruped_control.params import (JOINT_NAMES, LEGS, ParameterError, joint_index, load_robot_params,
                                       load_yaml, config_path, robot_params_from_dict)
 
@@ -89,3 +91,40 @@ def test_missing_file_and_bad_yaml(tmp_path):
     scalar.write_text("3\n")
     with pytest.raises(ParameterError, match="mapping"):
         load_robot_params(str(scalar))
+
+
+@pytest.fixture
+def fresh_config_dir():
+    """config_dir() is cached per process; each case starts and ends with an empty cache."""
+    common.config_dir.cache_clear()
+    yield common.config_dir
+    common.config_dir.cache_clear()
+
+
+def test_config_dir_comes_from_the_ros_package_path(tmp_path, monkeypatch, fresh_config_dir):
+    """An install space (<prefix>/share/underwater_quadruped) wins over the module's source tree."""
+    pytest.importorskip("rospkg")
+    share = tmp_path / "install" / "share" / "underwater_quadruped"
+    (share / "config").mkdir(parents=True)
+    (share / "package.xml").write_text("<package format='3'><name>underwater_quadruped</name></package>")
+    monkeypatch.setenv("ROS_PACKAGE_PATH", str(tmp_path / "install" / "share"))
+    assert fresh_config_dir() == str(share / "config")
+    assert common.config_path("robot.yaml") == str(share / "config" / "robot.yaml")
+
+
+def test_config_dir_without_ros_is_the_source_tree(tmp_path, monkeypatch, fresh_config_dir):
+    monkeypatch.setenv("ROS_PACKAGE_PATH", str(tmp_path))
+    source_tree = os.path.join(os.path.dirname(os.path.dirname(os.path.abspath(common.__file__))), "config")
+    assert fresh_config_dir() == source_tree
+    assert os.path.isfile(common.config_path("robot.yaml"))
+
+
+def test_imu_mount_must_lie_inside_the_body(raw):
+    tree = copy.deepcopy(raw)
+    assert np.allclose(robot_params_from_dict(tree).imu_mount_xyz, raw["imu"]["mount_xyz"])
+    tree["imu"]["mount_xyz"] = [0.0, 0.0, 0.5]
+    with pytest.raises(ParameterError, match="imu.mount_xyz.*outside the body"):
+        robot_params_from_dict(tree)
+    del tree["imu"]
+    with pytest.raises(ParameterError, match="missing parameter 'imu.mount_xyz'"):
+        robot_params_from_dict(tree)

@@ -26,11 +26,17 @@ ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 XACRO_FILE = os.path.join(ROOT, "urdf", "underwater_quadruped.urdf.xacro")
 
 
+def requirements_file() -> str:
+    """The pinned requirements of this platform (scripts/setup.sh): the Jetson's Python 3.8 or the rest."""
+    return "requirements-jetson.txt" if sys.version_info < (3, 9) else "requirements.txt"
+
+
 def xacro_executable() -> str:
     sibling = os.path.join(os.path.dirname(sys.executable), "xacro")
     found = sibling if os.path.exists(sibling) else shutil.which("xacro")
     if found is None:
-        pytest.fail("xacro is not installed (requirements.txt pins it)")
+        pytest.fail("xacro is not installed beside %s or on PATH (%s pins it: pip install -r %s)"
+                    % (sys.executable, requirements_file(), requirements_file()))
     return found
 
 
@@ -134,7 +140,24 @@ def test_links_form_one_tree_rooted_at_base_link(urdf):
     roots = set(links) - set(children)
     assert roots == {"base_link"}
     assert all(j.find("parent").get("link") in links for j in urdf.findall("joint"))
-    assert {"leg%d_paw" % leg for leg in LEGS} <= set(links)
+    assert {"leg%d_paw" % leg for leg in LEGS} | {"imu_link"} <= set(links)
+
+
+def test_imu_link_is_fixed_to_base_link_at_the_configured_mount(tmp_path, urdf, params):
+    """/imu/data's frame (config/vn100.yaml) is a link of the URDF, so the TF tree has it."""
+    with open(config_path("vn100.yaml")) as stream:
+        vn100 = yaml.safe_load(stream)
+    joint = next(j for j in urdf.findall("joint") if j.find("child").get("link") == vn100["frame_id"])
+    assert joint.get("type") == "fixed" and joint.find("parent").get("link") == "base_link"
+    assert np.allclose(floats(joint.find("origin").get("xyz")), params.imu_mount_xyz)
+    assert np.allclose(floats(joint.find("origin").get("rpy")), 0.0)
+    with open(config_path("robot.yaml")) as stream:
+        tree = yaml.safe_load(stream)
+    tree["imu"]["mount_xyz"] = [0.05, -0.02, 0.03]
+    moved = tmp_path / "robot.yaml"
+    moved.write_text(yaml.safe_dump(tree))
+    origin = run_xacro("robot_yaml:=%s" % moved).find("joint[@name='imu_joint']/origin")
+    assert np.allclose(floats(origin.get("xyz")), [0.05, -0.02, 0.03])
 
 
 def test_limits_and_dimensions_come_from_robot_yaml(urdf, params):

@@ -1,0 +1,63 @@
+#!/usr/bin/env bash
+# CI step: the package runs from its install space. Builds both packages of the tree in a scratch
+# workspace, installs them into a temporary prefix, then, in a clean environment that has only
+# `source <prefix>/setup.bash` (no source tree, no devel space, no venv activation), checks that
+# rospack and the Python config lookup point into the prefix and runs sim.launch from it for a few
+# seconds: every node up and /imu/data flowing.
+#
+# Usage: tests/install_space.sh [SCRATCH]   (run under flock /tmp/uq-ros.lock: it starts roslaunch)
+#   env UQ_ROS_PORT (master port, default 11391), KEEP=1 keeps the scratch folder
+set -uo pipefail
+ROOT="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"
+# shellcheck disable=SC1091
+source "$ROOT/scripts/paths.sh"
+SCRATCH="${1:-$(mktemp -d /tmp/uq_install.XXXXXX)}"
+PORT="${UQ_ROS_PORT:-11391}"
+PREFIX="$SCRATCH/install"
+LOG="$SCRATCH/log"
+mkdir -p "$SCRATCH/ws/src" "$LOG"
+cleanup() { if [ -z "${KEEP:-}" ]; then rm -rf "$SCRATCH"; else echo "install_space: kept $SCRATCH"; fi; }
+trap cleanup EXIT
+fail() { echo "install_space: FAILED: $*"; for f in "$LOG"/*; do echo "--- $f"; tail -25 "$f"; done; exit 1; }
+
+ln -s "$UQ_ROOT" "$SCRATCH/ws/src/underwater_quadruped"
+ln -s "$UQ_ROOT/quadruped_msgs" "$SCRATCH/ws/src/quadruped_msgs"
+underlay=""
+[ -f /opt/ros/noetic/setup.bash ] && underlay="source /opt/ros/noetic/setup.bash;"
+( cd "$SCRATCH/ws" && env -i HOME="$SCRATCH" PATH=/usr/bin:/bin bash -c "$underlay catkin_make install \
+    -DPYTHON_EXECUTABLE='$UQ_VENV/bin/python' -DCMAKE_INSTALL_PREFIX='$PREFIX' -DCATKIN_ENABLE_TESTING=OFF" \
+    >"$LOG/catkin_make.log" 2>&1 ) || fail "catkin_make install"
+[ -f "$PREFIX/setup.bash" ] || fail "no $PREFIX/setup.bash"
+
+# Everything below runs in a clean environment from the install space only, outside the source tree.
+cat >"$SCRATCH/from_install.sh" <<EOS
+set -u
+cd "$SCRATCH"
+set +u; source "$PREFIX/setup.bash"; set -u
+export ROS_HOME="$SCRATCH/ros_home" ROS_MASTER_URI="http://localhost:$PORT"
+share="\$(rospack find underwater_quadruped)"
+[ "\$share" = "$PREFIX/share/underwater_quadruped" ] || { echo "rospack find underwater_quadruped: \$share"; exit 1; }
+echo "rospack find underwater_quadruped: \$share"
+echo "rosmsg show quadruped_msgs/ServoCommand: \$(rosmsg show quadruped_msgs/ServoCommand | tr '\n' ' ' | cut -c1-80)..."
+python - <<'PY' || exit 1
+import quadruped_control, quadruped_msgs.msg
+from quadruped_control.params import config_dir
+print("python: quadruped_control from %s, config from %s" % (quadruped_control.__file__, config_dir()))
+assert quadruped_control.__file__.startswith("$PREFIX/"), quadruped_control.__file__
+assert config_dir() == "$PREFIX/share/underwater_quadruped/config", config_dir()
+PY
+roslaunch -p $PORT underwater_quadruped sim.launch sim_id:=install_$PORT description:=true >"$LOG/roslaunch.log" 2>&1 &
+launch=\$!
+trap 'kill -INT \$launch 2>/dev/null; wait \$launch' EXIT
+for _ in \$(seq 1 60); do rostopic list >/dev/null 2>&1 && break; sleep 0.5; done
+timeout 60 rostopic echo -n 1 /imu/data/header/frame_id >"$LOG/imu.txt" 2>&1 || { echo "no /imu/data within 60 s"; exit 1; }
+echo "/imu/data frame_id: \$(head -1 "$LOG/imu.txt")"
+nodes="\$(rosnode list)"
+for n in /sim_node /vn100_node /servo_feedback_node /pwm_node /attitude_controller /robot_state_publisher /visualization; do
+  grep -qx "\$n" <<<"\$nodes" || { echo "node \$n is not running; nodes: \$(echo \$nodes)"; exit 1; }
+done
+echo "nodes up: \$(echo \$nodes)"
+EOS
+env -i HOME="$SCRATCH" PATH=/usr/bin:/bin LANG=C.UTF-8 bash "$SCRATCH/from_install.sh" || fail "from the install space"
+grep -E "cannot read|Traceback|process has died" "$LOG/roslaunch.log" && fail "errors in the launch log"
+echo "install_space: OK (installed into a temporary prefix, sim.launch ran from it)"
