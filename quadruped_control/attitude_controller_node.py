@@ -136,7 +136,7 @@ class AttitudeControllerNode:
         self.command_pub = rospy.Publisher("servo_command", ServoCommand, queue_size=10)
         self.state_pub = rospy.Publisher("controller_state", ControllerState, queue_size=10)
         self.diagnostics = Updater()
-        self.diagnostics.setHardwareID("attitude_controller")
+        self.diagnostics.setHardwareID("none")  # no hardware of its own (diagnostic_updater convention)
         self.diagnostics.add("control loop", self._diagnose_loop)
         self.diagnostics.add("inputs", self._diagnose_inputs)
 

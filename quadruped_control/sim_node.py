@@ -154,7 +154,7 @@ class SimNode:
         self.step_errors = 0
         self.started = time.monotonic()
         self.diagnostics = Updater()
-        self.diagnostics.setHardwareID("simulated robot")
+        self.diagnostics.setHardwareID("none")  # no hardware (diagnostic_updater convention)
         self.diagnostics.add("simulation", self._diagnose)
         rospy.loginfo("sim_node: fake I2C bus on %s, fake VN-100 on %s, %.0f Hz physics, %s servos",
                       self.bridge.path, self.imu_pty.path, rate,

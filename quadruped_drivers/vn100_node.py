@@ -82,7 +82,8 @@ class Vn100Node:
         self.last_reader_error = ""
         self.last_stamp: Optional[rospy.Time] = None
         self.diagnostics = Updater()
-        self.diagnostics.setHardwareID("vn100 %s" % self.port)
+        # The hardware ID is the sensor's serial number (register 3), set once the sensor has answered
+        # (diagnostic_updater's convention: "wait until the device is open before calling setHardwareID").
         self.diagnostics.add("imu", self._diagnose)
         self.diag_timer = rospy.Timer(rospy.Duration(1.0), lambda _e: self.diagnostics.update())
         self.thread = threading.Thread(target=self._run, name="vn100_reader", daemon=True)
@@ -146,6 +147,9 @@ class Vn100Node:
     def _diagnose(self, stat: DiagnosticStatusWrapper) -> DiagnosticStatusWrapper:
         rate = self.monitor.rate(time.monotonic())
         parser = self.driver.parser
+        if self.driver.serial_number:
+            stat.hardware_id = "VN-100 SN %s" % self.driver.serial_number
+            self.diagnostics.setHardwareID(stat.hardware_id)
         if not self.driver.connected:
             stat.summary(DiagnosticStatus.ERROR, "disconnected: %s" % (self.driver.last_error or "opening port"))
         elif rate < 0.9 * self.rate_hz:

@@ -57,6 +57,27 @@ for n in /sim_node /vn100_node /servo_feedback_node /pwm_node /attitude_controll
   grep -qx "\$n" <<<"\$nodes" || { echo "node \$n is not running; nodes: \$(echo \$nodes)"; exit 1; }
 done
 echo "nodes up: \$(echo \$nodes)"
+# /diagnostics: every status lands in exactly one analyzer of config/diagnostics_analyzers.yaml; hardware
+# IDs follow diagnostic_updater's convention ("none" without hardware, the VN-100's serial number).
+python - <<'PY' || exit 1
+import rospy
+from diagnostic_msgs.msg import DiagnosticArray
+from quadruped_control.diagnostics_analyzers import load_analyzers, matching_paths
+statuses = {}
+rospy.init_node("diagnostics_check", anonymous=True)
+sub = rospy.Subscriber("/diagnostics", DiagnosticArray, lambda m: statuses.update((s.name, s.hardware_id) for s in m.status))
+deadline = rospy.get_time() + 20.0
+wanted = {"vn100_node: imu", "attitude_controller: control loop", "sim_node: simulation", "pwm_node: servo output"}
+while not rospy.is_shutdown() and rospy.get_time() < deadline and not (wanted <= set(statuses) and statuses["vn100_node: imu"]):
+    rospy.sleep(0.2)
+analyzers = load_analyzers()
+bad = {n: matching_paths(n, analyzers) for n in statuses if len(matching_paths(n, analyzers)) != 1}
+print("diagnostics: %d statuses, hardware IDs %s" % (len(statuses), dict(sorted(statuses.items()))))
+assert wanted <= set(statuses), "missing statuses: %s" % (wanted - set(statuses))
+assert not bad, "statuses not in exactly one analyzer: %s" % bad
+assert statuses["attitude_controller: control loop"] == statuses["sim_node: simulation"] == "none", statuses
+assert statuses["vn100_node: imu"].startswith("VN-100 SN "), statuses["vn100_node: imu"]
+PY
 EOS
 env -i HOME="$SCRATCH" PATH=/usr/bin:/bin LANG=C.UTF-8 bash "$SCRATCH/from_install.sh" || fail "from the install space"
 grep -E "cannot read|Traceback|process has died" "$LOG/roslaunch.log" && fail "errors in the launch log"

@@ -14,7 +14,7 @@ from quadruped_drivers.vn100.driver import Vn100Driver, Vn100Error, serial_port_
 from quadruped_drivers.vn100.fake import (FakeVn100, InMemoryPort, ManualClock, NoiseModel,
                                           PtyFakeVn100)
 
-HANDSHAKE = (vp.async_pause_command() + vp.read_model_command()
+HANDSHAKE = (vp.async_pause_command() + vp.read_model_command() + vp.read_serial_number_command()
              + vp.disable_ascii_output_command()
              + vp.ascii_command("VNWRG,75,1,4,01,0131") + vp.async_resume_command())
 
@@ -55,6 +55,7 @@ def test_handshake_bytes_exact_and_model_read():
     rig.driver.connect()
     assert bytes(rig.ports[0].bytes_written) == HANDSHAKE
     assert rig.driver.model == "VN-100T-CR"
+    assert rig.driver.serial_number == "0100012345"
     assert rig.driver.connected and rig.driver.last_error == ""
     assert rig.device.ascii_output_type == 0
     assert rig.device.binary_config[75] == (1, 4, {1: 0x0131})

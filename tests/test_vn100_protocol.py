@@ -43,6 +43,7 @@ def test_xor_checksum_matches_design_example():
 # ------------------------------------------------------------------ ASCII commands
 def test_command_builders_exact_bytes():
     assert vp.read_model_command() == b"$VNRRG,01*72\r\n"
+    assert vp.read_serial_number_command() == b"$VNRRG,03*70\r\n"
     assert vp.read_register_command(75).startswith(b"$VNRRG,75*")
     assert vp.async_pause_command() == vp.ascii_command("VNASY,0")
     assert vp.async_resume_command() == vp.ascii_command("VNASY,1")

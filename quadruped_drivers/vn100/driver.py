@@ -6,7 +6,8 @@
 configuration sequence (UM001 Sec. 3.9, 4.2.3) is
 
 1. ``$VNASY,0`` pause asynchronous output (its echo is awaited but optional), flush input;
-2. ``$VNRRG,01`` read the model number (stored in :attr:`Vn100Driver.model`);
+2. ``$VNRRG,01`` read the model number (:attr:`Vn100Driver.model`), ``$VNRRG,03`` the serial number
+   (:attr:`Vn100Driver.serial_number`: the diagnostics' hardware ID);
 3. ``$VNWRG,06,0`` turn off ASCII asynchronous output;
 4. ``$VNWRG,75,1,<800/rate>,01,0131`` binary output 1 on serial port 1: TimeStartup, Quaternion,
    AngularRate, Accel (group 1); the echoed register contents are checked;
@@ -116,6 +117,7 @@ class Vn100Driver:
         self._pending: List[Vn100Sample] = []
         self._next_attempt: float = float("-inf")
         self.model: Optional[str] = None
+        self.serial_number: Optional[str] = None
         self.last_error = ""
         self.disconnects = 0
         self.connects = 0
@@ -176,6 +178,8 @@ class Vn100Driver:
         self.parser.reset()
         reply = self._command(vp.read_model_command(), "VNRRG", vp.MODEL_REGISTER)
         self.model = ",".join(reply.values)
+        reply = self._command(vp.read_serial_number_command(), "VNRRG", vp.SERIAL_NUMBER_REGISTER)
+        self.serial_number = ",".join(reply.values)
         self._command(vp.disable_ascii_output_command(), "VNWRG",
                       vp.ASYNC_OUTPUT_TYPE_REGISTER)
         reply = self._command(self._configure_command, "VNWRG", 75)

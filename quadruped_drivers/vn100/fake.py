@@ -1,7 +1,7 @@
 """A byte-level fake VN-100 for tests and simulation, an in-memory serial port and a pty bridge.
 
 :class:`FakeVn100` speaks the subset of the VN-100 serial protocol the driver uses (UM001 Sec. 3.8,
-3.9, 4.2-4.4): ASCII commands ``$VNRRG``, ``$VNWRG`` (registers 1, 5, 6, 7, 75-77), ``$VNASY``, with
+3.9, 4.2-4.4): ASCII commands ``$VNRRG``, ``$VNWRG`` (registers 1, 3, 5, 6, 7, 75-77), ``$VNASY``, with
 checksum verification (8-bit XOR, 16-bit CRC, or the ``XX`` bypass) and ``$VNERR`` replies; and the
 binary output message of register 75 at 800 Hz / RateDivisor. Like a factory-fresh sensor it starts
 with ASCII asynchronous output on (``$VNYMR`` at 40 Hz) and binary output off, and it returns to
@@ -35,6 +35,7 @@ from quadruped_drivers.vn100.conversions import ros_to_vn
 
 GRAVITY = 9.80665
 DEFAULT_MODEL = "VN-100T-CR"
+DEFAULT_SERIAL_NUMBER = "0100012345"
 _DEFAULT_ASCII_RATE_HZ = 40
 _ADOR_YMR = 14  # Async Data Output Type "VNYMR" (factory default)
 
@@ -78,7 +79,7 @@ class FakeVn100:
 
     OUTPUT_LIMIT = 1 << 16  # bytes; like a UART nobody reads, further output is lost
 
-    def __init__(self, model: str = DEFAULT_MODEL,
+    def __init__(self, model: str = DEFAULT_MODEL, serial_number: str = DEFAULT_SERIAL_NUMBER,
                  noise_std: Union[NoiseModel, float] = 0.0,
                  corrupt_probability: float = 0.0, drop_probability: float = 0.0,
                  rng: Union[np.random.Generator, int, None] = 0,
@@ -88,6 +89,7 @@ class FakeVn100:
             if not 0.0 <= p <= 1.0:
                 raise ValueError("%s must be in [0, 1], got %r" % (name, p))
         self.model = model
+        self.serial_number = serial_number
         self.noise = noise_std if isinstance(noise_std, NoiseModel) else \
             NoiseModel(float(noise_std), float(noise_std), float(noise_std))
         self.corrupt_probability = corrupt_probability
@@ -236,6 +238,8 @@ class FakeVn100:
     def _register_values(self, register: int) -> Optional[List[str]]:
         if register == 1:
             return [self.model]
+        if register == 3:
+            return [self.serial_number]
         if register == 5:
             return [str(self.baud)]
         if register == 6:
@@ -277,8 +281,8 @@ class FakeVn100:
             return
         values = args[1:]
         try:
-            if register == 1:
-                self._reply("VNERR,09")  # model number is read-only
+            if register in (1, 3):
+                self._reply("VNERR,09")  # model and serial number are read-only
                 return
             if register == 5:
                 baud = int(values[0])

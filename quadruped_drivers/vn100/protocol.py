@@ -514,6 +514,7 @@ def write_register_command(register: int, values: Sequence[str]) -> bytes:
 
 
 MODEL_REGISTER = 1
+SERIAL_NUMBER_REGISTER = 3
 ASYNC_OUTPUT_TYPE_REGISTER = 6
 BINARY_OUTPUT_REGISTERS = (75, 76, 77)
 
@@ -521,6 +522,11 @@ BINARY_OUTPUT_REGISTERS = (75, 76, 77)
 def read_model_command() -> bytes:
     """``$VNRRG,01``: model number register (e.g. ``VN-100T-CR``)."""
     return read_register_command(MODEL_REGISTER)
+
+
+def read_serial_number_command() -> bytes:
+    """``$VNRRG,03``: serial number register (a 32-bit number, e.g. ``0100012345``)."""
+    return read_register_command(SERIAL_NUMBER_REGISTER)
 
 
 def disable_ascii_output_command() -> bytes:
