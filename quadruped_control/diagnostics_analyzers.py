@@ -11,7 +11,7 @@ from __future__ import annotations
 import re
 from typing import Any, Dict, List, Mapping, Optional
 
-from quadruped_control.params import ParameterError, config_path, load_yaml
+from quadruped_common.config import ParameterError, config_path, load_yaml
 
 GENERIC = "diagnostic_aggregator/GenericAnalyzer"
 GROUP = "diagnostic_aggregator/AnalyzerGroup"

@@ -7,7 +7,7 @@ import subprocess
 import pytest
 
 from quadruped_control.diagnostics_analyzers import load_analyzers, matching_paths, validate_analyzers
-from quadruped_control.params import ParameterError
+from quadruped_common.config import ParameterError
 
 # "<node>: <task>" as diagnostic_updater names them (node names from launch/*.launch, tasks from the nodes)
 STATUSES = {

@@ -8,7 +8,7 @@ import xml.etree.ElementTree as ET
 import pytest
 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
-FIRST_PARTY = {"quadruped_control", "quadruped_drivers", "underwater_quadruped"}
+FIRST_PARTY = {"quadruped_common", "quadruped_control", "quadruped_drivers", "underwater_quadruped"}
 #: top-level module -> rosdep key (ROS packages are their own key)
 KEYS = {
     "numpy": "python3-numpy", "yaml": "python3-yaml", "serial": "python3-serial",
@@ -26,7 +26,7 @@ def runtime_imports():
     """Top-level modules imported anywhere (also lazily) by the package's runtime code."""
     found = set()
     sources = [os.path.join(ROOT, "nodes", n) for n in os.listdir(os.path.join(ROOT, "nodes"))]
-    for package in ("quadruped_control", "quadruped_drivers"):
+    for package in sorted(FIRST_PARTY - {"underwater_quadruped"}):
         for folder, _dirs, files in os.walk(os.path.join(ROOT, package)):
             sources += [os.path.join(folder, f) for f in files if f.endswith(".py")]
     for path in sources:
