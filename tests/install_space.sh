@@ -40,8 +40,8 @@ share="\$(rospack find underwater_quadruped)"
 echo "rospack find underwater_quadruped: \$share"
 echo "rosmsg show quadruped_msgs/ServoCommand: \$(rosmsg show quadruped_msgs/ServoCommand | tr '\n' ' ' | cut -c1-80)..."
 python - <<'PY' || exit 1
-import quadruped_control, quadruped_msgs.msg
-from quadruped_control.params import config_dir
+import quadruped_common, quadruped_control, quadruped_msgs.msg
+from quadruped_common.config import config_dir
 print("python: quadruped_control from %s, config from %s" % (quadruped_control.__file__, config_dir()))
 assert quadruped_control.__file__.startswith("$PREFIX/"), quadruped_control.__file__
 assert config_dir() == "$PREFIX/share/underwater_quadruped/config", config_dir()
