@@ -131,13 +131,14 @@ def run_trial(spec: TrialSpec) -> Dict[str, Any]:
     nominal_speed = load_robot_params(spec.robot_yaml).servo_no_load_speed
     servo_params = dataclasses.replace(servo_params,
                                        max_speed=servo_params.max_speed * robot.servo_no_load_speed / nominal_speed)
-    servo = make_servo_model(spec.servo_model, servo_params)
     model = None
     if spec.plant != "paper":
         tank = load_tank_params(spec.tank_yaml)
         if spec.tank_overrides:
             tank = tank.with_values(**{k: (tuple(v) if isinstance(v, list) else v) for k, v in spec.tank_overrides})
         model = make_plant(spec.plant, robot, tank)
+        servo_params = dataclasses.replace(servo_params, max_speed=servo_params.max_speed * tank.servo_speed_scale)
+    servo = make_servo_model(spec.servo_model, servo_params)
     if spec.controller not in ("on", "off"):
         raise ValueError("controller must be 'on' or 'off', got %r" % (spec.controller,))
     sim = ClosedLoopSimulation(
@@ -393,16 +394,7 @@ def study_paper_experiments(args: argparse.Namespace) -> int:
     servo = args.servo_model_given or ("rate-limited" if plant == "tank" else args.servo_model)
     duration = args.duration if args.duration_given else pe.DURATION
     rows = list(pe.PAPER_TABLE)
-    specs, tilts = [], []
-    for row in rows:
-        initial, tilt = pe.initial_attitude(pe.setpoint_rpy_deg(row), row["theta_init"], row["psi_init"])
-        tilts.append(tilt)
-        overrides = (("t_rec", float(row["t_rec"])),) if gains == "experiment" and row["t_rec"] != 1.5 else ()
-        specs.append(TrialSpec(label=pe.case_label(row), setpoint_rpy_deg=pe.setpoint_rpy_deg(row),
-                               initial_rpy_deg=tuple(round(v, 9) for v in initial), duration=duration,
-                               gains=gains, servo_model=servo, seed=args.seed, plant=plant, tank_yaml=args.tank_yaml,
-                               robot_yaml=args.robot_yaml, quiet=True, config_overrides=overrides,
-                               trace_stride=5))
+    specs, tilts = _experiment_specs(args, plant, gains, servo, duration)
     start = time.perf_counter()
     results = _run_many(specs, args, "paper-experiments")
     wall = time.perf_counter() - start
@@ -420,6 +412,106 @@ def study_paper_experiments(args: argparse.Namespace) -> int:
                    "figures": figures, "rows": table_rows}, stream, indent=2, allow_nan=False)
     print(markdown)
     print("figures: %s\n%d trials in %.1f s wall" % (", ".join(figures), len(specs), wall))
+    return 0
+
+
+def _experiment_specs(args: argparse.Namespace, plant: str, gains: str, servo: str, duration: float,
+                      tag: str = "", tank_overrides: Tuple[Tuple[str, Any], ...] = (),
+                      keep_trace: bool = True) -> Tuple[List[TrialSpec], List[float]]:
+    """The 15 trials of Table 1 (see :mod:`quadruped_control.studies.paper_experiments`) and their tilts."""
+    from quadruped_control.studies import paper_experiments as pe
+
+    specs, tilts = [], []
+    for row in pe.PAPER_TABLE:
+        initial, tilt = pe.initial_attitude(pe.setpoint_rpy_deg(row), row["theta_init"], row["psi_init"])
+        tilts.append(tilt)
+        overrides = (("t_rec", float(row["t_rec"])),) if gains == "experiment" and row["t_rec"] != 1.5 else ()
+        specs.append(TrialSpec(label=(tag + " " if tag else "") + pe.case_label(row),
+                               setpoint_rpy_deg=pe.setpoint_rpy_deg(row),
+                               initial_rpy_deg=tuple(round(v, 9) for v in initial), duration=duration,
+                               gains=gains, servo_model=servo, seed=args.seed, plant=plant, tank_yaml=args.tank_yaml,
+                               robot_yaml=args.robot_yaml, quiet=True, config_overrides=overrides,
+                               trace_stride=5, tank_overrides=tank_overrides, keep_trace=keep_trace))
+    return specs, tilts
+
+
+def study_identify(args: argparse.Namespace) -> int:
+    """Fit the tank plant's uncertain parameters to Table 1 (:mod:`quadruped_control.studies.identify`)."""
+    from quadruped_control.studies import identify as idf
+    from quadruped_control.studies import paper_experiments as pe
+
+    os.makedirs(args.out, exist_ok=True)
+    duration = args.duration if args.duration_given else 160.0  # longest paper t_s 128.6 s + 30 s hold
+    servo = args.servo_model_given or "rate-limited"
+    rows = list(pe.PAPER_TABLE)
+    start = time.perf_counter()
+
+    def evaluate(points: List[Dict[str, float]], tag: str) -> List[Dict[str, Any]]:
+        specs: List[TrialSpec] = []
+        for i, values in enumerate(points):
+            specs += _experiment_specs(args, "tank", "experiment", servo, duration, "%s%02d" % (tag, i),
+                                       idf.tank_overrides(values), keep_trace=False)[0]
+        results = _run_many(specs, args, "identify (%s)" % tag)
+        out = []
+        for i, values in enumerate(points):
+            table = pe.comparison_rows(rows, results[15 * i:15 * (i + 1)])
+            out.append({"values": values, "objective": idf.objective(table), "agreement": pe.agreement(table),
+                        "rows": table})
+        return out
+
+    hypercube = evaluate(idf.latin_hypercube(args.points, args.seed), "lhs")
+    costs = [e["objective"] for e in hypercube]
+    sensitivity = {name: idf.spearman([e["values"][name] for e in hypercube], costs)
+                   for name, _, _, _ in idf.PARAMETERS}
+    best = min(hypercube, key=lambda e: e["objective"])
+    ranked = sorted(sensitivity, key=lambda n: -abs(sensitivity[n]))[:args.refine]
+    refine_points = []
+    for name, _, low, high in idf.PARAMETERS:
+        if name in ranked:
+            for sign in (-1.0, 1.0):
+                values = dict(best["values"])
+                values[name] = min(high, max(low, values[name] + sign * (high - low) / 8.0))
+                refine_points.append(values)
+    refined = evaluate(refine_points, "ref") if refine_points else []
+    steps = {}
+    for e in refined:
+        changed = [n for n in e["values"] if e["values"][n] != best["values"][n]]
+        if changed:
+            steps.setdefault(changed[0], []).append((e["values"][changed[0]], e["objective"] - best["objective"]))
+    final = min([best] + refined, key=lambda e: e["objective"])
+    wall = time.perf_counter() - start
+    trials = 15 * (len(hypercube) + len(refined))
+    note = "simulate --study identify (%d trials)" % trials
+    with open(config_path("tank.yaml")) as stream:
+        identified = idf.update_tank_yaml(stream.read(), final["values"], note)
+    with open(os.path.join(args.out, "tank_identified.yaml"), "w") as stream:
+        stream.write(identified)
+    if args.write_config:
+        with open(config_path("tank.yaml"), "w") as stream:
+            stream.write(identified)
+    report = {"study": "identify", "duration": duration, "servo_model": servo, "points": args.points,
+              "refine": ranked, "trials": trials, "wall_time": wall, "best": final, "sensitivity_rank": sensitivity,
+              "refinement_steps": steps, "hypercube": [{k: e[k] for k in ("values", "objective", "agreement")}
+                                                       for e in hypercube]}
+    with open(os.path.join(args.out, "identify.json"), "w") as stream:
+        json.dump(report, stream, indent=2, allow_nan=False)
+    lines = ["## Identification: %d trials (%d parameter sets x 15 experiments, %g s each), %.0f s wall"
+             % (trials, len(hypercube) + len(refined), duration, wall), "",
+             "Best objective %.2f: same settled outcome %d of 15, t_s within 2x %d of 15." % (
+                 final["objective"], final["agreement"]["same_settled_outcome"], final["agreement"]["t_s_within_2x"]),
+             "", "| parameter | low | high | best | rank correlation with the objective (hypercube) "
+             "| objective change, refinement step down / up |", "|---|---|---|---|---|---|"]
+    for name, _, low, high in idf.PARAMETERS:
+        step = steps.get(name, [])
+        lines.append("| %s | %g | %g | %.4g | %+.2f | %s |" % (
+            name, low, high, final["values"][name], sensitivity[name],
+            " / ".join("%+.2f" % d for _, d in sorted(step)) if step else "--"))
+    lines += ["", pe.format_table(final["rows"], "Best parameter set: tank plant, experiment gains, %s servos" % servo)]
+    with open(os.path.join(args.out, "identify.md"), "w") as stream:
+        stream.write("\n".join(lines))
+    print("\n".join(lines))
+    print("results: %s; identified parameters: %s%s" % (args.out, os.path.join(args.out, "tank_identified.yaml"),
+                                                        " (written to config/tank.yaml)" if args.write_config else ""))
     return 0
 
 
@@ -458,7 +550,13 @@ def build_parser() -> argparse.ArgumentParser:
                              "config/robot.yaml); the robustness study varies its estimates around this file")
     parser.add_argument("--scheme", choices=SCHEMES, default=None,
                         help="stroke scheme (default: stroke.scheme of config/controller.yaml, 'paper')")
-    parser.add_argument("--study", choices=("paper-sim", "robustness", "schemes", "paper-experiments"), default=None,
+    parser.add_argument("--points", type=int, default=12, help="identify: Latin hypercube size (default 12)")
+    parser.add_argument("--refine", type=int, default=2,
+                        help="identify: parameters refined around the best point (default 2)")
+    parser.add_argument("--write-config", action="store_true",
+                        help="identify: write the identified values into the package's config/tank.yaml")
+    parser.add_argument("--study", choices=("paper-sim", "robustness", "schemes", "paper-experiments", "identify"),
+                        default=None,
                         help="run a study (paper-experiments: Table 1's 15 experiments, default on the tank plant "
                              "with the experiment gains and rate-limited servos)")
     parser.add_argument("--perturbed", type=int, default=1,
@@ -521,6 +619,10 @@ def main(argv: Optional[Sequence[str]] = None) -> int:
             return main_study(args)
         if args.study == "paper-experiments":
             return study_paper_experiments(args)
+        if args.study == "identify":
+            if args.points < 2 or args.refine < 0:
+                parser.error("--points must be >= 2 and --refine >= 0")
+            return study_identify(args)
         spec = TrialSpec(label="setpoint %s deg" % " ".join("%g" % v for v in args.rpy),
                          setpoint_rpy_deg=tuple(args.rpy), initial_rpy_deg=tuple(args.initial_rpy),
                          duration=args.duration, gains=GAIN_ALIASES[args.gains], servo_model=args.servo_model,

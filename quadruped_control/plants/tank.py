@@ -62,16 +62,22 @@ class TankParams:
     center_of_buoyancy: Vec3 = (0.0, 0.0, 0.001)
     added_mass_scale: float = 1.0
     paw_added_mass_scale: float = 1.0
+    #: paw drag coefficient relative to robot.yaml's C_D (the paper's CFD value)
+    paw_drag_scale: float = 1.0
+    #: servo speed relative to robot.yaml's no-load speed (loaded servos in water are slower)
+    servo_speed_scale: float = 1.0
 
     def __post_init__(self) -> None:
         for name in ("rope_length", "rope_stiffness"):
             value = getattr(self, name)
             if not (math.isfinite(value) and value > 0.0):
                 raise ParameterError("tank %s must be positive and finite, got %r" % (name, value))
-        for name in ("rope_damping", "added_mass_scale", "paw_added_mass_scale"):
+        for name in ("rope_damping", "added_mass_scale", "paw_added_mass_scale", "paw_drag_scale"):
             value = getattr(self, name)
             if not (math.isfinite(value) and value >= 0.0):
                 raise ParameterError("tank %s must be finite and >= 0, got %r" % (name, value))
+        if not (math.isfinite(self.servo_speed_scale) and 0.0 < self.servo_speed_scale <= 1.0):
+            raise ParameterError("tank servo_speed_scale must be in (0, 1], got %r" % (self.servo_speed_scale,))
         if not math.isfinite(self.net_weight):
             raise ParameterError("tank net_weight must be finite, got %r" % (self.net_weight,))
         for name in ("hook", "center_of_buoyancy"):
@@ -103,7 +109,9 @@ def load_tank_params(path: Optional[str] = None, tree: Optional[Mapping[str, Any
             rope_length=float(rope["length"]), rope_stiffness=float(rope["stiffness"]),
             rope_damping=float(rope["damping"]), net_weight=float(hydro["net_weight"]),
             center_of_buoyancy=tuple(float(v) for v in hydro["center_of_buoyancy"]),  # type: ignore[arg-type]
-            added_mass_scale=float(added["scale"]), paw_added_mass_scale=float(added["paw_scale"]))
+            added_mass_scale=float(added["scale"]), paw_added_mass_scale=float(added["paw_scale"]),
+            paw_drag_scale=float(data.get("paw_drag", {}).get("scale", 1.0)),
+            servo_speed_scale=float(data.get("servos", {}).get("speed_scale", 1.0)))
     except (KeyError, TypeError, ValueError, AttributeError) as exc:
         raise ParameterError("%s: malformed tank parameters: %s" % (path, exc)) from None
 
@@ -199,6 +207,7 @@ class TankModel(FloatingBaseModel):
     def __init__(self, params: RobotParams, tank: TankParams) -> None:
         super().__init__(params)
         self.tank = tank
+        self.drag_constant *= tank.paw_drag_scale
         if not tank.drag:
             self.drag_constant = 0.0
             self._drag = (0.0,) * 8

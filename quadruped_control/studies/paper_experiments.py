@@ -18,6 +18,7 @@ paper: the larger t_r, the larger t_s (unsettled is worst), the larger |e_ss| an
 """
 from __future__ import annotations
 
+import functools
 import math
 from typing import Any, Dict, List, Optional, Sequence, Tuple
 
@@ -64,6 +65,7 @@ def setpoint_rpy_deg(row: Dict[str, Any]) -> Tuple[float, float, float]:
     return {"roll": (cmd, 0.0, 0.0), "pitch": (0.0, cmd, 0.0), "roll+pitch": (cmd, cmd, 0.0)}[row["set"]]
 
 
+@functools.lru_cache(maxsize=64)
 def initial_attitude(setpoint_deg: Sequence[float], theta_init_deg: float, psi_init_deg: float,
                      directions: int = 72) -> Tuple[Tuple[float, float, float], float]:
     """(roll, pitch, yaw) in degrees of R_0 = Rz(psi_init) R_tilt with the smallest tilt angle giving the
@@ -224,7 +226,8 @@ def plot_sets(results: Sequence[Dict[str, Any]], rows: Sequence[Dict[str, Any]],
             panel.grid(alpha=0.3)
         panels[0].legend(ncol=6, fontsize=8, loc="best")
         panels[-1].set_xlabel("t [s]")
-        fig.suptitle("%s: %s setpoints (thin raw, thick 3 s smoothed, dashed setpoint)" % (title, case_set))
+        fig.suptitle("%s\n%s setpoints (thin raw, thick 3 s smoothed, dashed setpoint)" % (title, case_set),
+                     fontsize=10)
         fig.tight_layout()
         path = "%s_%s.png" % (out_prefix, case_set.replace("+", "_"))
         fig.savefig(path, dpi=110)
