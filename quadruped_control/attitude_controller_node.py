@@ -46,7 +46,8 @@ from std_srvs.srv import SetBool, SetBoolResponse
 
 from quadruped_control.controller import AttitudeController
 from quadruped_control.controller_config import TUNABLE_BOUNDS, apply_tunables, load_controller_config
-from quadruped_control.monitoring import HoldEpisodes, ImuLimits, RateMonitor, WindowStatistics
+from quadruped_common.imu_plausibility import SensorLimits
+from quadruped_control.monitoring import HoldEpisodes, RateMonitor, WindowStatistics
 from quadruped_control.params import JOINT_NAMES, ParameterError, load_robot_params
 from quadruped_control.so3 import quat_to_rot, rot_to_quat, rpy_to_rot
 from quadruped_control.supervisor import ControlSupervisor
@@ -103,8 +104,8 @@ class AttitudeControllerNode:
 
         # IMU plausibility: the sensor's ranges from vn100.yaml, the same values the driver checks.
         vn100 = load_vn100_settings(_optional_path("~vn100_yaml"))
-        imu_limits = ImuLimits(max_angular_rate=vn100["max_angular_rate"], max_acceleration=vn100["max_acceleration"],
-                               quaternion_norm_tolerance=vn100["quaternion_norm_tolerance"])
+        imu_limits = SensorLimits(max_angular_rate=vn100["max_angular_rate"], max_acceleration=vn100["max_acceleration"],
+                                  unit_tolerance=vn100["quaternion_norm_tolerance"])
         self.config = self.config.replace(max_angular_rate=imu_limits.max_angular_rate)
         controller = AttitudeController(robot, self.config)
         roll, pitch, yaw = [math.radians(v) for v in rospy.get_param("~setpoint_rpy_deg", [0.0, 0.0, 0.0])]

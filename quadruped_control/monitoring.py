@@ -4,7 +4,8 @@
   diagnostics the nodes publish and for the latency benchmark.
 * :class:`RateMonitor`: message rate over a sliding time window.
 * :func:`imu_sample_problem`: why an IMU sample must not be used by the controller (NaN, non-unit
-  quaternion, rate or acceleration beyond the sensor's range (:class:`ImuLimits`), non-finite or old
+  quaternion, rate or acceleration beyond the sensor's range (the check shared with the VN-100 driver,
+  :mod:`quadruped_common.imu_plausibility`), non-finite or old
   stamp), or ``None`` when it is fine; :func:`time_problem` is the one freshness check (a non-finite
   stamp or clock is never fresh). The supervisor drops and counts implausible samples and holds.
 * :class:`LowPassDifferentiator`: filtered joint velocities from sampled positions (servo feedback).
@@ -14,14 +15,12 @@ from __future__ import annotations
 
 import collections
 import math
-from dataclasses import dataclass
 from typing import Deque, Dict, Optional, Sequence
 
 import numpy as np
 
-#: A quaternion whose norm is further than this from 1 is rejected (the VN-100 outputs unit
-#: quaternions to float precision; anything worse is a corrupted or uninitialised message).
-QUATERNION_NORM_TOLERANCE = 1e-3
+from quadruped_common.imu_plausibility import DEFAULT_LIMITS, ImplausibleSample, SensorLimits, check_sample
+
 
 
 class WindowStatistics:
@@ -81,27 +80,6 @@ class RateMonitor:
         return (len(self._stamps) - 1) / span if span > 0 else 0.0
 
 
-@dataclass(frozen=True)
-class ImuLimits:
-    """What a working IMU can report; anything outside is a corrupted sample, never a measurement.
-
-    Defaults: the VN-100's ranges (VN-100 datasheet, "IMU specifications": gyro +-2000 deg/s,
-    accelerometer +-16 g) plus 5 %, per axis, and a unit-quaternion tolerance far above float32
-    rounding. The controller node takes the values from config/vn100.yaml (``max_angular_rate``,
-    ``max_acceleration``, ``quaternion_norm_tolerance``), the same ones the driver checks.
-    """
-
-    max_angular_rate: float = 36.652       # rad/s = 2000 deg/s * 1.05
-    max_acceleration: float = 164.75       # m/s^2 = 16 g * 1.05
-    quaternion_norm_tolerance: float = QUATERNION_NORM_TOLERANCE
-
-    def __post_init__(self) -> None:
-        for name in ("max_angular_rate", "max_acceleration", "quaternion_norm_tolerance"):
-            value = getattr(self, name)
-            if isinstance(value, bool) or not isinstance(value, (int, float)) or not (math.isfinite(value) and value > 0):
-                raise ValueError("ImuLimits.%s must be a positive finite number, got %r" % (name, value))
-
-
 def time_problem(stamp: float, now: float, max_age: float, what: str = "IMU sample") -> Optional[str]:
     """Why a sample stamped ``stamp`` is not fresh at ``now``, or ``None``: a non-finite stamp or clock
     (NaN, +-inf, both inf: the age would be NaN and every comparison false), older than ``max_age``, or
@@ -122,39 +100,24 @@ def time_problem(stamp: float, now: float, max_age: float, what: str = "IMU samp
 
 def imu_values_problem(orientation_xyzw: Sequence[float], angular_velocity: Sequence[float],
                        linear_acceleration: Optional[Sequence[float]] = None,
-                       limits: ImuLimits = ImuLimits()) -> Optional[str]:
-    """Why an IMU sample's values cannot come from a working sensor, or ``None``: non-finite values, a
-    quaternion whose norm is off by more than the tolerance, a rate or an acceleration (when given)
-    beyond the sensor's range on any axis."""
+                       limits: SensorLimits = DEFAULT_LIMITS) -> Optional[str]:
+    """Why an IMU sample's values cannot come from a working sensor (``"<reason>: <message>"``, reason as
+    in :class:`~quadruped_common.imu_plausibility.ImplausibleSample`), or ``None``: the shared check
+    :func:`~quadruped_common.imu_plausibility.check_sample` (non-finite, non-unit quaternion, rate or
+    acceleration beyond the sensor's range)."""
     try:
-        q = np.asarray(orientation_xyzw, dtype=float)
-        w = np.asarray(angular_velocity, dtype=float)
-        a = None if linear_acceleration is None else np.asarray(linear_acceleration, dtype=float)
-    except (TypeError, ValueError, OverflowError):
-        return "IMU sample is not numeric"
-    if q.shape != (4,) or not np.all(np.isfinite(q)):
-        return "IMU orientation is not finite"
-    if w.shape != (3,) or not np.all(np.isfinite(w)):
-        return "IMU angular velocity is not finite"
-    if a is not None and (a.shape != (3,) or not np.all(np.isfinite(a))):
-        return "IMU linear acceleration is not finite"
-    norm = math.sqrt(float(np.dot(q, q))) if float(np.max(np.abs(q))) < 1e150 else math.inf
-    if not abs(norm - 1.0) <= limits.quaternion_norm_tolerance:
-        return "IMU quaternion is not unit (norm %.4g)" % norm
-    rate = float(np.max(np.abs(w)))
-    if rate > limits.max_angular_rate:
-        return "IMU angular rate %.4g rad/s beyond the sensor range %.4g rad/s" % (rate, limits.max_angular_rate)
-    if a is not None:
-        accel = float(np.max(np.abs(a)))
-        if accel > limits.max_acceleration:
-            return "IMU acceleration %.4g m/s^2 beyond the sensor range %.4g m/s^2" % (accel, limits.max_acceleration)
+        check_sample(orientation_xyzw, angular_velocity, linear_acceleration, limits)
+    except ImplausibleSample as exc:
+        return "IMU sample implausible, %s: %s" % (exc.reason, exc)
+    except (TypeError, ValueError, OverflowError) as exc:
+        return "IMU sample malformed: %s" % exc
     return None
 
 
 def imu_sample_problem(orientation_xyzw: Sequence[float], angular_velocity: Sequence[float],
                        sample_time: float, now: float, max_age: float,
                        linear_acceleration: Optional[Sequence[float]] = None,
-                       limits: ImuLimits = ImuLimits()) -> Optional[str]:
+                       limits: SensorLimits = DEFAULT_LIMITS) -> Optional[str]:
     """Why an IMU sample is unusable for control, or ``None``: :func:`imu_values_problem` (non-finite,
     non-unit quaternion, beyond the sensor's range) or :func:`time_problem` (non-finite stamp or clock,
     stale, from the future)."""

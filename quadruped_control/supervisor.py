@@ -15,8 +15,8 @@ with pytest:
   hold (no stroking, integral frozen, feet at the nominal pose) and the reason in the output.
 
 Input plausibility. Every IMU sample is checked when it arrives (:meth:`ControlSupervisor.set_imu`)
-against what a working sensor can report (:class:`~quadruped_control.monitoring.ImuLimits`: finite,
-unit quaternion, rate and acceleration within the sensor's range): an implausible sample is dropped
+against what a working sensor can report (:mod:`quadruped_common.imu_plausibility`, the check the
+VN-100 driver applies too: finite, unit quaternion, rate and acceleration within the sensor's range): an implausible sample is dropped
 (never stored, so it never reaches the controller), counted per reason and reported; the previous
 sample stays in use while it is fresh, and ``max_implausible_run`` implausible samples in a row make
 the controller hold until a plausible one arrives. Time is checked at every tick
@@ -36,7 +36,8 @@ from typing import Callable, Dict, Optional, Sequence
 import numpy as np
 
 from quadruped_control.controller import AttitudeController, ControllerOutput, estimate_body_torque
-from quadruped_control.monitoring import ImuLimits, imu_values_problem, time_problem
+from quadruped_common.imu_plausibility import ImplausibleSample, SensorLimits, check_sample
+from quadruped_control.monitoring import time_problem
 from quadruped_control.so3 import quat_to_rot
 
 #: Maps 12 joint angles (rad, JOINT_NAMES order) to 12 pulse widths (us), clamped to the limits.
@@ -80,7 +81,7 @@ class ControlSupervisor:
     """
 
     def __init__(self, controller: AttitudeController, pulse_map: PulseMap, max_imu_age: float = 0.05,
-                 armed: bool = False, imu_limits: Optional[ImuLimits] = None, max_implausible_run: int = 3,
+                 armed: bool = False, imu_limits: Optional[SensorLimits] = None, max_implausible_run: int = 3,
                  joint_margin: float = math.radians(15.0), max_joint_age: float = 0.1) -> None:
         if not (math.isfinite(max_imu_age) and max_imu_age > 0):
             raise ValueError("max_imu_age must be a positive number of seconds, got %r" % (max_imu_age,))
@@ -91,7 +92,7 @@ class ControlSupervisor:
         self.controller = controller
         self.pulse_map = pulse_map
         self.max_imu_age = float(max_imu_age)
-        self.imu_limits = imu_limits or ImuLimits()
+        self.imu_limits = imu_limits or SensorLimits()
         self.max_implausible_run = max_implausible_run
         self.max_joint_age = float(max_joint_age)
         limits = controller.robot.joint_limits.as_array()  # rows theta1..3, columns low, high
@@ -135,13 +136,14 @@ class ControlSupervisor:
         message).
         """
         self.imu_received += 1
-        problem = imu_values_problem(orientation_xyzw, angular_velocity, linear_acceleration, self.imu_limits)
-        if problem is not None:
+        try:
+            check_sample(orientation_xyzw, angular_velocity, linear_acceleration, self.imu_limits)
+        except (ImplausibleSample, ValueError, TypeError, OverflowError) as exc:
+            reason = exc.reason if isinstance(exc, ImplausibleSample) else "malformed"
+            problem = "implausible IMU sample (%s): %s" % (reason, exc)
             self.imu_dropped += 1
             self.implausible_run += 1
-            kind = problem.split(" (")[0].split(" %")[0]
-            kind = " ".join(word for word in kind.split() if not any(ch.isdigit() for ch in word))
-            self.imu_drop_reasons[kind] = self.imu_drop_reasons.get(kind, 0) + 1
+            self.imu_drop_reasons[reason] = self.imu_drop_reasons.get(reason, 0) + 1
             self.last_imu_drop = problem
             return problem
         self.implausible_run = 0

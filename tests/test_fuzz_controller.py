@@ -23,7 +23,8 @@ from quadruped_common.tunables import TUNABLES, bounds
 from quadruped_control.controller import AttitudeController
 from quadruped_control.controller_config import Gains, apply_tunables, load_controller_config
 from quadruped_control.kinematics import within_limits
-from quadruped_control.monitoring import ImuLimits, imu_values_problem, time_problem
+from quadruped_common.imu_plausibility import SensorLimits
+from quadruped_control.monitoring import imu_values_problem, time_problem
 from quadruped_control.params import load_robot_params
 from quadruped_control.so3 import quat_to_rot
 from quadruped_control.supervisor import ControlSupervisor
@@ -32,7 +33,7 @@ from quadruped_drivers.config_files import LOADERS
 ROBOT = load_robot_params()
 BASE = load_controller_config(gain_set="experiment")
 LIMITS = bounds()
-LIMITS_IMU = ImuLimits()
+LIMITS_IMU = SensorLimits()
 
 any_float = st.floats(allow_nan=True, allow_infinity=True)
 unit_quaternion = st.lists(st.floats(-1.0, 1.0), min_size=4, max_size=4).filter(

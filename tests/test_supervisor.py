@@ -62,9 +62,9 @@ def test_armed_with_good_imu_strokes_within_limits(supervisor):
 
 
 @pytest.mark.parametrize("quaternion, reason", [
-    ((math.nan, 0.0, 0.0, 1.0), "not finite"),
-    ((0.0, 0.0, 0.0, 0.5), "not unit"),
-    ((0.0, 0.0, 0.0, 0.0), "not unit"),
+    ((math.nan, 0.0, 0.0, 1.0), "non-finite"),
+    ((0.0, 0.0, 0.0, 0.5), "quaternion norm"),
+    ((0.0, 0.0, 0.0, 0.0), "quaternion norm"),
 ])
 def test_invalid_imu_holds_the_safe_pose(supervisor, quaternion, reason):
     supervisor.arm(True)

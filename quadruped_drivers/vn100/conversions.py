@@ -36,6 +36,10 @@ from typing import Sequence, Tuple, Union
 
 import numpy as np
 
+# The plausibility check (and its limits) is shared with the controller's supervisor; re-exported here.
+from quadruped_common.imu_plausibility import (ACCEL_RANGE_M_S2, DEFAULT_LIMITS, GYRO_RANGE_RAD_S,  # noqa: F401
+                                               UNIT_TOLERANCE, ImplausibleSample, SensorLimits,
+                                               bounded_vector3, check_sample, unit_quaternion)
 from quadruped_control.so3 import quat_multiply
 
 ArrayLike = Union[Sequence[float], np.ndarray]
@@ -46,49 +50,6 @@ Q_ENU_NED = np.array([_S, _S, 0.0, 0.0])
 #: R_FRD_FLU as a quaternion (x, y, z, w) (its own inverse up to sign).
 Q_FRD_FLU = np.array([1.0, 0.0, 0.0, 0.0])
 _FLIP_YZ = np.array([1.0, -1.0, -1.0])
-
-#: A received quaternion whose norm differs from 1 by more than this is rejected (the VN-100 sends
-#: float32 unit quaternions, norm error ~1e-7; anything larger means corruption).
-UNIT_TOLERANCE = 1e-3
-#: VN-100 measurement ranges (VectorNav VN-100 datasheet / product brief, "IMU specifications":
-#: gyro range +-2000 deg/s, accelerometer range +-16 g). The sensor saturates there, so a larger
-#: component can only come from a corrupted packet. Defaults of :class:`SensorLimits`; the node takes
-#: its limits from ``config/vn100.yaml``.
-GYRO_RANGE_RAD_S = math.radians(2000.0)
-ACCEL_RANGE_M_S2 = 16.0 * 9.80665
-
-
-class ImplausibleSample(ValueError):
-    """A sample that cannot come from a working VN-100 (non-finite, non-unit quaternion, out of range).
-
-    ``reason`` is a short, stable key for counters and diagnostics: ``non-finite``,
-    ``quaternion norm``, ``angular rate range``, ``acceleration range``.
-    """
-
-    def __init__(self, reason: str, message: str) -> None:
-        super().__init__(message)
-        self.reason = reason
-
-
-@dataclass(frozen=True)
-class SensorLimits:
-    """Plausibility bounds of one sample: ``|component| <= max_angular_rate`` (rad/s) and
-    ``<= max_acceleration`` (m/s^2), quaternion norm within ``unit_tolerance`` of 1."""
-
-    max_angular_rate: float = GYRO_RANGE_RAD_S
-    max_acceleration: float = ACCEL_RANGE_M_S2
-    unit_tolerance: float = UNIT_TOLERANCE
-
-    def __post_init__(self) -> None:
-        for name in ("max_angular_rate", "max_acceleration", "unit_tolerance"):
-            value = getattr(self, name)
-            if isinstance(value, bool) or not isinstance(value, (int, float)) or not (
-                    math.isfinite(value) and value > 0):
-                raise ValueError("SensorLimits.%s must be a positive finite number, got %r" % (name, value))
-
-
-DEFAULT_LIMITS = SensorLimits()
-
 
 @dataclass
 class ImuReading:
@@ -115,29 +76,6 @@ _VN_TO_ROS = _sandwich_matrix(Q_ENU_NED, Q_FRD_FLU)
 _ROS_TO_VN = _sandwich_matrix(Q_ENU_NED * _CONJ, Q_FRD_FLU * _CONJ)
 
 
-def _unit_quaternion(q: ArrayLike, name: str, tolerance: float) -> np.ndarray:
-    v = np.asarray(q, dtype=float).reshape(-1)
-    if v.shape != (4,):
-        raise ValueError("%s must have 4 elements (x, y, z, w), got shape %s" % (name, np.shape(q)))
-    if not np.all(np.isfinite(v)):
-        raise ImplausibleSample("non-finite", "%s has non-finite elements: %s" % (name, v))
-    norm = float(np.linalg.norm(v))
-    if not abs(norm - 1.0) <= tolerance:  # also catches an overflowing norm (inf)
-        raise ImplausibleSample("quaternion norm", "%s is not a unit quaternion (norm %.6g)" % (name, norm))
-    return v / norm
-
-
-def _vector3(v: ArrayLike, name: str, bound: float = math.inf, reason: str = "") -> np.ndarray:
-    a = np.asarray(v, dtype=float).reshape(-1)
-    if a.shape != (3,):
-        raise ValueError("%s must have 3 elements, got shape %s" % (name, np.shape(v)))
-    if not np.all(np.isfinite(a)):
-        raise ImplausibleSample("non-finite", "%s has non-finite elements: %s" % (name, a))
-    if not np.all(np.abs(a) <= bound):
-        raise ImplausibleSample(reason, "%s %s is outside the sensor range +-%.6g" % (name, a, bound))
-    return a
-
-
 def _canonical(q: np.ndarray) -> np.ndarray:
     q = q / np.linalg.norm(q)
     return -q if q[3] < 0.0 else q
@@ -153,9 +91,7 @@ def vn_to_ros(quaternion_xyzw: ArrayLike, angular_rate: ArrayLike, acceleration:
     quaternion that is not unit length within ``limits.unit_tolerance``, or a rate or acceleration
     component beyond the sensor's range; ``ValueError`` for wrong shapes.
     """
-    q_ned_frd = _unit_quaternion(quaternion_xyzw, "VN-100 quaternion", limits.unit_tolerance)
-    rate = _vector3(angular_rate, "angular rate", limits.max_angular_rate, "angular rate range")
-    accel = _vector3(acceleration, "acceleration", limits.max_acceleration, "acceleration range")
+    q_ned_frd, rate, accel = check_sample(quaternion_xyzw, angular_rate, acceleration, limits)
     q_enu_flu = _VN_TO_ROS @ q_ned_frd
     return ImuReading(orientation_xyzw=_canonical(q_enu_flu),
                       angular_velocity=rate * _FLIP_YZ,
@@ -171,8 +107,8 @@ def ros_to_vn(orientation_xyzw: ArrayLike, angular_velocity: ArrayLike,
     ``Q_FLU_FRD = Q_FRD_FLU^-1``. Returns ``(q_xyzw with w >= 0, rate_FRD, specific_force_FRD)``.
     Used by the fake VN-100 so the simulator can feed ROS-frame truth.
     """
-    q_enu_flu = _unit_quaternion(orientation_xyzw, "orientation", unit_tolerance)
-    rate = _vector3(angular_velocity, "angular velocity")
-    accel = _vector3(linear_acceleration, "linear acceleration")
+    q_enu_flu = unit_quaternion(orientation_xyzw, "orientation", unit_tolerance)
+    rate = bounded_vector3(angular_velocity, "angular velocity")
+    accel = bounded_vector3(linear_acceleration, "linear acceleration")
     q_ned_frd = _ROS_TO_VN @ q_enu_flu
     return _canonical(q_ned_frd), rate * _FLIP_YZ, accel * _FLIP_YZ
