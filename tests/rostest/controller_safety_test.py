@@ -110,7 +110,7 @@ class ControllerSafetyTest(unittest.TestCase):
         # 3. NaN quaternion: safe pose, reason, ERROR diagnostic, node alive.
         self.mode = "nan"
         commands, states, diagnostics = self.window(3.5)
-        self.assert_holding(states, commands, "not finite")
+        self.assert_holding(states, commands, "non-finite")
         self.assertTrue(any(d.level == DiagnosticStatus.ERROR and "not finite" in d.message
                             for _, d in diagnostics), "no ERROR diagnostic for the NaN IMU")
 
@@ -122,7 +122,7 @@ class ControllerSafetyTest(unittest.TestCase):
         # 5. Non-unit quaternion: hold.
         self.mode = "nonunit"
         commands, states, _ = self.window(3.5)
-        self.assert_holding(states, commands, "not unit")
+        self.assert_holding(states, commands, "quaternion norm")
 
         # 6. IMU silent (after good samples): the fallback timer keeps the node ticking and holding.
         self.mode = "good"
