@@ -111,7 +111,7 @@ class ControllerSafetyTest(unittest.TestCase):
         self.mode = "nan"
         commands, states, diagnostics = self.window(3.5)
         self.assert_holding(states, commands, "non-finite")
-        self.assertTrue(any(d.level == DiagnosticStatus.ERROR and "not finite" in d.message
+        self.assertTrue(any(d.level == DiagnosticStatus.ERROR and "non-finite" in d.message
                             for _, d in diagnostics), "no ERROR diagnostic for the NaN IMU")
 
         # 4. Good again: stroking resumes.
