@@ -20,29 +20,43 @@ current scheme holds (power strokes retrace, recoveries complete, the feet retur
 the record shows 'hold' with the reason), then the new scheme starts from the nominal pose.
 
 Discretisation of the integral (the paper gives the continuous law dz/dt = e_R + K_aw Delta_sat): with
-h the elapsed time of this step, backward (implicit) Euler,
-    z_k = z_(k-1) + h (e_R,k + K_aw Delta_sat,k),   Delta_sat,k = tau_cmd,k - sat(tau_cmd,k),
-    tau_cmd,k = c_k - K_i z_k   (c_k: the P, D and feedforward terms of eq. (pid) at this step),
-so the saturation excess fed back is that of the torque this step commands (the record's tau_cmd and
-tau_sat satisfy it exactly unless the integral limit acts). It has a closed form: with the predictor
-u = c_k - K_i (z_(k-1) + h e_R,k) and g = h K_aw K_i >= 0, tau_cmd,k = u when |u| <= tau_max and
-otherwise tau_cmd,k = u_hat (|u| + g tau_max) / (1 + g), i.e. Delta_sat,k = u_hat (|u| - tau_max) / (1 + g).
+h the elapsed time of this step, c_k the P, D and feedforward terms of eq. (pid) at this step, so that
+tau_cmd,k = c_k - K_i z_k, and g = h K_aw K_i >= 0 the anti-windup loop gain of one step:
+
+* g <= 1 (every gain set of config/controller.yaml at 100 Hz; the discretisation of the first release,
+  so ``--study paper-sim`` keeps its numbers): forward in the anti-windup term,
+      z_k = z_(k-1) + h (e_R,k + K_aw Delta_sat,(k-1)),  Delta_sat,(k-1) = tau_cmd,(k-1) - sat(tau_cmd,(k-1)),
+  the saturation excess of the torque commanded over the interval that just ended (zero after start,
+  reset and hold);
+* g > 1: backward (implicit) Euler,
+      z_k = z_(k-1) + h (e_R,k + K_aw Delta_sat,k),
+  the excess of the torque this step commands. It has a closed form: with the predictor
+  u = c_k - K_i (z_(k-1) + h e_R,k), tau_cmd,k = u when |u| <= tau_max and otherwise
+  tau_cmd,k = u_hat (|u| + g tau_max) / (1 + g), i.e. Delta_sat,k = u_hat (|u| - tau_max) / (1 + g).
+
 Then z_k is clipped to the norm ``integral_limit`` (on by default). h is the actual elapsed time
 t_k - t_(k-1) clipped to [0, max_step_factor * dt]; the first step after construction/reset uses dt.
 While holding, the integral is frozen.
 
 Stability for EVERY gain and step the interfaces allow (K_p, K_i, K_d, K_aw >= 0, any h >= 0). The
 dead-zone phi(tau) = tau - sat(tau) = tau - P(tau), P the projection onto the ball |tau| <= tau_max, is
-the gradient of the convex function 1/2 dist(tau, ball)^2, so it is monotone and 1-Lipschitz. The step
-solves tau + g phi(tau) = u, i.e. tau_cmd,k = (I + g phi)^(-1)(u), the resolvent of a monotone
-operator, which is firmly non-expansive for every g >= 0: |tau_k - tau'_k| <= |u - u'|. For K_i > 0,
-z_k = (c_k - tau_k) / K_i, so two integral states z, z' fed the same measurements satisfy
-|z_k - z'_k| <= |tau_k - tau'_k| / K_i <= |u - u'| / K_i = |z_(k-1) - z'_(k-1)|: the update is
-non-expansive in z, whatever g is (no growth, no sign-alternating oscillation). For K_i = 0 the
-integral does not act on the torque. The clip to ``integral_limit`` is a projection onto a ball,
-non-expansive too, and bounds |z| absolutely. The explicit scheme z_k = z_(k-1) + h (e_k + K_aw
-Delta_(k-1)) used before multiplies the deviation by (1 - h K_aw K_i) in saturation and diverges once
-h K_aw K_i > 2 (e.g. K_i 20, K_aw 10 and h >= 12.5 ms: the integral passed 1e6 in under a second).
+the gradient of the convex function 1/2 dist(tau, ball)^2, so it is monotone and firmly non-expansive:
+<phi(a) - phi(b), a - b> >= |phi(a) - phi(b)|^2. Take two integral states z, z' fed the same
+measurements, d = z_(k-1) - z'_(k-1), and K_i > 0 (for K_i = 0 the integral does not act on the torque).
+
+* Forward form: d_k = d + h K_aw delta with delta = phi(a) - phi(b), a - b = -K_i d (a, b the previous
+  commands). Firm non-expansiveness gives <delta, d> <= -|delta|^2 / K_i, so
+  |d_k|^2 <= |d|^2 + (h K_aw / K_i) |delta|^2 (g - 2) <= |d|^2 for g <= 2; with g <= 1 the deviation is
+  not even reversed in sign (in saturation along a fixed direction it is multiplied by 1 - g in [0, 1]).
+  Beyond g = 2 this form diverges (e.g. K_i 20, K_aw 10 and h >= 12.5 ms: the integral passed 1e6 in
+  under a second), which is why it is used only up to g = 1.
+* Backward form: the step solves tau + g phi(tau) = u, i.e. tau_cmd,k = (I + g phi)^(-1)(u), the resolvent
+  of a monotone operator, firmly non-expansive for every g >= 0: |tau_k - tau'_k| <= |u - u'|. As
+  z_k = (c_k - tau_k) / K_i, |z_k - z'_k| <= |u - u'| / K_i = |d|.
+
+Each step is therefore non-expansive in z whichever form it takes (gains and h may change between
+steps), the clip to ``integral_limit`` is a projection onto a ball, non-expansive too, and it bounds |z|
+absolutely: no growth and no sign-alternating oscillation for any gain or step.
 
 No overflow, no NaN: step() refuses non-finite inputs and angular rates beyond ``max_angular_rate``
 (ValueError; the supervisor then holds), so with |e_R| <= 1, bounded gains (cfg bounds), |z| <=
@@ -317,6 +331,7 @@ class AttitudeController:
         nominal pose: call :meth:`hold` first to retract them smoothly.
         """
         self._integral = [0.0, 0.0, 0.0]
+        self._delta_sat: Vec3 = (0.0, 0.0, 0.0)  # Delta_sat of the last command (forward form)
         self._t_prev: Optional[float] = None
         self._e_R: Vec3 = (0.0, 0.0, 0.0)
         self._geodesic = 0.0
@@ -435,20 +450,25 @@ class AttitudeController:
 
         k_p, k_i, k_d, k_aw = gains.k_p, gains.k_i, gains.k_d, gains.k_aw
         tau_max = config.tau_max
-        # P, D and feedforward terms c_k of eq. (pid); the integral term -K_i z_k is added below.
-        nx = -k_p * ex - k_d * wx + fx
-        ny = -k_p * ey - k_d * wy + fy
-        nz = -k_p * ez - k_d * wz + fz
-        # Integral of eq. (pid), backward Euler with the anti-windup excess of this step's command (module
-        # docstring): predictor z + h e_R, its command u; in saturation add h K_aw Delta_sat in closed form.
+        # Integral of eq. (pid) (module docstring): forward in the anti-windup excess while the loop gain
+        # g = h K_aw K_i of one step is at most 1 (the first release's form), backward Euler beyond.
         z = self._integral
-        zx, zy, zz = z[0] + h * ex, z[1] + h * ey, z[2] + h * ez
-        ux, uy, uz = nx - k_i * zx, ny - k_i * zy, nz - k_i * zz
-        norm_u = math.hypot(ux, uy, uz)
-        if norm_u > tau_max:
-            g = h * k_aw * k_i
-            step = h * k_aw * (norm_u - tau_max) / ((1.0 + g) * norm_u)  # h K_aw |Delta_sat| / |u|
-            zx, zy, zz = zx + step * ux, zy + step * uy, zz + step * uz
+        g = h * k_aw * k_i
+        if g <= 1.0:
+            ax, ay, az = self._delta_sat
+            zx = z[0] + h * (ex + k_aw * ax)
+            zy = z[1] + h * (ey + k_aw * ay)
+            zz = z[2] + h * (ez + k_aw * az)
+        else:
+            # Predictor z + h e_R and its command u; in saturation add h K_aw Delta_sat in closed form.
+            zx, zy, zz = z[0] + h * ex, z[1] + h * ey, z[2] + h * ez
+            ux = -k_p * ex - k_i * zx - k_d * wx + fx
+            uy = -k_p * ey - k_i * zy - k_d * wy + fy
+            uz = -k_p * ez - k_i * zz - k_d * wz + fz
+            norm_u = math.hypot(ux, uy, uz)
+            if norm_u > tau_max:
+                step = h * k_aw * (norm_u - tau_max) / ((1.0 + g) * norm_u)  # h K_aw |Delta_sat| / |u|
+                zx, zy, zz = zx + step * ux, zy + step * uy, zz + step * uz
         norm_z = math.hypot(zx, zy, zz)
         limit = config.integral_limit
         if norm_z > limit:
@@ -456,8 +476,13 @@ class AttitudeController:
             zx, zy, zz = zx * scale, zy * scale, zz * scale
         z[0], z[1], z[2] = zx, zy, zz
 
-        cx, cy, cz = nx - k_i * zx, ny - k_i * zy, nz - k_i * zz
+        # Summed in the order of eq. (pid) as the first release did: the paper-sim limit cycles are
+        # sensitive to the last bit, and their published numbers are kept.
+        cx = -k_p * ex - k_i * zx - k_d * wx + fx
+        cy = -k_p * ey - k_i * zy - k_d * wy + fy
+        cz = -k_p * ez - k_i * zz - k_d * wz + fz
         sx_, sy_, sz_, saturated = _saturate_f(cx, cy, cz, tau_max)  # eq. (sat)
+        self._delta_sat = (cx - sx_, cy - sy_, cz - sz_)
         self._tau_sat = (sx_, sy_, sz_)
         self._omega = (wx, wy, wz)
 
@@ -492,6 +517,7 @@ class AttitudeController:
         else:
             h = self._config.dt
         self._hold_reason = str(reason)
+        self._delta_sat = (0.0, 0.0, 0.0)
         self._tau_sat = (0.0, 0.0, 0.0)
         self._stroke.hold(h)
         zero = (0.0, 0.0, 0.0)

@@ -95,6 +95,8 @@ def test_saturation_keeps_direction_and_limits_magnitude():
 
 
 def test_saturated_step_and_anti_windup_term_by_hand():
+    """g = h K_aw K_i <= 1 (every configured gain set at 100 Hz): the anti-windup term uses the excess of
+    the torque commanded over the interval that just ended (controller docstring, forward form)."""
     ctl = controller()
     angle = math.radians(60.0)
     R = rot_x(angle)
@@ -104,17 +106,31 @@ def test_saturated_step_and_anti_windup_term_by_hand():
     assert s1.saturated
     np.testing.assert_allclose(s1.tau_sat, 2.0 * tau1 / np.linalg.norm(tau1), rtol=1e-14)
     assert np.linalg.norm(s1.tau_sat) == pytest.approx(2.0)
-    # Backward Euler (controller docstring): z_1 = dt (e + K_aw Delta_sat,1), with the excess of the
-    # torque commanded by this very step, tau_cmd,1 = -K_p e - K_i z_1.
-    delta1 = s1.tau_cmd - s1.tau_sat
-    np.testing.assert_allclose(s1.integral, DT * (e + 0.25 * delta1), rtol=1e-13)
+    # First step: no torque was commanded before, z_1 = dt e; tau_cmd,1 = -K_p e - K_i z_1.
+    np.testing.assert_allclose(s1.integral, DT * e, rtol=1e-13)
     np.testing.assert_allclose(s1.tau_cmd, -5.0 * e - 0.15 * s1.integral, rtol=1e-14)
-    # Closed form: |Delta_sat| = (|u| - tau_max) / (1 + h K_aw K_i), u the command without the excess term.
-    u = -5.0 * e - 0.15 * DT * e
-    assert np.linalg.norm(delta1) == pytest.approx((np.linalg.norm(u) - 2.0) / (1.0 + DT * 0.25 * 0.15), rel=1e-13)
     s2 = ctl.step(DT, R, np.zeros(3)).state
-    # z_2 = z_1 + dt (e + K_aw Delta_sat of step 2), eq. (pid)
-    np.testing.assert_allclose(s2.integral, s1.integral + DT * (e + 0.25 * (s2.tau_cmd - s2.tau_sat)), rtol=1e-13)
+    # z_2 = z_1 + dt (e + K_aw Delta_sat,1), eq. (pid) with the excess of step 1's command.
+    np.testing.assert_allclose(s2.integral, s1.integral + DT * (e + 0.25 * (s1.tau_cmd - s1.tau_sat)), rtol=1e-13)
+
+
+def test_backward_euler_anti_windup_by_hand_when_the_loop_gain_of_a_step_exceeds_one():
+    """g = h K_aw K_i > 1: backward Euler with the excess of this step's own command, in closed form."""
+    gains = Gains(k_p=5.0, k_i=20.0, k_d=0.0, k_aw=10.0)   # g = 0.01 * 10 * 20 = 2
+    ctl = AttitudeController(PARAMS, plain_config(gains=gains))
+    angle = math.radians(60.0)
+    R = rot_x(angle)
+    e = np.array([math.sin(angle), 0.0, 0.0])
+    s1 = ctl.step(0.0, R, np.zeros(3)).state
+    assert s1.saturated
+    delta1 = s1.tau_cmd - s1.tau_sat
+    np.testing.assert_allclose(s1.integral, DT * (e + 10.0 * delta1), rtol=1e-12)
+    np.testing.assert_allclose(s1.tau_cmd, -5.0 * e - 20.0 * s1.integral, rtol=1e-12)
+    # |Delta_sat| = (|u| - tau_max) / (1 + g), u the command without the excess term.
+    u = -5.0 * e - 20.0 * DT * e
+    assert np.linalg.norm(delta1) == pytest.approx((np.linalg.norm(u) - 2.0) / (1.0 + 2.0), rel=1e-12)
+    s2 = ctl.step(DT, R, np.zeros(3)).state
+    np.testing.assert_allclose(s2.integral, s1.integral + DT * (e + 10.0 * (s2.tau_cmd - s2.tau_sat)), rtol=1e-12)
 
 
 def test_anti_windup_stops_the_integral_growing_under_saturation():
@@ -338,7 +354,8 @@ def test_hold_freezes_integral_retracts_feet_and_restarts_cleanly():
     s = ctl.step(3.0, R, np.zeros(3)).state
     assert not s.holding and s.hold_reason == ""
     assert s.pair_phase == ("recovery", "power")
-    np.testing.assert_allclose(s.integral, frozen + DT * (s.e_R + 0.25 * (s.tau_cmd - s.tau_sat)), rtol=1e-12)
+    # The excess of the last command is cleared by the hold: z = z_frozen + dt e_R.
+    np.testing.assert_allclose(s.integral, frozen + DT * s.e_R, rtol=1e-12)
 
 
 def test_hold_never_raises_and_works_before_any_step():
