@@ -6,6 +6,7 @@ from typing import Any, Callable, Dict
 
 from quadruped_control.controller_config import load_controller_config
 from quadruped_control.params import load_robot_params
+from quadruped_control.plants import load_tank_params
 from quadruped_control.simulation import load_simulation_settings
 from quadruped_drivers.calibration import load_servo_calibration
 from quadruped_drivers.hardware_config import load_hardware_config
@@ -19,4 +20,6 @@ LOADERS: Dict[str, Callable[[str], Any]] = {
     "servo_calibration.yaml": load_servo_calibration,
     "simulation.yaml": load_simulation_settings,
     "vn100.yaml": load_vn100_settings,
+    "tank.yaml": load_tank_params,
+    "tank_identified.yaml": load_tank_params,
 }

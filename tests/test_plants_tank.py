@@ -11,7 +11,7 @@ from scipy.integrate import solve_ivp
 
 from quadruped_control.controller_config import load_controller_config
 from quadruped_control.dynamics import FloatingBaseModel, RigidBodyState
-from quadruped_control.params import ParameterError, load_robot_params
+from quadruped_control.params import ParameterError, config_path, load_robot_params
 from quadruped_control.plants import TankModel, TankParams, load_tank_params, make_plant
 from quadruped_control.plants.added_mass import (ellipsoid_added_mass, ellipsoid_coefficients, kirchhoff_terms,
                                                  point_mass_matrix)
@@ -125,6 +125,27 @@ def test_tank_params_are_validated() -> None:
         TankParams(hook=(0.0, float("nan"), 0.0))
     with pytest.raises(ParameterError):
         load_tank_params(tree={"suspension": {}})
+
+
+@pytest.mark.parametrize("edit, key", [
+    (("suspension: true", "suspension: 1"), "effects.suspension"),           # a number is not a switch
+    (("drag: true", "drag: 'no'"), "effects.drag"),                        # bool('no') would be True
+    (("length: 0.5", "length: true"), "suspension.length"),                 # true is not 1
+    (("stiffness: 2000.0", "stiffness: .nan"), "suspension.stiffness"),
+    (("net_weight: 1.0", "net_weight: 1.0e+300"), "hydrostatics.net_weight"),
+    (("  scale: 1.0\n  # [estimate] paws", "  scale: -1.0\n  # [estimate] paws"), "added_mass.scale"),
+    (("hook: [0.0, 0.0, 0.077]", "hook: [0.0, 0.077]"), "suspension.hook"),
+    (("paw_drag:", "paw_dragg:"), "paw_dragg"),                              # unknown key
+])
+def test_malformed_tank_yaml_is_refused_naming_file_and_key(tmp_path, edit, key) -> None:
+    text = open(config_path("tank.yaml")).read()
+    old, new = edit
+    assert old in text, old
+    path = tmp_path / "tank.yaml"
+    path.write_text(text.replace(old, new, 1))
+    with pytest.raises(ParameterError) as info:
+        load_tank_params(str(path))
+    assert str(path) in str(info.value) and key in str(info.value)
     with pytest.raises(ValueError):
         make_plant("ocean", ROBOT)
 

@@ -35,7 +35,8 @@ import numpy as np
 from quadruped_control.dynamics import (FloatingBaseModel, Mat3, RigidBodyState, _StepContext, _as_mat3,
                                         _chart_rate, _check_dt, _exp_rotation, _joint_array,
                                         _leg_kinematics_flat, _matmul)
-from quadruped_control.params import ParameterError, RobotParams, config_path, load_yaml
+from quadruped_common.config import ParameterError, boolean, check_keys, load_config, number, vector
+from quadruped_control.params import RobotParams
 from quadruped_control.plants.added_mass import ellipsoid_added_mass, point_mass_matrix, sphere_added_mass
 
 __all__ = ["TankModel", "TankParams", "hydrostatic_wrench", "load_tank_params", "rope_force",
@@ -90,30 +91,51 @@ class TankParams:
         return replace(self, **values)
 
 
+def tank_params_from_dict(data: Mapping[str, Any]) -> TankParams:
+    """Validate a parsed tank.yaml tree (strict types, no unknown keys, physically possible ranges,
+    wider than the identification's plausible bounds) into :class:`TankParams`; ParameterError naming
+    the key otherwise."""
+    check_keys(data, "", ("effects", "suspension", "hydrostatics", "added_mass", "paw_drag", "servos"),
+               required=("suspension", "hydrostatics", "added_mass"))
+    effects = check_keys(data.get("effects", {}), "effects",
+                         ("suspension", "hydrostatics", "torso_added_mass", "paw_added_mass", "drag"))
+    rope = check_keys(data["suspension"], "suspension", ("hook", "length", "stiffness", "damping"),
+                      required=("hook", "length", "stiffness", "damping"))
+    hydro = check_keys(data["hydrostatics"], "hydrostatics", ("net_weight", "center_of_buoyancy"),
+                       required=("net_weight", "center_of_buoyancy"))
+    added = check_keys(data["added_mass"], "added_mass", ("scale", "paw_scale"), required=("scale", "paw_scale"))
+    paw_drag = check_keys(data.get("paw_drag", {}), "paw_drag", ("scale",))
+    servos = check_keys(data.get("servos", {}), "servos", ("speed_scale",))
+
+    def switch(name: str) -> bool:
+        return boolean(effects.get(name, True), "effects." + name)
+
+    return TankParams(
+        suspension=switch("suspension"), hydrostatics=switch("hydrostatics"),
+        torso_added_mass=switch("torso_added_mass"), paw_added_mass=switch("paw_added_mass"),
+        drag=switch("drag"),
+        hook=tuple(vector(rope["hook"], "suspension.hook", 3, -1.0, 1.0)),  # type: ignore[arg-type]
+        rope_length=number(rope["length"], "suspension.length", 0.0, 20.0, low_open=True),
+        rope_stiffness=number(rope["stiffness"], "suspension.stiffness", 0.0, 1e7, low_open=True),
+        rope_damping=number(rope["damping"], "suspension.damping", 0.0, 1e6),
+        net_weight=number(hydro["net_weight"], "hydrostatics.net_weight", -100.0, 100.0),
+        center_of_buoyancy=tuple(vector(hydro["center_of_buoyancy"], "hydrostatics.center_of_buoyancy",
+                                        3, -0.5, 0.5)),  # type: ignore[arg-type]
+        added_mass_scale=number(added["scale"], "added_mass.scale", 0.0, 10.0),
+        paw_added_mass_scale=number(added["paw_scale"], "added_mass.paw_scale", 0.0, 10.0),
+        paw_drag_scale=number(paw_drag.get("scale", 1.0), "paw_drag.scale", 0.0, 10.0),
+        servo_speed_scale=number(servos.get("speed_scale", 1.0), "servos.speed_scale", 0.0, 10.0, low_open=True))
+
+
 def load_tank_params(path: Optional[str] = None, tree: Optional[Mapping[str, Any]] = None) -> TankParams:
-    """:class:`TankParams` from ``config/tank.yaml`` (or ``path``/``tree``); ParameterError if malformed."""
-    path = path or config_path("tank.yaml")
-    data = tree if tree is not None else load_yaml(path)
-    try:
-        effects = data.get("effects", {})
-        rope = data["suspension"]
-        hydro = data["hydrostatics"]
-        added = data["added_mass"]
-        return TankParams(
-            suspension=bool(effects.get("suspension", True)),
-            hydrostatics=bool(effects.get("hydrostatics", True)),
-            torso_added_mass=bool(effects.get("torso_added_mass", True)),
-            paw_added_mass=bool(effects.get("paw_added_mass", True)),
-            drag=bool(effects.get("drag", True)),
-            hook=tuple(float(v) for v in rope["hook"]),  # type: ignore[arg-type]
-            rope_length=float(rope["length"]), rope_stiffness=float(rope["stiffness"]),
-            rope_damping=float(rope["damping"]), net_weight=float(hydro["net_weight"]),
-            center_of_buoyancy=tuple(float(v) for v in hydro["center_of_buoyancy"]),  # type: ignore[arg-type]
-            added_mass_scale=float(added["scale"]), paw_added_mass_scale=float(added["paw_scale"]),
-            paw_drag_scale=float(data.get("paw_drag", {}).get("scale", 1.0)),
-            servo_speed_scale=float(data.get("servos", {}).get("speed_scale", 1.0)))
-    except (KeyError, TypeError, ValueError, AttributeError) as exc:
-        raise ParameterError("%s: malformed tank parameters: %s" % (path, exc)) from None
+    """:class:`TankParams` from ``config/tank.yaml`` (or ``path``/``tree``) through the strict loader
+    (:mod:`quadruped_common.config`); ParameterError naming the file and the key if malformed."""
+    if tree is not None:
+        try:
+            return tank_params_from_dict(tree)
+        except ParameterError as exc:
+            raise ParameterError("%s: %s" % (path or "tank parameters", exc)) from None
+    return load_config(path, "tank.yaml", tank_params_from_dict)
 
 
 def rope_force(hook_world: Sequence[float], hook_velocity: Sequence[float], anchor: Sequence[float],
