@@ -34,9 +34,34 @@ def prepare_bag_dir(path: str) -> str:
     return path
 
 
-def record_command(bag_dir: str, prefix: str, args: Sequence[str]) -> List[str]:
-    """The rosbag command line: bags named PREFIX_<date>.bag in bag_dir."""
-    return ["rosbag", "record", "-o", os.path.join(bag_dir, prefix)] + list(args)
+#: rosbag record options whose value is the next argument (the rest are flags or --opt=value)
+_VALUE_OPTIONS = {"-o", "-O", "-b", "-l", "-e", "-x", "-p", "--output-prefix", "--output-name", "--buffsize",
+                  "--chunksize", "--limit", "--exclude", "--node", "--duration", "--size", "--max-splits",
+                  "--lz4", "--publish"}
+
+
+def resolve_topics(args: Sequence[str], namespace: str) -> List[str]:
+    """``args`` with every relative topic name made absolute in ``namespace`` (ROS_NAMESPACE).
+
+    rosbag subscribes to a relative name in its namespace but writes the name as given into the bag;
+    absolute names keep the bags' topics what ``rostopic list`` shows (and what bag_report reads).
+    Options, their values and roslaunch's ``__name:=`` remappings are left alone.
+    """
+    prefix = "/" + "/".join(part for part in namespace.split("/") if part)
+    out = []
+    takes_value = False
+    for arg in args:
+        if takes_value or arg.startswith("-") or ":=" in arg or arg.startswith("/"):
+            out.append(arg)
+        else:
+            out.append(prefix.rstrip("/") + "/" + arg)
+        takes_value = arg in _VALUE_OPTIONS
+    return out
+
+
+def record_command(bag_dir: str, prefix: str, args: Sequence[str], namespace: str = "/") -> List[str]:
+    """The rosbag command line: bags named PREFIX_<date>.bag in bag_dir, topics absolute."""
+    return ["rosbag", "record", "-o", os.path.join(bag_dir, prefix)] + resolve_topics(args, namespace)
 
 
 def main(argv: Sequence[str]) -> int:
@@ -48,7 +73,7 @@ def main(argv: Sequence[str]) -> int:
     except BagDirError as exc:
         print("bag_record: %s; nothing is recorded" % exc, file=sys.stderr)
         return 1
-    command = record_command(bag_dir, argv[2], argv[3:])
+    command = record_command(bag_dir, argv[2], argv[3:], os.environ.get("ROS_NAMESPACE", "/"))
     print("bag_record: recording into %s" % bag_dir, flush=True)
     os.execvp(command[0], command)
     return 0  # not reached: execvp replaces the process

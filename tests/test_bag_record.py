@@ -4,7 +4,7 @@ import stat
 
 import pytest
 
-from quadruped_control.bag_record import BagDirError, main, prepare_bag_dir, record_command
+from quadruped_control.bag_record import BagDirError, main, prepare_bag_dir, record_command, resolve_topics
 
 
 def test_missing_bag_dir_is_created(tmp_path):
@@ -36,7 +36,16 @@ def test_read_only_bag_dir_is_refused(tmp_path):
 
 def test_command_keeps_roslaunch_arguments(tmp_path):
     command = record_command(str(tmp_path), "uq", ["imu/data", "__name:=recorder"])
-    assert command == ["rosbag", "record", "-o", os.path.join(str(tmp_path), "uq"), "imu/data", "__name:=recorder"]
+    assert command == ["rosbag", "record", "-o", os.path.join(str(tmp_path), "uq"), "/imu/data", "__name:=recorder"]
+
+
+def test_relative_topics_are_resolved_in_the_namespace():
+    args = ["--split", "--size=1024", "-l", "5", "imu/data", "/diagnostics", "__log:=x", "sim/pose"]
+    assert resolve_topics(args, "/uq1/") == ["--split", "--size=1024", "-l", "5", "/uq1/imu/data", "/diagnostics",
+                                             "__log:=x", "/uq1/sim/pose"]
+    assert resolve_topics(args, "fleet/uq2")[4] == "/fleet/uq2/imu/data"
+    assert resolve_topics(["imu/data"], "/") == ["/imu/data"]
+    assert resolve_topics(["imu/data"], "") == ["/imu/data"]
 
 
 def test_main_refuses_a_bad_bag_dir_without_starting_rosbag(tmp_path, capsys):
