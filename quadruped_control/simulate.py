@@ -615,7 +615,7 @@ def main(argv: Optional[Sequence[str]] = None) -> int:
         if args.study == "robustness":
             return study_robustness(args)
         if args.study == "schemes":
-            from quadruped_control.scheme_study import main_study
+            from quadruped_control.studies.schemes import main_study
             return main_study(args)
         if args.study == "paper-experiments":
             return study_paper_experiments(args)

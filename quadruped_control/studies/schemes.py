@@ -1,6 +1,6 @@
 """``simulate --study schemes``: the paper's stroke scheme against the coordinated one on one ensemble.
 
-Ensemble (:mod:`quadruped_control.paper_cases`): the paper's simulation cases (15/45/75 degrees on all
+Ensemble (:mod:`quadruped_control.studies.cases`): the paper's simulation cases (15/45/75 degrees on all
 axes), the 15 experiments of Table 1 (reconstructed initial attitudes, t_rec = 1.0 s where the paper used
 it, 180 s), 20 seeded random setpoint / initial-attitude pairs (120 s); each from its initial attitude and
 from ``perturbed`` starts with every initial Euler angle perturbed uniformly by +-0.5 degrees (numpy
@@ -23,7 +23,7 @@ from typing import Any, Dict, List, Optional, Sequence, Tuple
 
 import numpy as np
 
-from quadruped_control.paper_cases import paper_sim_cases, random_cases, table1_cases
+from quadruped_control.studies.cases import paper_sim_cases, random_cases, table1_cases
 
 __all__ = ["build_specs", "compare", "main_study"]
 
