@@ -184,7 +184,11 @@ def _figure(rows: Sequence[Dict[str, Any]], path: str) -> None:
 def main_study(args: Any) -> int:
     """The study of the module docstring with the CLI's arguments (``out``, ``jobs``, ``perturbed``,
     ``robot_yaml``, and the study runner's ``dask_scheduler``, ``resume``, ``quiet``); trials run through
-    :func:`quadruped_control.studies.run_trials` (executor, progress bar, resume from ``out/trials``)."""
+    :func:`quadruped_control.studies.run_trials` (executor, progress bar, resume from ``out/trials``).
+
+    Exit status: 0 when every target of the comparison is met, 2 when one is not (the results are
+    written either way), so a script can tell; a ``set -e`` script that runs several studies should not
+    take 2 for a failed run."""
     from quadruped_control.simulate import _run_many
 
     out = args.out
