@@ -322,3 +322,14 @@ def test_controller_off_holds_the_nominal_pose() -> None:
     np.testing.assert_allclose(result.joint_targets, np.tile(nominal_joint_angles(ROBOT).ravel(), (201, 1)))
     assert result.info["controller"] == "off"
     assert abs(result.rpy[-1, 0]) < 0.2  # swung back towards level, not driven to the setpoint
+
+
+def test_empty_optional_tank_section_means_defaults_but_a_wrong_type_is_refused(tmp_path) -> None:
+    text = open(config_path("tank.yaml")).read()
+    assert "  speed_scale: 1.0" in text
+    path = tmp_path / "tank.yaml"
+    path.write_text(text.replace("  speed_scale: 1.0", "", 1))          # 'servos:' left empty (null)
+    assert load_tank_params(str(path)).servo_speed_scale == 1.0
+    path.write_text(text.replace("  speed_scale: 1.0", "", 1).replace("servos:", "servos: 3", 1))
+    with pytest.raises(ParameterError, match="'servos' must be a mapping"):
+        load_tank_params(str(path))

@@ -91,21 +91,28 @@ class TankParams:
         return replace(self, **values)
 
 
+def _optional_section(data: Mapping[str, Any], name: str) -> Any:
+    """An optional section: absent or empty (YAML null, e.g. ``servos:`` with every key removed) means
+    all its defaults; anything else is checked by the caller (a number or a list is still refused)."""
+    value = data.get(name)
+    return {} if value is None else value
+
+
 def tank_params_from_dict(data: Mapping[str, Any]) -> TankParams:
     """Validate a parsed tank.yaml tree (strict types, no unknown keys, physically possible ranges,
     wider than the identification's plausible bounds) into :class:`TankParams`; ParameterError naming
     the key otherwise."""
     check_keys(data, "", ("effects", "suspension", "hydrostatics", "added_mass", "paw_drag", "servos"),
                required=("suspension", "hydrostatics", "added_mass"))
-    effects = check_keys(data.get("effects", {}), "effects",
+    effects = check_keys(_optional_section(data, "effects"), "effects",
                          ("suspension", "hydrostatics", "torso_added_mass", "paw_added_mass", "drag"))
     rope = check_keys(data["suspension"], "suspension", ("hook", "length", "stiffness", "damping"),
                       required=("hook", "length", "stiffness", "damping"))
     hydro = check_keys(data["hydrostatics"], "hydrostatics", ("net_weight", "center_of_buoyancy"),
                        required=("net_weight", "center_of_buoyancy"))
     added = check_keys(data["added_mass"], "added_mass", ("scale", "paw_scale"), required=("scale", "paw_scale"))
-    paw_drag = check_keys(data.get("paw_drag", {}), "paw_drag", ("scale",))
-    servos = check_keys(data.get("servos", {}), "servos", ("speed_scale",))
+    paw_drag = check_keys(_optional_section(data, "paw_drag"), "paw_drag", ("scale",))
+    servos = check_keys(_optional_section(data, "servos"), "servos", ("speed_scale",))
 
     def switch(name: str) -> bool:
         return boolean(effects.get(name, True), "effects." + name)
