@@ -17,7 +17,7 @@ from __future__ import annotations
 
 import abc
 import math
-from typing import Callable, List, Optional, Sequence, Tuple
+from typing import Any, Callable, List, Optional, Sequence, Tuple
 
 from quadruped_control.kinematics import UnreachableError
 from quadruped_control.params import LEGS, ParameterError, RobotParams
@@ -50,7 +50,11 @@ class StrokeScheme(abc.ABC):
     joints: List[Vec3]
     nominal: List[Vec3]
     holding: bool
+    hold_time: float
     pairs: Tuple[Tuple[int, int], Tuple[int, int]]
+    #: Per-pair state of the scheme; each has ``legs``, ``phase``, ``time`` and ``velocities`` (latched
+    #: foot velocity per leg of the pair), read by :attr:`pair_phase_time` and :attr:`velocity_commands`.
+    _pairs: List[Any]
 
     # ---- shared set-up -------------------------------------------------------------------------
 
@@ -113,14 +117,23 @@ class StrokeScheme(abc.ABC):
         """Phase of each pair: 'power', 'recovery' or 'hold'."""
 
     @property
-    @abc.abstractmethod
     def pair_phase_time(self) -> Tuple[float, float]:
         """Time since each pair's phase started (since the hold started while holding), s."""
+        if self.holding:
+            return self.hold_time, self.hold_time
+        return self._pairs[0].time, self._pairs[1].time
 
     @property
-    @abc.abstractmethod
     def velocity_commands(self) -> List[Vec3]:
-        """Foot velocity commands in force per leg (legs 1..4; zero outside power phases)."""
+        """Foot velocity commands in force per leg (legs 1..4; zero outside power phases and while
+        holding)."""
+        out: List[Vec3] = [(0.0, 0.0, 0.0)] * 4
+        if not self.holding:
+            for pair in self._pairs:
+                if pair.phase == PHASE_POWER:
+                    for slot, leg in enumerate(pair.legs):
+                        out[leg - 1] = pair.velocities[slot]
+        return out
 
     @property
     def at_rest(self) -> bool:

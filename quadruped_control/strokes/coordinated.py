@@ -219,22 +219,6 @@ class CoordinatedStrokes(StrokeScheme):
         return tuple(PHASE_POWER if p.phase == PHASE_POWER else PHASE_RECOVERY  # type: ignore[return-value]
                      for p in self._pairs)
 
-    @property
-    def pair_phase_time(self) -> Tuple[float, float]:
-        if self.holding:
-            return self.hold_time, self.hold_time
-        return self._pairs[0].time, self._pairs[1].time
-
-    @property
-    def velocity_commands(self) -> List[Vec3]:
-        out: List[Vec3] = [(0.0, 0.0, 0.0)] * 4
-        if not self.holding:
-            for pair in self._pairs:
-                if pair.phase == PHASE_POWER:
-                    for slot, leg in enumerate(pair.legs):
-                        out[leg - 1] = pair.velocities[slot]
-        return out
-
     # ---- stepping ----------------------------------------------------------------------------
 
     def advance(self, dt: float, velocity_command: VelocityCommand) -> None:

@@ -224,23 +224,6 @@ class StrokeCycle(StrokeScheme):
             return PHASE_HOLD, PHASE_HOLD
         return self._pairs[0].phase, self._pairs[1].phase
 
-    @property
-    def pair_phase_time(self) -> Tuple[float, float]:
-        """Time since each pair's phase started (since the hold started while holding), s."""
-        if self.holding:
-            return self.hold_time, self.hold_time
-        return self._pairs[0].time, self._pairs[1].time
-
-    @property
-    def velocity_commands(self) -> List[Vec3]:
-        """Latched foot velocity commands per leg (legs 1..4; zero for legs not in a power phase)."""
-        out: List[Vec3] = [(0.0, 0.0, 0.0)] * 4
-        for pair in self._pairs:
-            if pair.phase == PHASE_POWER and not self.holding:
-                for slot, leg in enumerate(pair.legs):
-                    out[leg - 1] = pair.velocities[slot]
-        return out
-
     # ---- stepping ----------------------------------------------------------------------------
 
     def advance(self, dt: float, velocity_command: VelocityCommand) -> None:
