@@ -117,7 +117,7 @@ class SimNode:
             raise ParameterError("~lockstep_graph entries are 'topic node', got %r" % (self.lockstep_graph,))
         self.lockstep_timeouts = 0
 
-        self.fake = build_fake_hardware(self.hardware)
+        self.fake = build_fake_hardware(self.hardware, log_transactions=False)  # runs for hours: no log
         # The bus's own lock: bridged transactions and the physics updates of the fake registers
         # never interleave mid-transaction.
         self.lock = self.fake.lock

@@ -322,3 +322,16 @@ def test_open_real_bus_fails_clearly_without_the_device():
         open_i2c_bus(250)
     with pytest.raises(ValueError):
         open_i2c_bus(-1)
+
+
+def test_fake_hardware_for_a_long_running_server_keeps_no_log():
+    # sim_node serves the drivers for hours: a log of every transaction grew its heap without bound
+    # and its full garbage collections stalled the simulated robot (docs/sim_timing.md).
+    hw = load_hardware_config()
+    fake = build_fake_hardware(hw, log_transactions=False)
+    fake.bus.writeto(hw.pca_address, bytes([0x00]))
+    fake.bus.writeto(hw.mux_address, bytes([0x01]))
+    assert fake.bus.log == []
+    logged = build_fake_hardware(hw)
+    logged.bus.writeto(hw.pca_address, bytes([0x00]))
+    assert len(logged.bus.log) == 1

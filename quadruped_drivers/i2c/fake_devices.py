@@ -433,12 +433,19 @@ class FakeHardware:
             return np.array([self.pca.pulse_width_us(joint.pwm_channel) for joint in self.config.joints])
 
 
-def build_fake_hardware(hardware_config: Any, require_lock: bool = False) -> FakeHardware:
+def build_fake_hardware(hardware_config: Any, require_lock: bool = False,
+                        log_transactions: bool = True) -> FakeHardware:
     """Build the fake bus, TCA9548A, ADS1115s (one per distinct mux channel/address) and PCA9685.
 
     Joints that share a mux channel and ADC address share one :class:`FakeAds1115` (different AINs).
+    ``log_transactions``: keep every transaction in ``bus.log`` (tests read it). A long-running server
+    such as sim_node must turn it off: the drivers make 18 transactions per 10 ms cycle
+    (benchmarks/bench_bus_budget.py), so the log grows without bound, and Python's full garbage
+    collections of that growing heap stalled the simulated robot for 55 ms every ~48 s
+    (docs/sim_timing.md).
     """
     bus = FakeI2CBus(require_lock=require_lock, name="fake-i2c-%d" % hardware_config.i2c_bus)
+    bus.log_enabled = log_transactions
     mux = FakeTca9548a()
     bus.attach(hardware_config.mux_address, mux)
     pca = FakePca9685(oscillator_hz=hardware_config.pca_oscillator_hz)
