@@ -44,6 +44,7 @@ from geometry_msgs.msg import Point, Quaternion, QuaternionStamped, Vector3, Vec
 from sensor_msgs.msg import Imu, JointState
 from std_srvs.srv import SetBool, SetBoolResponse
 
+from quadruped_common.node_startup import start_node
 from quadruped_control.controller import AttitudeController
 from quadruped_control.controller_config import TUNABLE_BOUNDS, apply_tunables, load_controller_config
 from quadruped_common.imu_plausibility import SensorLimits
@@ -389,10 +390,5 @@ class AttitudeControllerNode:
 
 
 def main(argv: Optional[List[str]] = None) -> None:
-    rospy.init_node("attitude_controller")
-    try:
-        AttitudeControllerNode()
-    except (ParameterError, ValueError, OSError) as exc:
-        rospy.logfatal("attitude controller cannot start: %s", exc)
-        raise SystemExit(1)
+    start_node("attitude_controller", AttitudeControllerNode)
     rospy.spin()

@@ -58,6 +58,7 @@ from geometry_msgs.msg import PoseStamped
 from rosgraph_msgs.msg import Clock
 from std_srvs.srv import SetBool, SetBoolResponse
 
+from quadruped_common.node_startup import start_node
 from quadruped_control.lockstep import AnswerTracker, SimClock
 
 from quadruped_control.params import JOINT_NAMES, ParameterError, load_robot_params
@@ -359,10 +360,4 @@ class SimNode:
 
 
 def main(argv: Optional[List[str]] = None) -> None:
-    rospy.init_node("sim_node")
-    try:
-        node = SimNode()
-    except (ParameterError, ValueError, OSError) as exc:
-        rospy.logfatal("sim_node cannot start: %s", exc)
-        raise SystemExit(1)
-    node.run()
+    start_node("sim_node", SimNode).run()

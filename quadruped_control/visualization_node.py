@@ -31,8 +31,9 @@ from geometry_msgs.msg import TransformStamped
 from sensor_msgs.msg import Imu, JointState
 from visualization_msgs.msg import Marker, MarkerArray
 
+from quadruped_common.node_startup import start_node
 from quadruped_control.monitoring import RateMonitor
-from quadruped_control.params import ParameterError, config_path, load_robot_params
+from quadruped_control.params import config_path, load_robot_params
 from quadruped_control.visualization import (Throttle, VisualizationError, foot_target_spheres,
                                              imu_orientation, unit_quaternion, visual_joint_state)
 from quadruped_msgs.msg import ControllerState
@@ -186,12 +187,7 @@ class VisualizationNode:
 
 
 def main(argv=None) -> None:
-    rospy.init_node("visualization")
-    try:
-        VisualizationNode()
-    except (ParameterError, ValueError) as exc:
-        rospy.logfatal("visualization: %s" % exc)
-        raise SystemExit(1)
+    start_node("visualization", VisualizationNode)
     rospy.spin()
 
 

@@ -29,8 +29,9 @@ from diagnostic_msgs.msg import DiagnosticStatus
 from diagnostic_updater import DiagnosticStatusWrapper, Updater
 from std_srvs.srv import SetBool, SetBoolResponse
 
+from quadruped_common.node_startup import start_node
 from quadruped_control.monitoring import RateMonitor, WindowStatistics
-from quadruped_control.params import JOINT_NAMES, ParameterError
+from quadruped_control.params import JOINT_NAMES
 from quadruped_drivers.hardware_config import load_hardware_config
 from quadruped_drivers.node_support import open_bus, with_failsafe
 from quadruped_drivers.pwm_output import ServoPwmOutput
@@ -174,10 +175,5 @@ class PwmNode:
 
 
 def main(argv: Optional[List[str]] = None) -> None:
-    rospy.init_node("pwm_node")
-    try:
-        PwmNode()
-    except (ParameterError, ValueError, OSError) as exc:
-        rospy.logfatal("pwm_node cannot start: %s", exc)
-        raise SystemExit(1)
+    start_node("pwm_node", PwmNode)
     rospy.spin()

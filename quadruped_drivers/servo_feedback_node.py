@@ -24,6 +24,7 @@ from diagnostic_msgs.msg import DiagnosticStatus
 from diagnostic_updater import DiagnosticStatusWrapper, Updater
 from sensor_msgs.msg import JointState
 
+from quadruped_common.node_startup import start_node
 from quadruped_control.monitoring import LowPassDifferentiator, RateMonitor, WindowStatistics
 from quadruped_control.params import JOINT_NAMES, ParameterError
 from quadruped_drivers.calibration import load_servo_calibration
@@ -115,10 +116,5 @@ class ServoFeedbackNode:
 
 
 def main(argv: Optional[List[str]] = None) -> None:
-    rospy.init_node("servo_feedback_node")
-    try:
-        ServoFeedbackNode()
-    except (ParameterError, ValueError, OSError) as exc:
-        rospy.logfatal("servo_feedback_node cannot start: %s", exc)
-        raise SystemExit(1)
+    start_node("servo_feedback_node", ServoFeedbackNode)
     rospy.spin()

@@ -30,8 +30,8 @@ from diagnostic_msgs.msg import DiagnosticStatus
 from diagnostic_updater import DiagnosticStatusWrapper, Updater
 from sensor_msgs.msg import Imu
 
+from quadruped_common.node_startup import start_node
 from quadruped_control.monitoring import RateMonitor
-from quadruped_common.config import ParameterError
 from quadruped_drivers.vn100.conversions import SensorLimits
 from quadruped_drivers.vn100.driver import Vn100Driver, serial_port_factory
 from quadruped_drivers.vn100.sample_gate import DROP_REASONS, TIME_ANOMALY, SampleGate
@@ -180,10 +180,5 @@ class Vn100Node:
 
 
 def main(argv: Optional[List[str]] = None) -> None:
-    rospy.init_node("vn100_node")
-    try:
-        Vn100Node()
-    except (ParameterError, ValueError, OSError) as exc:
-        rospy.logfatal("vn100_node cannot start: %s", exc)
-        raise SystemExit(1)
+    start_node("vn100_node", Vn100Node)
     rospy.spin()

@@ -1,0 +1,89 @@
+"""How every long-running node of the stack starts and stops (ROS glue shared by drivers and controller).
+
+:func:`start_node` is each node's ``main`` up to ``rospy.spin()``:
+
+* ``rospy.init_node``, then the node object; a configuration error is a FATAL log naming the node and
+  exit status 1, not a traceback;
+* the start-up heap frozen (:mod:`quadruped_common.heap`): no full garbage collection walks it again;
+* :func:`stop_xmlrpc_server_on_shutdown`, the work-around for ros/ros_comm#2238 below.
+
+ros/ros_comm#2238 (open in Noetic, which is end-of-life): ``rosgraph.xmlrpc.XmlRpcNode.shutdown``
+closes the listening socket but never asks ``socketserver``'s ``serve_forever`` loop to stop. The
+loop's ``poll`` then reports the closed descriptor as ready at once, forever: one thread per node
+spins at 100 % of a core. The stack's control path runs SCHED_FIFO, so after Ctrl-C those spinning
+threads held both cores of the development machine, the nodes missed roslaunch's 15 s SIGINT grace
+period and were killed with SIGKILL. The work-around stops the loop the documented way
+(``BaseServer.shutdown``) from a client shutdown hook, before rospy closes the socket.
+"""
+from __future__ import annotations
+
+import threading
+from typing import Callable, Tuple, Type, TypeVar
+
+import rospy
+import rosgraph.xmlrpc
+
+from quadruped_common.config import ParameterError
+from quadruped_common.heap import frozen_startup_heap
+
+NodeT = TypeVar("NodeT")
+
+#: Start-up errors that mean "this configuration cannot run": FATAL log and exit status 1.
+CONFIGURATION_ERRORS: Tuple[Type[BaseException], ...] = (ParameterError, ValueError, OSError)
+
+
+def stop_xmlrpc_server(node: rosgraph.xmlrpc.XmlRpcNode, timeout: float = 2.0) -> bool:
+    """End ``node``'s XML-RPC serving thread (ros/ros_comm#2238); True when it ended within ``timeout``.
+
+    ``is_shutdown`` first, so that ``XmlRpcNode._run`` does not call ``serve_forever`` again once it
+    returns; ``BaseServer.shutdown`` then ends ``serve_forever`` within its 0.5 s poll interval. It is
+    called from a helper thread because it blocks until the loop ends, and would block for ever if the
+    loop was not running.
+    """
+    server = node.server
+    if server is None:
+        return True  # never started, or already shut down by rospy
+    node.is_shutdown = True
+    stopper = threading.Thread(target=server.shutdown, name="xmlrpc-stop", daemon=True)
+    stopper.start()
+    stopper.join(timeout)
+    return not stopper.is_alive()
+
+
+def _this_process_xmlrpc_node() -> rosgraph.xmlrpc.XmlRpcNode:
+    # rospy.init_node keeps its XmlRpcNode only as the bound method node.shutdown in rospy's internal
+    # shutdown hooks; there is no public accessor.
+    for hook in rospy.core._shutdown_hooks:  # noqa: SLF001 (see above)
+        owner = getattr(hook, "__self__", None)
+        if isinstance(owner, rosgraph.xmlrpc.XmlRpcNode):
+            return owner
+    raise RuntimeError("rospy.init_node has not started an XML-RPC server in this process")
+
+
+def stop_xmlrpc_server_on_shutdown() -> None:
+    """Register :func:`stop_xmlrpc_server` for this process's node (after ``rospy.init_node``)."""
+    node = _this_process_xmlrpc_node()
+    rospy.on_shutdown(lambda: stop_xmlrpc_server(node))
+
+
+def start_node(name: str, build: Callable[[], NodeT],
+               errors: Tuple[Type[BaseException], ...] = CONFIGURATION_ERRORS) -> NodeT:
+    """``rospy.init_node(name)`` and ``build()`` (module docstring); returns the node object.
+
+    Call ``rospy.spin()`` (or the node's own loop) after it. The XML-RPC hook is registered after the
+    node object: rospy runs client hooks in registration order, so the node's own ``rospy.on_shutdown``
+    hooks (pwm_node: outputs off) run first and are not delayed by the up to 0.5 s the server takes
+    to stop.
+    """
+    with frozen_startup_heap():
+        rospy.init_node(name)
+        try:
+            node = build()
+        except errors as exc:
+            rospy.logfatal("%s cannot start: %s", name, exc)
+            raise SystemExit(1)
+        stop_xmlrpc_server_on_shutdown()
+    return node
+
+
+__all__ = ["CONFIGURATION_ERRORS", "start_node", "stop_xmlrpc_server", "stop_xmlrpc_server_on_shutdown"]
