@@ -9,6 +9,9 @@
 #                        hold episodes (all / stale IMU), time held
 #   pwm_node: IMU-sample-to-PCA9685-write latency p50/p99/max (IMU stamp -> end of the I2C write)
 #   servo_feedback_node, vn100_node: rates and read times
+# and, from benchmarks/machine_stall_probe.py run beside the stack at SCHED_FIFO 99, the machine's own
+# stalls (times in which no thread could run) and which stale-IMU holds fell into one; each run's hold
+# episodes are listed with their reasons (benchmarks/sim_graph_summary.py).
 # Usage: bash benchmarks/bench_sim_graph.sh [DURATION [RUNS]]
 # Take figures on a quiet machine: other load shows up directly in the jitter and latency tails.
 set -euo pipefail
@@ -20,26 +23,12 @@ RUNS="${2:-3}"
 OUT="$(mktemp -d /tmp/uq_bench_graph.XXXXXX)"
 for run in $(seq 1 "$RUNS"); do
   echo "== run $run/$RUNS: ${DURATION} s =="
+  mkdir -p "$OUT/run$run"
+  # The independent witness of machine-level stalls (benchmarks/machine_stall_probe.py).
+  python benchmarks/machine_stall_probe.py "$OUT/run$run/machine_stalls.csv" &
+  PROBE=$!
   UQ_ROS_PORT="${UQ_ROS_PORT:-11358}" bash scripts/sim_maneuver.sh "$OUT/run$run" "$DURATION" >/dev/null
+  kill -INT "$PROBE"; wait "$PROBE" || true
 done
-python - "$OUT" "$RUNS" <<'PYEOF'
-import glob, os, sys
-from quadruped_control.bag_report import health, health_across_runs, read_bags
-out, runs = sys.argv[1], int(sys.argv[2])
-figures = []
-for run in range(1, runs + 1):
-    values = health(read_bags(sorted(glob.glob(os.path.join(out, "run%d" % run, "bags", "*.bag")))))
-    figures.append(values)
-    print("run %d" % run)
-    for name, items in values.items():
-        print("  " + name)
-        for key, value in items.items():
-            print("    %-28s %s" % (key, value))
-print("over %d runs: min / median / max" % runs)
-for name, items in health_across_runs(figures).items():
-    print("  " + name)
-    for key, s in items.items():
-        print("    %-28s %10.3f %10.3f %10.3f%s" % (key, s["min"], s["median"], s["max"],
-                                                   "" if s["n"] == runs else "  (%d runs)" % s["n"]))
-PYEOF
+python benchmarks/sim_graph_summary.py "$OUT" "$RUNS"
 echo "(bags and logs in $OUT)"

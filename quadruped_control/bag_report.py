@@ -56,6 +56,7 @@ class BagData:
     state_geodesic: List[float] = field(default_factory=list)
     state_armed: List[bool] = field(default_factory=list)
     state_holding: List[bool] = field(default_factory=list)
+    state_hold_reason: List[str] = field(default_factory=list)
     truth_t: List[float] = field(default_factory=list)
     truth_q: List[Sequence[float]] = field(default_factory=list)
     diagnostics: Dict[str, Dict[str, str]] = field(default_factory=dict)
@@ -97,6 +98,7 @@ def _read_into(data: BagData, reader) -> None:
                 data.state_geodesic.append(msg.geodesic_error)
                 data.state_armed.append(bool(msg.armed))
                 data.state_holding.append(bool(msg.holding))
+                data.state_hold_reason.append(str(msg.hold_reason))
             elif connection.topic == "/sim/pose":
                 o = msg.pose.orientation
                 data.truth_t.append(_stamp(msg))
@@ -122,6 +124,40 @@ def _trial_start(data: BagData) -> float:
         if np.max(np.abs(setpoints[i] - setpoints[i - 1])) > 1e-6:
             start = i
     return data.state_t[start]
+
+
+@dataclass(frozen=True)
+class HoldEpisode:
+    """Consecutive /controller_state steps with ``holding`` set: stamps of the first and last held
+    step and the reason the first one gave."""
+
+    start: float
+    end: float
+    reason: str
+
+    @property
+    def stale_imu(self) -> bool:
+        return "stale" in self.reason
+
+
+def hold_episodes(data: BagData) -> List[HoldEpisode]:
+    """The controller's hold episodes in stamp order (the diagnostics count them; this says when)."""
+    order = np.argsort(np.array(data.state_t), kind="stable")
+    episodes: List[HoldEpisode] = []
+    start = None
+    last = 0.0
+    reason = ""
+    for i in order:
+        t, holding = data.state_t[i], data.state_holding[i]
+        if holding and start is None:
+            start, reason = t, data.state_hold_reason[i] if i < len(data.state_hold_reason) else ""
+        elif not holding and start is not None:
+            episodes.append(HoldEpisode(start, last, reason))
+            start = None
+        last = t
+    if start is not None:
+        episodes.append(HoldEpisode(start, last, reason))
+    return episodes
 
 
 def health(data: BagData) -> Dict[str, Dict[str, str]]:

@@ -117,3 +117,24 @@ def test_health_across_runs_gives_min_median_max_of_every_figure():
     latency = summary["pwm: servo output"]["latency p99 [ms]"]
     assert latency["n"] == 2.0 and latency["median"] == 3.75
     assert summary["pwm: servo output"]["watchdog tripped"]["max"] == 1.0
+
+
+def test_hold_episodes_say_when_and_why_in_stamp_order():
+    from quadruped_control.bag_report import BagData, HoldEpisode, hold_episodes
+    # Out of stamp order, as split bags may be; two episodes, the last one open at the end.
+    steps = [(0.00, False, ""), (0.02, True, "IMU sample is stale (56 ms old, limit 50 ms)"),
+             (0.01, True, "no IMU sample received yet"), (0.03, False, ""), (0.04, True, "IMU sample is stale (x)"),
+             (0.05, True, "IMU sample is stale (y)")]
+    data = BagData(state_t=[s[0] for s in steps], state_holding=[s[1] for s in steps],
+                   state_hold_reason=[s[2] for s in steps])
+    episodes = hold_episodes(data)
+    assert episodes == [HoldEpisode(0.01, 0.02, "no IMU sample received yet"),
+                        HoldEpisode(0.04, 0.05, "IMU sample is stale (x)")]
+    assert [e.stale_imu for e in episodes] == [False, True]
+
+
+def test_bag_reader_keeps_the_hold_reasons(tmp_path):
+    bag = str(tmp_path / "never_armed.bag")
+    write_bag(bag, duration=2.0, armed=False)
+    data = read_bags([bag])
+    assert len(data.state_hold_reason) == len(data.state_holding) == 200

@@ -1,0 +1,83 @@
+"""Figures of benchmarks/bench_sim_graph.sh: each run's health figures, its hold episodes and the
+machine stalls seen beside it, then min / median / max over the runs.
+
+    python benchmarks/sim_graph_summary.py OUT RUNS
+
+OUT/runN/bags/*.bag are the runs' bags, OUT/runN/machine_stalls.csv the stall probe's record
+(benchmarks/machine_stall_probe.py; missing: no attribution). A stale-IMU hold is listed with the
+longest machine stall in the stale limit + one control period before the controller's first held step:
+a stall there means that no process could run, whatever the stack did.
+"""
+from __future__ import annotations
+
+import glob
+import os
+import sys
+from typing import Dict, List
+
+sys.path.insert(0, os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
+
+from quadruped_common.stall_probe import Stall, read_stalls, stall_before  # noqa: E402
+from quadruped_control.bag_report import health, health_across_runs, hold_episodes, read_bags  # noqa: E402
+
+STALE_LIMIT = 0.05  # attitude_controller ~imu_max_age default (s)
+CONTROL_PERIOD = 0.01
+REPORTED_STALL = 0.020  # machine stalls this long or longer are counted in the figures
+
+
+def run_figures(run_dir: str) -> Dict[str, Dict[str, str]]:
+    data = read_bags(sorted(glob.glob(os.path.join(run_dir, "bags", "*.bag"))))
+    figures = health(data)
+    probe = os.path.join(run_dir, "machine_stalls.csv")
+    stalls: List[Stall] = []
+    if os.path.exists(probe):
+        with open(probe) as lines:
+            stalls = read_stalls(lines)
+        long_stalls = [s for s in stalls if s.duration >= REPORTED_STALL]
+        figures["machine (stall probe, SCHED_FIFO 99)"] = {
+            "stalls >= %.0f ms" % (REPORTED_STALL * 1e3): str(len(long_stalls)),
+            "longest stall [ms]": "%.1f" % (max((s.duration for s in stalls), default=0.0) * 1e3),
+        }
+    holds = []
+    during_stall = 0
+    for episode in hold_episodes(data):
+        line = "%.3f-%.3f %s" % (episode.start, episode.end, episode.reason)
+        if episode.stale_imu and os.path.exists(probe):
+            stall = stall_before(episode.start, stalls, STALE_LIMIT + CONTROL_PERIOD)
+            if stall is None:
+                line += "  [no machine stall > probe threshold]"
+            else:
+                during_stall += 1
+                line += "  [machine stall %.1f ms, ended %.1f ms before the hold]" % (
+                    stall.duration * 1e3, (episode.start - stall.end) * 1e3)
+        holds.append(line)
+    if os.path.exists(probe):
+        figures["machine (stall probe, SCHED_FIFO 99)"]["stale-IMU holds during a stall"] = str(during_stall)
+    figures["_holds"] = {str(i): line for i, line in enumerate(holds)}
+    return figures
+
+
+def main(out: str, runs: int) -> None:
+    per_run = []
+    for run in range(1, runs + 1):
+        figures = run_figures(os.path.join(out, "run%d" % run))
+        holds = figures.pop("_holds")
+        per_run.append(figures)
+        print("run %d" % run)
+        for name, items in figures.items():
+            print("  " + name)
+            for key, value in items.items():
+                print("    %-32s %s" % (key, value))
+        print("  hold episodes (first and last held step, reason of the first)")
+        for line in holds.values() or ["(none)"]:
+            print("    " + line)
+    print("over %d runs: min / median / max" % runs)
+    for name, items in health_across_runs(per_run).items():
+        print("  " + name)
+        for key, s in items.items():
+            print("    %-32s %10.3f %10.3f %10.3f%s" % (key, s["min"], s["median"], s["max"],
+                                                     "" if s["n"] == runs else "  (%d runs)" % s["n"]))
+
+
+if __name__ == "__main__":
+    main(sys.argv[1], int(sys.argv[2]))
