@@ -10,8 +10,8 @@
 #   pwm_node: IMU-sample-to-PCA9685-write latency p50/p99/max (IMU stamp -> end of the I2C write)
 #   servo_feedback_node, vn100_node: rates and read times
 # and, from benchmarks/machine_stall_probe.py run beside the stack at SCHED_FIFO 99, the machine's own
-# stalls (times in which no thread could run) and which stale-IMU holds fell into one; each run's hold
-# episodes are listed with their reasons (benchmarks/sim_graph_summary.py).
+# stalls (times in which no thread could run) and which control-period outliers and stale-IMU holds fell
+# into one; each run's hold episodes are listed with their reasons (benchmarks/sim_graph_summary.py).
 # Usage: bash benchmarks/bench_sim_graph.sh [DURATION [RUNS]]
 # Take figures on a quiet machine: other load shows up directly in the jitter and latency tails.
 set -euo pipefail
@@ -25,7 +25,8 @@ for run in $(seq 1 "$RUNS"); do
   echo "== run $run/$RUNS: ${DURATION} s =="
   mkdir -p "$OUT/run$run"
   # The independent witness of machine-level stalls (benchmarks/machine_stall_probe.py).
-  python benchmarks/machine_stall_probe.py "$OUT/run$run/machine_stalls.csv" &
+  # Wakes every 1 ms (about 1 % of one core); a wake-up 1.5 ms late or more is a stall.
+  python benchmarks/machine_stall_probe.py "$OUT/run$run/machine_stalls.csv" --period 0.001 --threshold 0.0015 &
   PROBE=$!
   UQ_ROS_PORT="${UQ_ROS_PORT:-11358}" bash scripts/sim_maneuver.sh "$OUT/run$run" "$DURATION" >/dev/null
   kill -INT "$PROBE"; wait "$PROBE" || true

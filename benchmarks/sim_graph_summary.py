@@ -4,7 +4,9 @@ machine stalls seen beside it, then min / median / max over the runs.
     python benchmarks/sim_graph_summary.py OUT RUNS
 
 OUT/runN/bags/*.bag are the runs' bags, OUT/runN/machine_stalls.csv the stall probe's record
-(benchmarks/machine_stall_probe.py; missing: no attribution). A stale-IMU hold is listed with the
+(benchmarks/machine_stall_probe.py; missing: no attribution). Control periods longer than 12 ms (the
+jitter outliers) are counted, and how many of them had a machine stall inside. A stale-IMU hold is
+listed with the
 longest machine stall in the stale limit + one control period before the controller's first held step:
 a stall there means that no process could run, whatever the stack did.
 """
@@ -15,6 +17,8 @@ import os
 import sys
 from typing import Dict, List
 
+import numpy as np
+
 sys.path.insert(0, os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
 
 from quadruped_common.stall_probe import Stall, read_stalls, stall_before  # noqa: E402
@@ -23,6 +27,7 @@ from quadruped_control.bag_report import health, health_across_runs, hold_episod
 STALE_LIMIT = 0.05  # attitude_controller ~imu_max_age default (s)
 CONTROL_PERIOD = 0.01
 REPORTED_STALL = 0.020  # machine stalls this long or longer are counted in the figures
+LATE_PERIOD = 0.012  # a control period this long is a jitter outlier (|period - 10 ms| > 2 ms)
 
 
 def run_figures(run_dir: str) -> Dict[str, Dict[str, str]]:
@@ -34,9 +39,20 @@ def run_figures(run_dir: str) -> Dict[str, Dict[str, str]]:
         with open(probe) as lines:
             stalls = read_stalls(lines)
         long_stalls = [s for s in stalls if s.duration >= REPORTED_STALL]
+        # Control periods from the controller's own step stamps (/controller_state, one per step),
+        # from the first step that strokes (before it, the fallback timer steps a controller that
+        # waits for its first IMU sample every 20 ms).
+        stamps = np.array(data.state_t)
+        stroking = stamps[~np.array(data.state_holding, dtype=bool)]
+        steps = np.sort(stamps[stamps >= stroking.min()]) if stroking.size else np.zeros(0)
+        late = [(a, b) for a, b in zip(steps[:-1], steps[1:]) if b - a > LATE_PERIOD]
+        late_in_stall = sum(1 for a, b in late if any(s.end >= a and s.start <= b for s in stalls))
         figures["machine (stall probe, SCHED_FIFO 99)"] = {
+            "stalls (all)": str(len(stalls)),
             "stalls >= %.0f ms" % (REPORTED_STALL * 1e3): str(len(long_stalls)),
             "longest stall [ms]": "%.1f" % (max((s.duration for s in stalls), default=0.0) * 1e3),
+            "control periods > %.0f ms" % (LATE_PERIOD * 1e3): str(len(late)),
+            "... with a stall inside": str(late_in_stall),
         }
     holds = []
     during_stall = 0
