@@ -32,7 +32,7 @@ from quadruped_common.config import ParameterError, config_path  # noqa: E402
 from quadruped_common.tunables import TUNABLES  # noqa: E402
 from quadruped_control.controller import AttitudeController  # noqa: E402
 from quadruped_control.controller_config import apply_tunables, load_controller_config  # noqa: E402
-from quadruped_control.monitoring import imu_values_problem, time_problem  # noqa: E402
+from quadruped_common.monitoring import imu_values_problem, time_problem  # noqa: E402
 from quadruped_control.params import load_robot_params  # noqa: E402
 from quadruped_control.so3 import rot_to_quat, rpy_to_rot  # noqa: E402
 from quadruped_control.supervisor import ControlSupervisor  # noqa: E402

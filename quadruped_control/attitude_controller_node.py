@@ -48,7 +48,7 @@ from quadruped_common.node_startup import start_node
 from quadruped_control.controller import AttitudeController
 from quadruped_control.controller_config import TUNABLE_BOUNDS, apply_tunables, load_controller_config
 from quadruped_common.imu_plausibility import SensorLimits
-from quadruped_control.monitoring import HoldEpisodes, RateMonitor, WindowStatistics
+from quadruped_common.monitoring import HoldEpisodes, RateMonitor, WindowStatistics
 from quadruped_control.params import JOINT_NAMES, ParameterError, load_robot_params
 from quadruped_control.so3 import quat_to_rot, rot_to_quat, rpy_to_rot
 from quadruped_control.supervisor import ControlSupervisor

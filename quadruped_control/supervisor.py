@@ -11,7 +11,7 @@ with pytest:
 * Armed with a usable IMU sample: one controller step (eq. error .. foot_integration), joint targets
   mapped to pulse widths and clamped to the per-channel limits.
 * Armed with an unusable IMU sample (NaN, non-unit quaternion, stale; see
-  :func:`~quadruped_control.monitoring.imu_sample_problem`) or a controller error: the controller's
+  :func:`~quadruped_common.monitoring.imu_sample_problem`) or a controller error: the controller's
   hold (no stroking, integral frozen, feet at the nominal pose) and the reason in the output.
 
 Input plausibility. Every IMU sample is checked when it arrives (:meth:`ControlSupervisor.set_imu`)
@@ -20,7 +20,7 @@ VN-100 driver applies too: finite, unit quaternion, rate and acceleration within
 (never stored, so it never reaches the controller), counted per reason and reported; the previous
 sample stays in use while it is fresh, and ``max_implausible_run`` implausible samples in a row make
 the controller hold until a plausible one arrives. Time is checked at every tick
-(:func:`~quadruped_control.monitoring.time_problem`): a non-finite stamp or clock is never fresh.
+(:func:`~quadruped_common.monitoring.time_problem`): a non-finite stamp or clock is never fresh.
 Joint feedback outside the servo ranges (``config/robot.yaml`` joint limits widened by
 ``joint_margin``) or older than ``max_joint_age`` is unusable (NaN) and counted.
 
@@ -37,7 +37,7 @@ import numpy as np
 
 from quadruped_control.controller import AttitudeController, ControllerOutput, estimate_body_torque
 from quadruped_common.imu_plausibility import ImplausibleSample, SensorLimits, check_sample
-from quadruped_control.monitoring import time_problem
+from quadruped_common.monitoring import time_problem
 from quadruped_control.so3 import quat_to_rot
 
 #: Maps 12 joint angles (rad, JOINT_NAMES order) to 12 pulse widths (us), clamped to the limits.

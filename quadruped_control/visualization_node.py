@@ -32,7 +32,7 @@ from sensor_msgs.msg import Imu, JointState
 from visualization_msgs.msg import Marker, MarkerArray
 
 from quadruped_common.node_startup import start_node
-from quadruped_control.monitoring import RateMonitor
+from quadruped_common.monitoring import RateMonitor
 from quadruped_control.params import config_path, load_robot_params
 from quadruped_control.visualization import (Throttle, VisualizationError, foot_target_spheres,
                                              imu_orientation, unit_quaternion, visual_joint_state)

@@ -24,7 +24,7 @@ from quadruped_control.controller import AttitudeController
 from quadruped_control.controller_config import Gains, apply_tunables, load_controller_config
 from quadruped_control.kinematics import within_limits
 from quadruped_common.imu_plausibility import SensorLimits
-from quadruped_control.monitoring import imu_values_problem, time_problem
+from quadruped_common.monitoring import imu_values_problem, time_problem
 from quadruped_control.params import load_robot_params
 from quadruped_control.so3 import quat_to_rot
 from quadruped_control.supervisor import ControlSupervisor

@@ -6,7 +6,7 @@ import pytest
 from hypothesis import given
 from hypothesis import strategies as st
 
-from quadruped_control.monitoring import (LowPassDifferentiator, RateMonitor, WindowStatistics,
+from quadruped_common.monitoring import (LowPassDifferentiator, RateMonitor, WindowStatistics,
                                           imu_sample_problem)
 
 UNIT = (0.0, 0.0, 0.0, 1.0)
@@ -68,7 +68,7 @@ def test_differentiator_converges_to_ramp_slope_and_survives_nan():
 
 
 def test_hold_episodes_count_runs_and_time_held():
-    from quadruped_control.monitoring import HoldEpisodes
+    from quadruped_common.monitoring import HoldEpisodes
 
     holds = HoldEpisodes()
     # 10 ms ticks: stroking, then a 7-tick stale gap, stroking, a 2-tick controller error, stroking.
@@ -84,7 +84,7 @@ def test_hold_episodes_count_runs_and_time_held():
 
 
 def test_hold_episodes_ignore_bad_time_and_count_an_open_episode():
-    from quadruped_control.monitoring import HoldEpisodes
+    from quadruped_common.monitoring import HoldEpisodes
 
     holds = HoldEpisodes()
     holds.update(1.0, True, "stale IMU")
