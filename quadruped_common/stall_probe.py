@@ -60,15 +60,22 @@ def read_stalls(lines: Iterable[str]) -> List[Stall]:
     return stalls
 
 
-def stall_before(onset: float, stalls: Sequence[Stall], window: float) -> Optional[Stall]:
-    """The longest stall that overlaps ``[onset - window, onset]``, or None.
+def stalled_time(stalls: Sequence[Stall], start: float, end: float) -> float:
+    """Seconds of ``[start, end]`` in which the machine was stalled (the union of the stalls in it).
 
-    For a stale-IMU hold, ``onset`` is the stamp of the controller's first held step (its
-    /controller_state) and ``window`` the stale limit plus one control period: a stall in that window
-    is a time in which no process, the simulated robot included, could run.
+    For a stale-IMU hold decided at ``end``, ``end - start`` is the stale limit plus one control
+    period: if the machine was stalled for most of that window, no process, the simulated robot
+    included, could have delivered a fresh sample. A long stall often comes in parts (the probe
+    wakes for a moment in between), so the parts are added up.
     """
-    overlapping = [s for s in stalls if s.end >= onset - window and s.start <= onset]
-    return max(overlapping, key=lambda s: s.duration) if overlapping else None
+    covered = 0.0
+    reached = start
+    for stall in sorted(stalls, key=lambda s: s.start):
+        lo, hi = max(stall.start, reached), min(stall.end, end)
+        if hi > lo:
+            covered += hi - lo
+            reached = hi
+    return covered
 
 
-__all__ = ["Stall", "watch", "format_stall", "read_stalls", "stall_before"]
+__all__ = ["Stall", "watch", "format_stall", "read_stalls", "stalled_time"]

@@ -284,7 +284,11 @@ class AttitudeControllerNode:
                     self.overruns += 1
             self.last_step_wall = started
             self.loop_monitor.tick(started)
-            now = rospy.get_time()  # controller time and the clock the IMU stamps are judged against
+            # Controller time and the clock the IMU stamps are judged against; it also stamps this
+            # step's controller_state (the moment of the decision, not of the publish, which can wait
+            # behind other threads).
+            step_stamp = rospy.Time.now()
+            now = step_stamp.to_sec()
             self.last_step_time = now
             result = self.supervisor.tick(now, now)
             held = bool(result.problem) and result.armed
@@ -306,7 +310,7 @@ class AttitudeControllerNode:
                 command.pulse_width_us = result.pulse_widths_us.tolist()
                 command.joint_target = result.joint_targets.tolist()
                 self.command_pub.publish(command)
-            self.state_pub.publish(self._state_message(result, rospy.Time.now()))
+            self.state_pub.publish(self._state_message(result, step_stamp))
         except rospy.ROSException:
             if not rospy.core.is_shutdown_requested():
                 raise

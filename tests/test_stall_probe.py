@@ -1,7 +1,7 @@
 """quadruped_common.stall_probe: late wake-ups become stalls; stalls are matched to holds."""
 import pytest
 
-from quadruped_common.stall_probe import Stall, format_stall, read_stalls, stall_before, watch
+from quadruped_common.stall_probe import Stall, format_stall, read_stalls, stalled_time, watch
 
 
 class FakeTime:
@@ -35,9 +35,10 @@ def test_stalls_round_trip_through_the_probe_file():
     assert read_stalls(lines) == stalls
 
 
-def test_a_hold_is_matched_to_the_longest_stall_in_its_window():
-    stalls = [Stall(9.80, 9.85), Stall(9.95, 9.97), Stall(9.96, 10.01), Stall(10.2, 10.3)]
-    assert stall_before(10.0, stalls, 0.06) == Stall(9.96, 10.01)  # overlaps the onset
-    assert stall_before(10.0, stalls[:2], 0.06) == Stall(9.95, 9.97)
-    assert stall_before(10.0, stalls[:1], 0.06) is None  # ended before the window
-    assert stall_before(10.0, stalls[3:], 0.06) is None  # after the hold began
+def test_stalled_time_adds_up_the_parts_of_a_stall_inside_the_window():
+    # The run-1 hold of docs/sim_timing.md: one freeze the probe saw as three stalls.
+    parts = [Stall(0.638, 0.6516), Stall(0.6526, 0.6635), Stall(0.6645, 0.7027)]
+    assert stalled_time(parts, 0.6445, 0.7045) == pytest.approx(0.0071 + 0.0109 + 0.0382)
+    assert stalled_time(parts, 0.0, 1.0) == pytest.approx(0.0136 + 0.0109 + 0.0382)
+    assert stalled_time(parts, 0.71, 0.80) == 0.0
+    assert stalled_time([Stall(0.0, 0.5), Stall(0.2, 0.3)], 0.0, 1.0) == pytest.approx(0.5)  # overlaps count once
