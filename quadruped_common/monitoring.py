@@ -157,6 +157,16 @@ class LowPassDifferentiator:
         return self.velocity.copy()
 
 
+#: Kind of hold whose reason is a stale sample (:func:`time_problem`): the timing failure.
+STALE_IMU = "stale IMU"
+
+
+def hold_kind(problem: str) -> str:
+    """Bucket of a hold reason: :data:`STALE_IMU` for a stale sample (the wording of
+    :func:`time_problem`), else "other". The controller's diagnostics and the bag report both use it."""
+    return STALE_IMU if "stale" in problem else "other"
+
+
 class HoldEpisodes:
     """Hold episodes and time held, from a per-tick "holding or not" signal on one clock.
 

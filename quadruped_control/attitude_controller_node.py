@@ -48,7 +48,7 @@ from quadruped_common.node_startup import start_node
 from quadruped_control.controller import AttitudeController
 from quadruped_control.controller_config import TUNABLE_BOUNDS, apply_tunables, load_controller_config
 from quadruped_common.imu_plausibility import SensorLimits
-from quadruped_common.monitoring import HoldEpisodes, RateMonitor, WindowStatistics
+from quadruped_common.monitoring import STALE_IMU, HoldEpisodes, RateMonitor, WindowStatistics, hold_kind
 from quadruped_control.params import JOINT_NAMES, ParameterError, load_robot_params
 from quadruped_control.so3 import quat_to_rot, rot_to_quat, rpy_to_rot
 from quadruped_control.supervisor import ControlSupervisor
@@ -64,11 +64,6 @@ _PHASE_CODES = {"recovery": ControllerState.PHASE_RECOVERY, "power": ControllerS
 
 def _problem_kind(problem: str) -> str:
     return re.sub(r"[-+]?[0-9.]+", "#", problem)
-
-
-def _hold_kind(problem: str) -> str:
-    """Diagnostics bucket of a hold reason: "stale IMU" (the timing failure) or "other"."""
-    return "stale IMU" if "stale" in problem else "other"
 
 
 def _optional_path(name: str) -> Optional[str]:
@@ -292,7 +287,7 @@ class AttitudeControllerNode:
             self.last_step_time = now
             result = self.supervisor.tick(now, now)
             held = bool(result.problem) and result.armed
-            self.hold_episodes.update(now, held, _hold_kind(result.problem) if held else "")
+            self.hold_episodes.update(now, held, hold_kind(result.problem) if held else "")
         # Log on a change of the kind of problem (numbers such as the sample age change every step).
         if _problem_kind(result.problem) != _problem_kind(self.last_problem):
             if result.problem:
@@ -362,7 +357,7 @@ class AttitudeControllerNode:
         stat.add("overruns", str(self.overruns))
         stat.add("held steps", str(self.hold_episodes.held_ticks))
         stat.add("hold episodes", str(self.hold_episodes.episodes))
-        stat.add("stale-IMU hold episodes", str(self.hold_episodes.episodes_of("stale IMU")))
+        stat.add("stale-IMU hold episodes", str(self.hold_episodes.episodes_of(STALE_IMU)))
         stat.add("time held [s]", "%.3f" % self.hold_episodes.time_held)
         stat.add("controller errors", str(self.supervisor.controller_errors))
         return stat

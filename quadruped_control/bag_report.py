@@ -27,6 +27,7 @@ from typing import Dict, List, Optional, Sequence
 
 import numpy as np
 
+from quadruped_common.monitoring import STALE_IMU, hold_kind
 from quadruped_control.metrics import compute_metrics
 from quadruped_control.simulation import geodesic_angles, rotations_to_rpy
 from quadruped_control.so3 import geodesic_angle, quat_to_rot, rot_to_rpy
@@ -137,7 +138,7 @@ class HoldEpisode:
 
     @property
     def stale_imu(self) -> bool:
-        return "stale" in self.reason
+        return hold_kind(self.reason) == STALE_IMU
 
 
 def hold_episodes(data: BagData) -> List[HoldEpisode]:

@@ -94,3 +94,9 @@ def test_hold_episodes_ignore_bad_time_and_count_an_open_episode():
     assert holds.episodes == 1 and holds.held_ticks == 4
     assert holds.time_held == pytest.approx(0.25)
     assert holds.holding
+
+
+def test_hold_kind_recognises_the_stale_wording_of_time_problem():
+    from quadruped_common.monitoring import STALE_IMU, hold_kind, time_problem
+    assert hold_kind(time_problem(0.0, 0.08, 0.05)) == STALE_IMU
+    assert hold_kind("no IMU sample received yet") == "other"
