@@ -17,12 +17,13 @@ import numpy as np
 
 sys.path.insert(0, os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
 
-from quadruped_control.controller import AttitudeController  # noqa: E402
-from quadruped_control.controller_config import load_controller_config  # noqa: E402
-from quadruped_control.dynamics import FloatingBaseModel, RigidBodyState, held_joint_input  # noqa: E402
-from quadruped_control.kinematics import joint_angles  # noqa: E402
-from quadruped_control.params import LEGS, load_robot_params  # noqa: E402
-from quadruped_control.so3 import rpy_to_rot  # noqa: E402
+from quadruped_common.robot import LEGS
+from quadruped_common.so3 import rpy_to_rot  # noqa: E402
+from quadruped_control.control.controller import AttitudeController  # noqa: E402
+from quadruped_control.control.controller_config import load_controller_config  # noqa: E402
+from quadruped_control.model.kinematics import joint_angles  # noqa: E402
+from quadruped_control.model.params import load_robot_params  # noqa: E402
+from quadruped_control.sim.plants.paper import FloatingBaseModel, RigidBodyState, held_joint_input  # noqa: E402
 
 DT = 0.01
 

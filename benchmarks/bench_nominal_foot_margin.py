@@ -3,7 +3,7 @@
 Run: ``.venv/bin/python benchmarks/bench_nominal_foot_margin.py [z1 z2 ...]`` (default z in -0.110,
 -0.105, -0.100 m, x and y from robot.yaml). Prints, for each candidate and leg:
 
-- the servo angles theta1..theta3 from :func:`quadruped_control.kinematics.joint_angles` (eq. ik_theta3,
+- the servo angles theta1..theta3 from :func:`quadruped_control.model.kinematics.joint_angles` (eq. ik_theta3,
   ik_theta1245) and their distance to the nearest end of ``joint_limits_deg``;
 - the passive angles theta4, theta5 (distance from 0 / 180 deg: the five-bar's extended or folded
   singularities);
@@ -25,8 +25,9 @@ import numpy as np
 
 sys.path.insert(0, os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
 
-from quadruped_control.kinematics import UnreachableError, joint_angles_full  # noqa: E402
-from quadruped_control.params import LEGS, RobotParams, load_robot_params  # noqa: E402
+from quadruped_common.robot import LEGS
+from quadruped_control.model.kinematics import UnreachableError, joint_angles_full  # noqa: E402
+from quadruped_control.model.params import RobotParams, load_robot_params  # noqa: E402
 
 SEARCH_MAX = 0.2    # m
 RESOLUTION = 1e-4   # m

@@ -17,12 +17,12 @@ import numpy as np
 
 sys.path.insert(0, os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
 
-from quadruped_control.controller import AttitudeController  # noqa: E402
-from quadruped_control.controller_config import load_controller_config  # noqa: E402
-from quadruped_control.params import load_robot_params  # noqa: E402
-from quadruped_control.servo_model import make_servo_model  # noqa: E402
-from quadruped_control.simulation import ClosedLoopSimulation, PlantSimulator  # noqa: E402
-from quadruped_control.so3 import rpy_to_rot  # noqa: E402
+from quadruped_common.so3 import rpy_to_rot  # noqa: E402
+from quadruped_control.control.controller import AttitudeController  # noqa: E402
+from quadruped_control.control.controller_config import load_controller_config  # noqa: E402
+from quadruped_control.model.params import load_robot_params  # noqa: E402
+from quadruped_control.sim.servo_model import make_servo_model  # noqa: E402
+from quadruped_control.sim.simulation import ClosedLoopSimulation, PlantSimulator  # noqa: E402
 
 
 def trial(args):

@@ -29,15 +29,15 @@ import yaml
 sys.path.insert(0, os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
 
 from quadruped_common.config import ParameterError, config_path  # noqa: E402
-from quadruped_common.tunables import TUNABLES  # noqa: E402
-from quadruped_control.controller import AttitudeController  # noqa: E402
-from quadruped_control.controller_config import apply_tunables, load_controller_config  # noqa: E402
 from quadruped_common.monitoring import imu_values_problem, time_problem  # noqa: E402
-from quadruped_control.params import load_robot_params  # noqa: E402
-from quadruped_control.so3 import rot_to_quat, rpy_to_rot  # noqa: E402
-from quadruped_control.supervisor import ControlSupervisor  # noqa: E402
+from quadruped_common.so3 import rot_to_quat, rpy_to_rot  # noqa: E402
+from quadruped_common.tunables import TUNABLES  # noqa: E402
+from quadruped_control.control.controller import AttitudeController  # noqa: E402
+from quadruped_control.control.controller_config import apply_tunables, load_controller_config  # noqa: E402
+from quadruped_control.control.supervisor import ControlSupervisor  # noqa: E402
+from quadruped_control.model.params import load_robot_params  # noqa: E402
+from quadruped_control.sim.config_files import LOADERS  # noqa: E402
 from quadruped_drivers.calibration import load_servo_calibration  # noqa: E402
-from quadruped_drivers.config_files import LOADERS  # noqa: E402
 from quadruped_drivers.hardware_config import load_hardware_config  # noqa: E402
 from quadruped_drivers.i2c.fault_scenarios import PERIOD, failsafe_latency, faulty_cycles  # noqa: E402
 from quadruped_drivers.vn100 import fuzz  # noqa: E402

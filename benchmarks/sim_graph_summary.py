@@ -22,7 +22,7 @@ import numpy as np
 sys.path.insert(0, os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
 
 from quadruped_common.stall_probe import Stall, read_stalls, stalled_time  # noqa: E402
-from quadruped_control.bag_report import health, health_across_runs, hold_episodes, read_bags  # noqa: E402
+from quadruped_control.analysis.bag_report import health, health_across_runs, hold_episodes, read_bags  # noqa: E402
 
 STALE_LIMIT = 0.05  # attitude_controller ~imu_max_age default (s)
 CONTROL_PERIOD = 0.01

@@ -2,7 +2,7 @@
 
 * ``cfg/AttitudeController.cfg`` (dynamic_reconfigure, rqt_reconfigure sliders) builds its parameter
   definitions from :data:`TUNABLES` at catkin build time;
-* :mod:`quadruped_control.controller_config` validates the same values from ``config/controller.yaml``
+* :mod:`quadruped_control.control.controller_config` validates the same values from ``config/controller.yaml``
   (gain sets, defaults) and from every live change against :func:`bounds`.
 
 So a gain that the reconfigure GUI cannot set is also refused in a file, and vice versa. This module

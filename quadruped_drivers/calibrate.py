@@ -29,7 +29,8 @@ from typing import Callable, List, Optional, Sequence, Tuple
 
 import numpy as np
 
-from quadruped_control.params import JOINT_NAMES, ParameterError, config_path, load_robot_params
+from quadruped_common.config import ParameterError, config_path
+from quadruped_common.robot import JOINT_NAMES, load_joint_limits
 from quadruped_drivers.calibration import ServoCalibration, load_servo_calibration, save_servo_calibration
 from quadruped_drivers.hardware_config import HardwareConfig, load_hardware_config
 from quadruped_drivers.i2c.fake_devices import FakeHardware, build_fake_hardware
@@ -231,7 +232,7 @@ class Calibrator:
 
 def joint_ranges(hardware_config: HardwareConfig, calibration: ServoCalibration) -> np.ndarray:
     """Per joint [low, high] (rad): the robot's joint limits intersected with the pulse limits."""
-    limits = load_robot_params().joint_limits.as_array()
+    limits = load_joint_limits().as_array()
     ranges = np.array([limits[index % 3] for index in range(len(JOINT_NAMES))])
     at_min = calibration.pulses_to_angles(hardware_config.min_us)
     at_max = calibration.pulses_to_angles(hardware_config.max_us)

@@ -1,7 +1,7 @@
 """Servo calibration maps: joint angle <-> pulse width (command side) and feedback volts <-> angle.
 
 Angles are the paper's joint angles theta1, theta2 (five-bar, eq. ik_theta1245) and theta3 (hip,
-eq. ik_theta3) in radians, in :data:`quadruped_control.params.JOINT_NAMES` order. With the robot's
+eq. ik_theta3) in radians, in :data:`quadruped_common.robot.JOINT_NAMES` order. With the robot's
 servo ranges (``config/robot.yaml`` joint_limits_deg: theta1 in [-230, -50], theta2 in [-130, 50],
 theta3 in [0, 180] deg) each joint spans exactly the 180 deg travel of its servo, so the natural map
 puts the middle of the range (-140, -40, 90 deg) at the 1500 us neutral pulse:
@@ -24,7 +24,7 @@ from typing import Any, Mapping, Optional, Sequence, Tuple
 import numpy as np
 
 from quadruped_common.config import ParameterError, boolean, check_keys, integer, load_config, number
-from quadruped_control.params import JOINT_NAMES
+from quadruped_common.robot import JOINT_NAMES
 
 
 @dataclass(frozen=True)

@@ -2,11 +2,11 @@
 
 The paper (section "Electronics") reads twelve ADS1115 ADCs for the servo feedback and drives the
 twelve servos through PWM at 100 Hz control rate; this file fixes how those parts sit on the Jetson's
-I2C bus. Joints are listed in :data:`quadruped_control.params.JOINT_NAMES` order
+I2C bus. Joints are listed in :data:`quadruped_common.robot.JOINT_NAMES` order
 (``leg{1..4}_{motor1,motor2,hip}`` = theta1, theta2, theta3 of eq. ik_theta3 / ik_theta1245).
 
 Loading never returns a half-valid object: a missing key, a duplicate channel or address, an address
-clash or a value out of range raises :class:`~quadruped_control.params.ParameterError` naming the key.
+clash or a value out of range raises :class:`~quadruped_common.config.ParameterError` naming the key.
 """
 from __future__ import annotations
 
@@ -17,7 +17,7 @@ from typing import Any, Dict, Mapping, Optional, Tuple
 import numpy as np
 
 from quadruped_common.config import ParameterError, boolean, integer, load_config, lookup, number
-from quadruped_control.params import JOINT_NAMES
+from quadruped_common.robot import JOINT_NAMES
 
 #: Failsafe actions of a PWM channel when the command watchdog trips.
 FAILSAFE_ACTIONS: Tuple[str, ...] = ("hold", "neutral", "off")

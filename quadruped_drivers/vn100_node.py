@@ -30,8 +30,8 @@ from diagnostic_msgs.msg import DiagnosticStatus
 from diagnostic_updater import DiagnosticStatusWrapper, Updater
 from sensor_msgs.msg import Imu
 
-from quadruped_common.node_startup import start_node
 from quadruped_common.monitoring import RateMonitor
+from quadruped_common.node_startup import start_node
 from quadruped_drivers.vn100.conversions import SensorLimits
 from quadruped_drivers.vn100.driver import Vn100Driver, serial_port_factory
 from quadruped_drivers.vn100.sample_gate import DROP_REASONS, TIME_ANOMALY, SampleGate

@@ -39,4 +39,4 @@ trap 'kill "${LOAD_PIDS[@]}" 2>/dev/null || true' EXIT
 run_closed_loop "$OUT/loaded.npz"
 kill "${LOAD_PIDS[@]}" 2>/dev/null || true
 trap - EXIT
-python -m quadruped_control.lockstep "$FIRST" "$OUT/loaded.npz" --tolerance 1e-6 --min-samples 1000
+python -m quadruped_control.sim.lockstep "$FIRST" "$OUT/loaded.npz" --tolerance 1e-6 --min-samples 1000

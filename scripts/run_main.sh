@@ -25,7 +25,7 @@ bash scripts/sim_maneuver.sh "$OUT/sim-maneuver" "$DURATION"
 
 echo
 echo "== 3/3 Report from the bag =="
-python -m quadruped_control.bag_report "$OUT"/sim-maneuver/bags/*.bag --out "$OUT/sim-maneuver" \
+python -m quadruped_control.analysis.bag_report "$OUT"/sim-maneuver/bags/*.bag --out "$OUT/sim-maneuver" \
   --title "Simulated robot through the full ROS stack: 45 deg roll"
 echo
 echo "Reports: $OUT/paper-sim (study.json, paper_sim.png), $OUT/sim-maneuver (report.md, metrics.json, attitude.png)"

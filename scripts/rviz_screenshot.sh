@@ -49,8 +49,9 @@ import rospy
 from geometry_msgs.msg import Point, Quaternion
 from sensor_msgs.msg import Imu, JointState
 
-from quadruped_control.kinematics import joint_angles
-from quadruped_control.params import JOINT_NAMES, LEGS, load_robot_params
+from quadruped_control.model.kinematics import joint_angles
+from quadruped_common.robot import JOINT_NAMES, LEGS
+from quadruped_control.model.params import load_robot_params
 from quadruped_msgs.msg import ControllerState
 
 

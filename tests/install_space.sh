@@ -62,7 +62,7 @@ echo "nodes up: \$(echo \$nodes)"
 python - <<'PY' || exit 1
 import rospy
 from diagnostic_msgs.msg import DiagnosticArray
-from quadruped_control.diagnostics_analyzers import load_analyzers, matching_paths
+from quadruped_control.ros.diagnostics_analyzers import load_analyzers, matching_paths
 statuses = {}
 rospy.init_node("diagnostics_check", anonymous=True)
 sub = rospy.Subscriber("/diagnostics", DiagnosticArray, lambda m: statuses.update((s.name, s.hardware_id) for s in m.status))

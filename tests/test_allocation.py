@@ -1,4 +1,4 @@
-"""Tests of quadruped_control.allocation: eq. (foot_speed), (foot_vel) and the torque they produce."""
+"""Tests of quadruped_control.control.allocation: eq. (foot_speed), (foot_vel) and the torque they produce."""
 import math
 
 import numpy as np
@@ -6,13 +6,14 @@ import pytest
 from hypothesis import assume, given
 from hypothesis import strategies as st
 
-from quadruped_control import hydrodynamics as hd
-from quadruped_control.allocation import (allocate, estimate_body_torque, foot_speed, foot_velocity_command,
+from quadruped_common.robot import LEGS
+from quadruped_common.so3 import exp_so3, rpy_to_rot
+from quadruped_control.control.allocation import (allocate, estimate_body_torque, foot_speed, foot_velocity_command,
                                           force_direction, leg_torques)
-from quadruped_control.dynamics import FloatingBaseModel, RigidBodyState
-from quadruped_control.kinematics import joint_angles
-from quadruped_control.params import LEGS, load_robot_params
-from quadruped_control.so3 import exp_so3, rpy_to_rot
+from quadruped_control.model import hydrodynamics as hd
+from quadruped_control.model.kinematics import joint_angles
+from quadruped_control.model.params import load_robot_params
+from quadruped_control.sim.plants.paper import FloatingBaseModel, RigidBodyState
 
 PARAMS = load_robot_params()
 K = PARAMS.drag_constant

@@ -1,10 +1,10 @@
-"""The recorder wrapper of launch/record.launch (quadruped_control.bag_record)."""
+"""The recorder wrapper of launch/record.launch (quadruped_control.ros.bag_record)."""
 import os
 import stat
 
 import pytest
 
-from quadruped_control.bag_record import BagDirError, main, prepare_bag_dir, record_command, resolve_topics
+from quadruped_control.ros.bag_record import BagDirError, main, prepare_bag_dir, record_command, resolve_topics
 
 
 def test_missing_bag_dir_is_created(tmp_path):

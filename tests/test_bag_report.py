@@ -6,8 +6,8 @@ import os
 import numpy as np
 import pytest
 
-from quadruped_control.bag_report import BagReportError, analyse, main, read_bags
-from quadruped_control.so3 import rot_to_quat, rpy_to_rot
+from quadruped_common.so3 import rot_to_quat, rpy_to_rot
+from quadruped_control.analysis.bag_report import BagReportError, analyse, main, read_bags
 
 rosbags = pytest.importorskip("rosbags")
 from rosbags.rosbag1 import Writer  # noqa: E402
@@ -102,7 +102,7 @@ def test_missing_bag_is_a_clear_error(tmp_path, capsys):
 
 
 def test_health_across_runs_gives_min_median_max_of_every_figure():
-    from quadruped_control.bag_report import health_across_runs
+    from quadruped_control.analysis.bag_report import health_across_runs
 
     runs = [{"ctl: control loop": {"loop rate [Hz]": "99.9", "hold episodes": "0", "hold reason": ""},
              "pwm: servo output": {"latency p99 [ms]": "3.0", "watchdog tripped": "False"}},
@@ -120,7 +120,7 @@ def test_health_across_runs_gives_min_median_max_of_every_figure():
 
 
 def test_hold_episodes_say_when_and_why_in_stamp_order():
-    from quadruped_control.bag_report import BagData, HoldEpisode, hold_episodes
+    from quadruped_control.analysis.bag_report import BagData, HoldEpisode, hold_episodes
     # Out of stamp order, as split bags may be; two episodes, the last one open at the end.
     steps = [(0.00, False, ""), (0.02, True, "IMU sample is stale (56 ms old, limit 50 ms)"),
              (0.01, True, "no IMU sample received yet"), (0.03, False, ""), (0.04, True, "IMU sample is stale (x)"),

@@ -8,7 +8,9 @@ import pytest
 import yaml
 from hypothesis import given, strategies as st
 
-from quadruped_control.params import JOINT_NAMES, ParameterError, config_path, load_robot_params
+from quadruped_common.config import ParameterError, config_path
+from quadruped_common.robot import JOINT_NAMES
+from quadruped_control.model.params import load_robot_params
 from quadruped_drivers import calibrate
 from quadruped_drivers.calibration import (calibration_to_yaml, load_servo_calibration, save_servo_calibration,
                                            servo_calibration_from_dict)

@@ -5,9 +5,9 @@ import pytest
 
 from quadruped_common.config import MAX_DEPTH, ParameterError, config_path, load_yaml, parse_yaml
 from quadruped_common.tunables import TUNABLES, bounds
-from quadruped_control.controller_config import Gains, load_controller_config
+from quadruped_control.control.controller_config import Gains, load_controller_config
+from quadruped_control.sim.config_files import LOADERS
 from quadruped_drivers.calibration import load_servo_calibration
-from quadruped_drivers.config_files import LOADERS
 from quadruped_drivers.vn100.settings import vn100_settings_from_dict
 
 @pytest.mark.parametrize("name", sorted(LOADERS))

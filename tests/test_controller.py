@@ -1,4 +1,4 @@
-"""Tests of quadruped_control.controller: eq. (error), (pid), (sat), allocation, stroke cycle, hold."""
+"""Tests of quadruped_control.control.controller: eq. (error), (pid), (sat), allocation, stroke cycle, hold."""
 import math
 
 import numpy as np
@@ -6,15 +6,17 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from quadruped_control import hydrodynamics as hd
-from quadruped_control.allocation import foot_velocity_command
-from quadruped_control.controller import (AttitudeController, ControllerOutput, control_torque,
+from quadruped_common.config import ParameterError
+from quadruped_common.robot import LEGS
+from quadruped_common.so3 import attitude_error, exp_so3, geodesic_angle, rot_x, rpy_to_rot
+from quadruped_control.control.allocation import foot_velocity_command
+from quadruped_control.control.controller import (AttitudeController, ControllerOutput, control_torque,
                                           estimate_body_torque, saturate)
-from quadruped_control.controller_config import ControllerConfig, Gains, load_controller_config
-from quadruped_control.dynamics import FloatingBaseModel, RigidBodyState, held_joint_input
-from quadruped_control.kinematics import joint_angles, within_limits
-from quadruped_control.params import LEGS, ParameterError, load_robot_params
-from quadruped_control.so3 import attitude_error, exp_so3, geodesic_angle, rot_x, rpy_to_rot
+from quadruped_control.control.controller_config import ControllerConfig, Gains, load_controller_config
+from quadruped_control.model import hydrodynamics as hd
+from quadruped_control.model.kinematics import joint_angles, within_limits
+from quadruped_control.model.params import load_robot_params
+from quadruped_control.sim.plants.paper import FloatingBaseModel, RigidBodyState, held_joint_input
 
 PARAMS = load_robot_params()
 DT = 0.01

@@ -1,13 +1,13 @@
-"""Tests of quadruped_control.controller_config: gains, timing and pairs of the attitude controller."""
+"""Tests of quadruped_control.control.controller_config: gains, timing and pairs of the attitude controller."""
 import dataclasses
 import math
 
 import pytest
 import yaml
 
-from quadruped_control.controller_config import (ControllerConfig, Gains, controller_config_from_dict,
+from quadruped_common.config import ParameterError, load_yaml, config_path
+from quadruped_control.control.controller_config import (ControllerConfig, Gains, controller_config_from_dict,
                                                  load_controller_config)
-from quadruped_control.params import ParameterError, load_yaml, config_path
 
 GAINS = Gains(k_p=5.0, k_i=0.15, k_d=1.0, k_aw=0.25)
 

@@ -6,8 +6,8 @@ import subprocess
 
 import pytest
 
-from quadruped_control.diagnostics_analyzers import load_analyzers, matching_paths, validate_analyzers
 from quadruped_common.config import ParameterError
+from quadruped_control.ros.diagnostics_analyzers import load_analyzers, matching_paths, validate_analyzers
 
 # "<node>: <task>" as diagnostic_updater names them (node names from launch/*.launch, tasks from the nodes)
 STATUSES = {

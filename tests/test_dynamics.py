@@ -1,4 +1,4 @@
-"""Tests of quadruped_control.dynamics: floating-base model eq. (trans), (rot) and its RK4 integrator."""
+"""Tests of quadruped_control.sim.plants.paper: floating-base model eq. (trans), (rot) and its RK4 integrator."""
 import dataclasses
 import math
 
@@ -7,12 +7,13 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from quadruped_control import hydrodynamics as hd
-from quadruped_control.dynamics import (DynamicsError, FloatingBaseModel, RigidBodyState, held_joint_input,
+from quadruped_common.robot import LEGS
+from quadruped_common.so3 import exp_so3, geodesic_angle, hat, rot_to_rpy, rpy_to_rot
+from quadruped_control.model import hydrodynamics as hd
+from quadruped_control.model.kinematics import UnreachableError, foot_jacobian, foot_position, joint_angles
+from quadruped_control.model.params import load_robot_params
+from quadruped_control.sim.plants.paper import (DynamicsError, FloatingBaseModel, RigidBodyState, held_joint_input,
                                         joint_velocity)
-from quadruped_control.kinematics import UnreachableError, foot_jacobian, foot_position, joint_angles
-from quadruped_control.params import LEGS, load_robot_params
-from quadruped_control.so3 import exp_so3, geodesic_angle, hat, rot_to_rpy, rpy_to_rot
 
 PARAMS = load_robot_params()
 #: Paws with zero net buoyancy: no conservative force, so kinetic energy alone can only decrease.

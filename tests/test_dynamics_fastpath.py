@@ -1,4 +1,4 @@
-"""The simulator's fast paths in quadruped_control.dynamics agree with the reference code they replace."""
+"""The simulator's fast paths in quadruped_control.sim.plants.paper agree with the reference code they replace."""
 from __future__ import annotations
 
 import numpy as np
@@ -6,11 +6,13 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from quadruped_control.dynamics import FloatingBaseModel, RigidBodyState, leg_kinematics
-from quadruped_control.kinematics import UnreachableError, foot_jacobian, foot_position
-from quadruped_control.params import LEGS, load_robot_params
-from quadruped_control.simulation import nominal_joint_angles
-from quadruped_control.so3 import exp_so3
+from quadruped_common.robot import LEGS
+from quadruped_common.so3 import exp_so3
+from quadruped_control.model.kinematics import UnreachableError, foot_jacobian, foot_position
+from quadruped_control.model.params import load_robot_params
+from quadruped_control.model.kinematics import leg_kinematics
+from quadruped_control.sim.plants.paper import FloatingBaseModel, RigidBodyState
+from quadruped_control.sim.simulation import nominal_joint_angles
 
 PARAMS = load_robot_params()
 Q0 = nominal_joint_angles(PARAMS)

@@ -19,16 +19,16 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from quadruped_common.config import ParameterError, config_path
-from quadruped_common.tunables import TUNABLES, bounds
-from quadruped_control.controller import AttitudeController
-from quadruped_control.controller_config import Gains, apply_tunables, load_controller_config
-from quadruped_control.kinematics import within_limits
 from quadruped_common.imu_plausibility import SensorLimits
 from quadruped_common.monitoring import imu_values_problem, time_problem
-from quadruped_control.params import load_robot_params
-from quadruped_control.so3 import quat_to_rot
-from quadruped_control.supervisor import ControlSupervisor
-from quadruped_drivers.config_files import LOADERS
+from quadruped_common.so3 import quat_to_rot
+from quadruped_common.tunables import TUNABLES, bounds
+from quadruped_control.control.controller import AttitudeController
+from quadruped_control.control.controller_config import Gains, apply_tunables, load_controller_config
+from quadruped_control.control.supervisor import ControlSupervisor
+from quadruped_control.model.kinematics import within_limits
+from quadruped_control.model.params import load_robot_params
+from quadruped_control.sim.config_files import LOADERS
 
 ROBOT = load_robot_params()
 BASE = load_controller_config(gain_set="experiment")

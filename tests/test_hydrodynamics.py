@@ -1,4 +1,4 @@
-"""Tests of quadruped_control.hydrodynamics: paw drag, its transmission, paw buoyancy, inertia-box drag.
+"""Tests of quadruped_control.model.hydrodynamics: paw drag, its transmission, paw buoyancy, inertia-box drag.
 
 The inertia-box body drag is checked against MuJoCo's own implementation of the same model.
 """
@@ -10,10 +10,12 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from quadruped_control import hydrodynamics as hd
-from quadruped_control.kinematics import floating_base_jacobian, foot_position, joint_angles
-from quadruped_control.params import LEGS, ParameterError, load_robot_params
-from quadruped_control.so3 import exp_so3, rot_to_quat, rpy_to_rot
+from quadruped_common.config import ParameterError
+from quadruped_common.robot import LEGS
+from quadruped_common.so3 import exp_so3, rot_to_quat, rpy_to_rot
+from quadruped_control.model import hydrodynamics as hd
+from quadruped_control.model.kinematics import floating_base_jacobian, foot_position, joint_angles
+from quadruped_control.model.params import load_robot_params
 
 PARAMS = load_robot_params()
 

@@ -7,9 +7,9 @@ import os
 import numpy as np
 import pytest
 
+from quadruped_common.config import config_path
 from quadruped_control import simulate
-from quadruped_control.params import config_path
-from quadruped_control.plants import TankParams, load_tank_params
+from quadruped_control.sim.plants import TankParams, load_tank_params
 from quadruped_control.studies import identify as idf
 
 

@@ -1,4 +1,4 @@
-"""Leg kinematics (quadruped_control.kinematics): FK/IK round trips, workspace, hip wrap, Jacobians."""
+"""Leg kinematics (quadruped_control.model.kinematics): FK/IK round trips, workspace, hip wrap, Jacobians."""
 import dataclasses
 import math
 
@@ -7,12 +7,13 @@ import pytest
 from hypothesis import assume, given, settings
 from hypothesis import strategies as st
 
-from quadruped_control.kinematics import (UnreachableError, body_to_leg, clamp_to_limits, five_bar_fk,
+from quadruped_common.robot import LEGS, JointLimits
+from quadruped_common.so3 import exp_so3, hat, quat_to_rot
+from quadruped_control.model.kinematics import (UnreachableError, body_to_leg, clamp_to_limits, five_bar_fk,
                                           five_bar_ik, five_bar_jacobian, floating_base_jacobian,
                                           foot_jacobian, foot_position, joint_angles, joint_angles_full,
                                           leg_fk, leg_ik_full, within_limits, wrap_into_range)
-from quadruped_control.params import LEGS, JointLimits, load_robot_params
-from quadruped_control.so3 import exp_so3, hat, quat_to_rot
+from quadruped_control.model.params import load_robot_params
 
 PARAMS = load_robot_params()
 GEOM = PARAMS.five_bar

@@ -5,7 +5,7 @@ import time
 import numpy as np
 import pytest
 
-from quadruped_control.lockstep import AnswerTracker, SimClock, compare_trajectories, main, widths_match
+from quadruped_control.sim.lockstep import AnswerTracker, SimClock, compare_trajectories, main, widths_match
 
 
 def test_sim_clock_is_exact_multiples():

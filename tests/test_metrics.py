@@ -1,4 +1,4 @@
-"""Tests of quadruped_control.metrics on signals with known answers."""
+"""Tests of quadruped_control.analysis.metrics on signals with known answers."""
 from __future__ import annotations
 
 import json
@@ -9,8 +9,8 @@ import pytest
 from hypothesis import given
 from hypothesis import strategies as st
 
-from quadruped_control import metrics
-from quadruped_control.metrics import (
+from quadruped_control.analysis import metrics
+from quadruped_control.analysis.metrics import (
     axis_errors,
     compute_metrics,
     moving_average_centered,

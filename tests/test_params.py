@@ -1,4 +1,4 @@
-"""Loading and validation of config/robot.yaml (quadruped_control.params)."""
+"""Loading and validation of config/robot.yaml (quadruped_control.model.params)."""
 import copy
 import math
 import os
@@ -7,8 +7,9 @@ import numpy as np
 import pytest
 
 from quadruped_common import config as common
-from quadruped_control.params import (JOINT_NAMES, LEGS, ParameterError, joint_index, load_robot_params,
-                                      load_yaml, config_path, robot_params_from_dict)
+from quadruped_common.config import ParameterError, load_yaml, config_path
+from quadruped_common.robot import JOINT_NAMES, LEGS, joint_index
+from quadruped_control.model.params import load_robot_params, robot_params_from_dict
 
 
 @pytest.fixture(scope="module")

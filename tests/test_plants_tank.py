@@ -9,15 +9,16 @@ import numpy as np
 import pytest
 from scipy.integrate import solve_ivp
 
-from quadruped_control.controller_config import load_controller_config
-from quadruped_control.dynamics import FloatingBaseModel, RigidBodyState
-from quadruped_control.params import ParameterError, config_path, load_robot_params
-from quadruped_control.plants import TankModel, TankParams, load_tank_params, make_plant
-from quadruped_control.plants.added_mass import (ellipsoid_added_mass, ellipsoid_coefficients, kirchhoff_terms,
+from quadruped_common.config import ParameterError, config_path
+from quadruped_common.so3 import rpy_to_rot
+from quadruped_control.control.controller_config import load_controller_config
+from quadruped_control.model.params import load_robot_params
+from quadruped_control.sim.plants import TankModel, TankParams, load_tank_params, make_plant
+from quadruped_control.sim.plants.added_mass import (ellipsoid_added_mass, ellipsoid_coefficients, kirchhoff_terms,
                                                  point_mass_matrix)
-from quadruped_control.plants.tank import _solve_mass, hydrostatic_wrench, rope_force, torso_ellipsoid
-from quadruped_control.simulation import ClosedLoopSimulation, PlantSimulator, nominal_joint_angles
-from quadruped_control.so3 import rpy_to_rot
+from quadruped_control.sim.plants.paper import FloatingBaseModel, RigidBodyState
+from quadruped_control.sim.plants.tank import _solve_mass, hydrostatic_wrench, rope_force, torso_ellipsoid
+from quadruped_control.sim.simulation import ClosedLoopSimulation, PlantSimulator, nominal_joint_angles
 
 ROBOT = load_robot_params()
 TANK = load_tank_params()
@@ -189,9 +190,9 @@ def _reduced_roll_model(model: TankModel, robot=ROBOT):
         M_q = J^T M J,
 
     V: torso weight and buoyancy, paw net buoyancy and the rope's pendulum term T0 (y_hook - y_anchor)^2 / (2 L);
-    Q_drag = J^T (drag wrench): the paper's paw and body drag (:mod:`quadruped_control.hydrodynamics`,
+    Q_drag = J^T (drag wrench): the paper's paw and body drag (:mod:`quadruped_control.model.hydrodynamics`,
     the readable functions) for that motion."""
-    from quadruped_control import hydrodynamics
+    from quadruped_control.model import hydrodynamics
 
     q = nominal_joint_angles(robot)
     feet = model.leg_input(q, np.zeros((4, 3))).foot_positions

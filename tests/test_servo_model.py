@@ -8,8 +8,8 @@ import pytest
 from hypothesis import given
 from hypothesis import strategies as st
 
-from quadruped_control.params import ParameterError
-from quadruped_control.servo_model import (
+from quadruped_common.config import ParameterError
+from quadruped_control.sim.servo_model import (
     IdealServo,
     RateLimitedServo,
     ServoParams,

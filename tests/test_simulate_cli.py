@@ -11,7 +11,7 @@ import sys
 import pytest
 
 from quadruped_control import simulate
-from quadruped_control.simulation import SimulationResult
+from quadruped_control.sim.simulation import SimulationResult
 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 
@@ -97,7 +97,7 @@ def test_module_runs_as_a_script_without_ros(tmp_path) -> None:
 
 def _robot_yaml_with_foot(tmp_path, z: float) -> str:
     """A copy of config/robot.yaml whose nominal foot height is ``z`` (m)."""
-    from quadruped_control.params import config_path, load_yaml
+    from quadruped_common.config import config_path, load_yaml
     import yaml
 
     tree = load_yaml(config_path("robot.yaml"))
@@ -109,7 +109,8 @@ def _robot_yaml_with_foot(tmp_path, z: float) -> str:
 
 
 def test_robot_yaml_reaches_plant_controller_and_studies(tmp_path) -> None:
-    from quadruped_control.params import config_path, load_robot_params
+    from quadruped_common.config import config_path
+    from quadruped_control.model.params import load_robot_params
 
     default_z = float(load_robot_params().nominal_foot_leg[2])
     other_z = default_z + 0.005

@@ -1,4 +1,4 @@
-"""Tests of the offline closed-loop simulator core (quadruped_control.simulation)."""
+"""Tests of the offline closed-loop simulator core (quadruped_control.sim.simulation)."""
 from __future__ import annotations
 
 import dataclasses
@@ -9,12 +9,13 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from quadruped_control.controller_config import load_controller_config
-from quadruped_control.dynamics import DynamicsError, FloatingBaseModel, RigidBodyState, held_joint_input
-from quadruped_control.kinematics import UnreachableError
-from quadruped_control.params import load_robot_params
-from quadruped_control.servo_model import IdealServo, RateLimitedServo, ServoParams
-from quadruped_control.simulation import (
+from quadruped_common.so3 import exp_so3, geodesic_angle, rot_to_quat, rot_to_rpy, rpy_to_rot
+from quadruped_control.control.controller_config import load_controller_config
+from quadruped_control.model.kinematics import UnreachableError
+from quadruped_control.model.params import load_robot_params
+from quadruped_control.sim.plants.paper import DynamicsError, FloatingBaseModel, RigidBodyState, held_joint_input
+from quadruped_control.sim.servo_model import IdealServo, RateLimitedServo, ServoParams
+from quadruped_control.sim.simulation import (
     ClosedLoopSimulation,
     PlantSimulator,
     SimulationError,
@@ -24,7 +25,6 @@ from quadruped_control.simulation import (
     rotations_to_quaternions,
     rotations_to_rpy,
 )
-from quadruped_control.so3 import exp_so3, geodesic_angle, rot_to_quat, rot_to_rpy, rpy_to_rot
 
 ROBOT = load_robot_params()
 CONFIG = load_controller_config(gain_set="simulation")

@@ -13,14 +13,15 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from quadruped_control.controller import AttitudeController
-from quadruped_control.controller_config import load_controller_config
-from quadruped_control.dynamics import DynamicsError, FloatingBaseModel, RigidBodyState, _as_mat3, held_joint_input
-from quadruped_control.kinematics import UnreachableError, joint_angles, joint_angles_floats, joint_angles_full
-from quadruped_control.params import LEGS, load_robot_params
-from quadruped_control.servo_model import IdealServo, RateLimitedServo, ServoParams
-from quadruped_control.simulation import ClosedLoopSimulation, PlantSimulator, SimulationError, nominal_joint_angles
-from quadruped_control.so3 import exp_so3, rpy_to_rot
+from quadruped_common.robot import LEGS
+from quadruped_common.so3 import exp_so3, rpy_to_rot
+from quadruped_control.control.controller import AttitudeController
+from quadruped_control.control.controller_config import load_controller_config
+from quadruped_control.model.kinematics import UnreachableError, joint_angles, joint_angles_floats, joint_angles_full
+from quadruped_control.model.params import load_robot_params
+from quadruped_control.sim.plants.paper import DynamicsError, FloatingBaseModel, RigidBodyState, _as_mat3, held_joint_input
+from quadruped_control.sim.servo_model import IdealServo, RateLimitedServo, ServoParams
+from quadruped_control.sim.simulation import ClosedLoopSimulation, PlantSimulator, SimulationError, nominal_joint_angles
 
 PARAMS = load_robot_params()
 Q0 = nominal_joint_angles(PARAMS)
@@ -203,12 +204,13 @@ def test_controller_output_arrays_match_the_stroke_state() -> None:
 # ------------------------------------------------------------------ whole loop
 
 def test_step_context_from_flat_equals_rows_constructor() -> None:
-    from quadruped_control.dynamics import _leg_kinematics_flat, _StepContext, leg_kinematics
+    from quadruped_control.model.kinematics import leg_kinematics, leg_kinematics_flat
+    from quadruped_control.sim.plants.paper import _StepContext
     rng = np.random.default_rng(3)
     q, q_dot = (Q0 + rng.uniform(-0.2, 0.2, (4, 3))).tolist(), rng.uniform(-3.0, 3.0, (4, 3)).tolist()
     restoring = tuple(rng.normal(size=9).tolist())
     a = _StepContext(leg_kinematics(q, q_dot, PARAMS), 0.37, restoring)
-    b = _StepContext.from_flat(_leg_kinematics_flat(q, q_dot, PARAMS), 0.37, restoring)
+    b = _StepContext.from_flat(leg_kinematics_flat(q, q_dot, PARAMS), 0.37, restoring)
     assert a.feet == b.feet and a.up_torque == b.up_torque and a.flat == b.flat
     with pytest.raises(ValueError):
         leg_kinematics(q[:3], q_dot[:3], PARAMS)

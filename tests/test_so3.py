@@ -1,4 +1,4 @@
-"""SO(3) utilities (quadruped_control.so3): properties of hat/vee, exp/log, quaternions, RPY, errors."""
+"""SO(3) utilities (quadruped_common.so3): properties of hat/vee, exp/log, quaternions, RPY, errors."""
 import math
 
 import numpy as np
@@ -6,7 +6,7 @@ import pytest
 from hypothesis import assume, given, settings
 from hypothesis import strategies as st
 
-from quadruped_control.so3 import (attitude_error, exp_so3, geodesic_angle, hat, is_rotation, log_so3,
+from quadruped_common.so3 import (attitude_error, exp_so3, geodesic_angle, hat, is_rotation, log_so3,
                                    orthonormalize, quat_conjugate, quat_multiply, quat_normalize,
                                    quat_to_rot, rot_to_quat, rot_to_rpy, rot_x, rot_y, rot_z, rpy_to_rot,
                                    vee)

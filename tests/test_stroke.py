@@ -7,10 +7,12 @@ import pytest
 from hypothesis import given
 from hypothesis import strategies as st
 
-from quadruped_control.kinematics import UnreachableError, joint_angles, within_limits
-from quadruped_control.params import LEGS, ParameterError, load_robot_params
-from quadruped_control.strokes.paper import (PHASE_HOLD, PHASE_POWER, PHASE_RECOVERY, StrokeCycle, StrokePath,
+from quadruped_common.config import ParameterError
+from quadruped_common.robot import LEGS
+from quadruped_control.control.strokes.paper import (PHASE_HOLD, PHASE_POWER, PHASE_RECOVERY, StrokeCycle, StrokePath,
                                       cubic_time_profile)
+from quadruped_control.model.kinematics import UnreachableError, joint_angles, within_limits
+from quadruped_control.model.params import load_robot_params
 
 PARAMS = load_robot_params()
 DT = 0.01

@@ -1,17 +1,18 @@
-"""Coordinated stroke scheme and the scheme interface (quadruped_control.strokes)."""
+"""Coordinated stroke scheme and the scheme interface (quadruped_control.control.strokes)."""
 import math
 
 import numpy as np
 import pytest
 
-from quadruped_control.controller import AttitudeController
-from quadruped_control.controller_config import controller_config_from_dict, load_controller_config
-from quadruped_control.params import ParameterError, load_robot_params
-from quadruped_control.simulation import ClosedLoopSimulation
-from quadruped_control.so3 import rpy_to_rot
-from quadruped_control.strokes import CoordinatedParams, CoordinatedStrokes, StrokeCycle, make_stroke_scheme
-from quadruped_control.strokes.coordinated import DRAG_OPTIMAL_RECOVERY_RATIO
-from quadruped_control.strokes.workspace import fibonacci_directions, leg_workspace
+from quadruped_common.config import ParameterError
+from quadruped_common.so3 import rpy_to_rot
+from quadruped_control.control.controller import AttitudeController
+from quadruped_control.control.controller_config import controller_config_from_dict, load_controller_config
+from quadruped_control.control.strokes import CoordinatedParams, CoordinatedStrokes, StrokeCycle, make_stroke_scheme
+from quadruped_control.control.strokes.coordinated import DRAG_OPTIMAL_RECOVERY_RATIO
+from quadruped_control.control.strokes.workspace import fibonacci_directions, leg_workspace
+from quadruped_control.model.params import load_robot_params
+from quadruped_control.sim.simulation import ClosedLoopSimulation
 
 PARAMS = load_robot_params()
 DT = 0.01

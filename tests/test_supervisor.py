@@ -6,11 +6,11 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from quadruped_control.controller import AttitudeController
-from quadruped_control.controller_config import load_controller_config
-from quadruped_control.params import load_robot_params
-from quadruped_control.so3 import rot_to_quat, rpy_to_rot
-from quadruped_control.supervisor import ControlSupervisor
+from quadruped_common.so3 import rot_to_quat, rpy_to_rot
+from quadruped_control.control.controller import AttitudeController
+from quadruped_control.control.controller_config import load_controller_config
+from quadruped_control.control.supervisor import ControlSupervisor
+from quadruped_control.model.params import load_robot_params
 
 LOW, HIGH = 500.0, 2500.0
 LEVEL = (0.0, 0.0, 0.0, 1.0)

@@ -2,7 +2,7 @@
 
 The paw positions are computed by chaining the URDF's own joint transforms (a small FK over the parsed
 XML, written here with numpy) for in-range actuated angles plus the passive knee angles of
-quadruped_control.visualization, and compared with quadruped_control.kinematics.foot_position
+quadruped_control.ros.visualization, and compared with quadruped_control.model.kinematics.foot_position
 (eq. ee_body, fk_T, fk_planar) to 1e-9 m. No ROS master needed.
 """
 import math
@@ -17,9 +17,11 @@ import numpy as np
 import pytest
 import yaml
 
-from quadruped_control.kinematics import foot_position, joint_angles
-from quadruped_control.params import JOINT_NAMES, LEGS, config_path, joint_index, load_robot_params
-from quadruped_control.visualization import (PASSIVE_JOINT_NAMES, VISUAL_JOINT_NAMES, VisualizationError,
+from quadruped_common.config import config_path
+from quadruped_common.robot import JOINT_NAMES, LEGS, joint_index
+from quadruped_control.model.kinematics import foot_position, joint_angles
+from quadruped_control.model.params import load_robot_params
+from quadruped_control.ros.visualization import (PASSIVE_JOINT_NAMES, VISUAL_JOINT_NAMES, VisualizationError,
                                              visual_joint_state)
 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))

@@ -1,4 +1,4 @@
-"""quadruped_control.visualization: passive five-bar angles, joint-state assembly, markers, throttling."""
+"""quadruped_control.ros.visualization: passive five-bar angles, joint-state assembly, markers, throttling."""
 import math
 
 import numpy as np
@@ -6,8 +6,9 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from quadruped_control.params import JOINT_NAMES, LEGS, FiveBar, joint_index, load_robot_params
-from quadruped_control.visualization import (LEG_COLOURS, PASSIVE_JOINT_NAMES, VISUAL_JOINT_NAMES, SphereMarker,
+from quadruped_common.robot import JOINT_NAMES, LEGS, joint_index
+from quadruped_control.model.params import FiveBar, load_robot_params
+from quadruped_control.ros.visualization import (LEG_COLOURS, PASSIVE_JOINT_NAMES, VISUAL_JOINT_NAMES, SphereMarker,
                                              Throttle, VisualizationError, foot_target_spheres, imu_orientation,
                                              knee_angles, unit_quaternion, visual_joint_state, wrap_angle)
 

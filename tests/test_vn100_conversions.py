@@ -8,7 +8,7 @@ import pytest
 from hypothesis import given
 from hypothesis import strategies as st
 
-from quadruped_control.so3 import quat_to_rot, rot_to_rpy, rot_x, rot_y, rot_z, rot_to_quat
+from quadruped_common.so3 import quat_to_rot, rot_to_rpy, rot_x, rot_y, rot_z, rot_to_quat
 from quadruped_drivers.vn100.conversions import ros_to_vn, vn_to_ros
 
 G = 9.80665

@@ -7,7 +7,7 @@ import time
 import numpy as np
 import pytest
 
-from quadruped_control.so3 import quat_to_rot, rot_x, rot_z, rot_to_quat
+from quadruped_common.so3 import quat_to_rot, rot_x, rot_z, rot_to_quat
 from quadruped_drivers.vn100 import protocol as vp
 from quadruped_drivers.vn100.conversions import vn_to_ros
 from quadruped_drivers.vn100.driver import Vn100Driver, Vn100Error, serial_port_factory
@@ -259,7 +259,7 @@ def test_pty_end_to_end_with_pyserial(tmp_path):
 
 
 def test_config_file_is_consistent():
-    from quadruped_control.params import config_path, load_yaml
+    from quadruped_common.config import config_path, load_yaml
 
     cfg = load_yaml(config_path("vn100.yaml"))
     assert vp.rate_divisor_for(cfg["rate_hz"]) == 4

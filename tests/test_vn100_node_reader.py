@@ -7,10 +7,10 @@ pytest.importorskip("diagnostic_updater")
 import rospy.rostime  # noqa: E402
 
 from quadruped_common.monitoring import RateMonitor  # noqa: E402
+from quadruped_drivers import vn100_node  # noqa: E402
 from quadruped_drivers.vn100.conversions import SensorLimits  # noqa: E402
 from quadruped_drivers.vn100.protocol import Vn100Sample  # noqa: E402
 from quadruped_drivers.vn100.sample_gate import SampleGate  # noqa: E402
-from quadruped_drivers import vn100_node  # noqa: E402
 
 
 def sample(ns, rate=0.1):

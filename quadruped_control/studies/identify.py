@@ -23,10 +23,19 @@ and down each. Sensitivity per parameter: that rank correlation and the refineme
 """
 from __future__ import annotations
 
+import argparse
+import json
 import math
+import os
+import time
 from typing import Any, Dict, List, Sequence, Tuple
 
 import numpy as np
+
+from quadruped_common.config import config_path
+from quadruped_control.studies import paper_experiments as pe
+from quadruped_control.studies.paper_experiments import experiment_specs
+from quadruped_control.studies.trial import TrialSpec, run_many
 
 __all__ = ["PARAMETERS", "case_cost", "latin_hypercube", "objective", "spearman", "tank_overrides"]
 
@@ -137,3 +146,81 @@ def update_tank_yaml(text: str, values: Dict[str, float], note: str) -> str:
     if missing:
         raise ValueError("tank.yaml has no line for %s" % ", ".join(missing))
     return "\n".join(lines) + "\n"
+
+
+def main_study(args: argparse.Namespace) -> int:
+    """Fit the tank plant's uncertain parameters to Table 1 (:mod:`quadruped_control.studies.identify`)."""
+
+    os.makedirs(args.out, exist_ok=True)
+    duration = args.duration if args.duration_given else 160.0  # longest paper t_s 128.6 s + 30 s hold
+    servo = args.servo_model_given or "rate-limited"
+    rows = list(pe.PAPER_TABLE)
+    start = time.perf_counter()
+
+    def evaluate(points: List[Dict[str, float]], tag: str) -> List[Dict[str, Any]]:
+        specs: List[TrialSpec] = []
+        for i, values in enumerate(points):
+            specs += experiment_specs(args, "tank", "experiment", servo, duration, "%s%02d" % (tag, i),
+                                       tank_overrides(values), keep_trace=False)[0]
+        results = run_many(specs, args, "identify (%s)" % tag)
+        out = []
+        for i, values in enumerate(points):
+            table = pe.comparison_rows(rows, results[15 * i:15 * (i + 1)])
+            out.append({"values": values, "objective": objective(table), "agreement": pe.agreement(table),
+                        "rows": table})
+        return out
+
+    hypercube = evaluate(latin_hypercube(args.points, args.seed), "lhs")
+    costs = [e["objective"] for e in hypercube]
+    sensitivity = {name: spearman([e["values"][name] for e in hypercube], costs)
+                   for name, _, _, _ in PARAMETERS}
+    best = min(hypercube, key=lambda e: e["objective"])
+    ranked = sorted(sensitivity, key=lambda n: -abs(sensitivity[n]))[:args.refine]
+    refine_points = []
+    for name, _, low, high in PARAMETERS:
+        if name in ranked:
+            for sign in (-1.0, 1.0):
+                values = dict(best["values"])
+                values[name] = min(high, max(low, values[name] + sign * (high - low) / 8.0))
+                refine_points.append(values)
+    refined = evaluate(refine_points, "ref") if refine_points else []
+    steps = {}
+    for e in refined:
+        changed = [n for n in e["values"] if e["values"][n] != best["values"][n]]
+        if changed:
+            steps.setdefault(changed[0], []).append((e["values"][changed[0]], e["objective"] - best["objective"]))
+    final = min([best] + refined, key=lambda e: e["objective"])
+    wall = time.perf_counter() - start
+    trials = 15 * (len(hypercube) + len(refined))
+    note = "simulate --study identify (%d trials)" % trials
+    with open(config_path("tank.yaml")) as stream:
+        identified = update_tank_yaml(stream.read(), final["values"], note)
+    with open(os.path.join(args.out, "tank_identified.yaml"), "w") as stream:
+        stream.write(identified)
+    if args.write_config:
+        with open(config_path("tank.yaml"), "w") as stream:
+            stream.write(identified)
+    report = {"study": "identify", "duration": duration, "servo_model": servo, "points": args.points,
+              "refine": ranked, "trials": trials, "wall_time": wall, "best": final, "sensitivity_rank": sensitivity,
+              "refinement_steps": steps, "hypercube": [{k: e[k] for k in ("values", "objective", "agreement")}
+                                                       for e in hypercube]}
+    with open(os.path.join(args.out, "identify.json"), "w") as stream:
+        json.dump(report, stream, indent=2, allow_nan=False)
+    lines = ["## Identification: %d trials (%d parameter sets x 15 experiments, %g s each), %.0f s wall"
+             % (trials, len(hypercube) + len(refined), duration, wall), "",
+             "Best objective %.2f: same settled outcome %d of 15, t_s within 2x %d of 15." % (
+                 final["objective"], final["agreement"]["same_settled_outcome"], final["agreement"]["t_s_within_2x"]),
+             "", "| parameter | low | high | best | rank correlation with the objective (hypercube) "
+             "| objective change, refinement step down / up |", "|---|---|---|---|---|---|"]
+    for name, _, low, high in PARAMETERS:
+        step = steps.get(name, [])
+        lines.append("| %s | %g | %g | %.4g | %+.2f | %s |" % (
+            name, low, high, final["values"][name], sensitivity[name],
+            " / ".join("%+.2f" % d for _, d in sorted(step)) if step else "--"))
+    lines += ["", pe.format_table(final["rows"], "Best parameter set: tank plant, experiment gains, %s servos" % servo)]
+    with open(os.path.join(args.out, "identify.md"), "w") as stream:
+        stream.write("\n".join(lines))
+    print("\n".join(lines))
+    print("results: %s; identified parameters: %s%s" % (args.out, os.path.join(args.out, "tank_identified.yaml"),
+                                                        " (written to config/tank.yaml)" if args.write_config else ""))
+    return 0

@@ -10,7 +10,7 @@ paper's model (default) or the tank (``--plant tank``). Every start runs with bo
 Per trial: geodesic settling time (3 s centred average, 6 degree band, held 30 s; ``None`` if it never
 settles), the worst smoothed geodesic error over the last 30 s, the torque delivered (eq. torque_leg from
 the simulated joints) against tau_sat, and the fraction of time some pair is in power
-(:func:`quadruped_control.simulate.stroke_metrics`). Writes ``schemes.json``, ``schemes.md`` and
+(:func:`quadruped_control.studies.trial.stroke_metrics`). Writes ``schemes.json``, ``schemes.md`` and
 ``schemes.png`` into the output folder and prints the summary with the targets of issue 9.
 """
 from __future__ import annotations
@@ -24,6 +24,7 @@ from typing import Any, Dict, List, Optional, Sequence, Tuple
 import numpy as np
 
 from quadruped_control.studies.cases import paper_sim_cases, random_cases, table1_cases
+from quadruped_control.studies.trial import TrialSpec, run_many
 
 __all__ = ["build_specs", "compare", "main_study"]
 
@@ -35,7 +36,6 @@ def build_specs(perturbed: int = 1, gain_sets: Sequence[str] = ("simulation", "e
                 servos: Sequence[str] = ("ideal", "rate-limited"), robot_yaml: Optional[str] = None,
                 cases: Optional[list] = None, plant: str = "paper", tank_yaml: Optional[str] = None) -> List[Any]:
     """TrialSpecs of the ensemble (module docstring); labels 'case|start|gains|servo|scheme'."""
-    from quadruped_control.simulate import TrialSpec
 
     if cases is None:
         cases = paper_sim_cases() + table1_cases() + random_cases()
@@ -189,7 +189,6 @@ def main_study(args: Any) -> int:
     Exit status: 0 when every target of the comparison is met, 2 when one is not (the results are
     written either way), so a script can tell; a ``set -e`` script that runs several studies should not
     take 2 for a failed run."""
-    from quadruped_control.simulate import _run_many
 
     out = args.out
     os.makedirs(out, exist_ok=True)
@@ -201,7 +200,7 @@ def main_study(args: Any) -> int:
     specs = build_specs(args.perturbed, gain_sets=args.scheme_gains.split(","), servos=args.scheme_servos.split(","),
                         robot_yaml=args.robot_yaml, cases=cases, plant=plant, tank_yaml=args.tank_yaml)
     start = time.perf_counter()
-    summaries = _run_many(specs, args, "schemes")
+    summaries = run_many(specs, args, "schemes")
     wall = time.perf_counter() - start
     rows = sorted((_row(s) for s in summaries), key=lambda r: (r["case"], r["start"], r["gains"], r["servo"],
                                                                 r["scheme"]))
@@ -227,10 +226,10 @@ def plot_stroke_timelines(path: str, setpoint_deg: Tuple[float, float, float] = 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    from quadruped_control.controller_config import load_controller_config
-    from quadruped_control.params import load_robot_params
-    from quadruped_control.simulation import ClosedLoopSimulation
-    from quadruped_control.so3 import rpy_to_rot
+    from quadruped_control.control.controller_config import load_controller_config
+    from quadruped_control.model.params import load_robot_params
+    from quadruped_control.sim.simulation import ClosedLoopSimulation
+    from quadruped_common.so3 import rpy_to_rot
 
     robot = load_robot_params()
     fig, axes = plt.subplots(2, 2, figsize=(11, 6.5), gridspec_kw={"height_ratios": [1, 2]})

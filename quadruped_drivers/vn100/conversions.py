@@ -40,7 +40,7 @@ import numpy as np
 from quadruped_common.imu_plausibility import (ACCEL_RANGE_M_S2, DEFAULT_LIMITS, GYRO_RANGE_RAD_S,  # noqa: F401
                                                UNIT_TOLERANCE, ImplausibleSample, SensorLimits,
                                                bounded_vector3, check_sample, unit_quaternion)
-from quadruped_control.so3 import quat_multiply
+from quadruped_common.so3 import quat_multiply
 
 ArrayLike = Union[Sequence[float], np.ndarray]
 

@@ -29,7 +29,7 @@ from typing import Callable, List, Optional, Sequence, Tuple, Union
 
 import numpy as np
 
-from quadruped_control.so3 import exp_so3, quat_multiply, rot_to_quat
+from quadruped_common.so3 import exp_so3, quat_multiply, rot_to_quat
 from quadruped_drivers.vn100 import protocol as vp
 from quadruped_drivers.vn100.conversions import ros_to_vn
 

@@ -20,7 +20,7 @@ import rospy
 import rostest
 from std_srvs.srv import SetBool
 
-from quadruped_control.metrics import moving_average_centered
+from quadruped_control.analysis.metrics import moving_average_centered
 from quadruped_drivers.hardware_config import load_hardware_config
 from geometry_msgs.msg import PoseStamped
 from quadruped_msgs.msg import ControllerState, ServoCommand

@@ -13,7 +13,7 @@ import numpy as np
 import rospy
 import rostest
 
-from quadruped_control.params import JOINT_NAMES
+from quadruped_common.robot import JOINT_NAMES
 from quadruped_drivers.hardware_config import load_hardware_config
 from quadruped_msgs.msg import ServoCommand
 

@@ -1,0 +1,296 @@
+"""Report of a recorded run from its rosbag: the paper's metrics, a figure, and the stack's health.
+
+    python -m quadruped_control.analysis.bag_report BAG [BAG ...] --out DIR [--from-setpoint-change]
+
+Reads the bag with the pure-Python ``rosbags`` reader (no ROS installation needed: analyse the robot's
+bags on any laptop). Uses:
+
+* ``/imu/data``: measured attitude (world ENU <- base_link), converted to roll, pitch, yaw;
+* ``/controller_state``: setpoint R_d, geodesic error, armed/holding;
+* ``/sim/pose`` (simulation only): true attitude, reported beside the measured one;
+* ``/diagnostics``: the last value of every node's figures (rates, jitter, latency, error counters).
+
+The trial analysed starts at the last change of the setpoint (the maneuver), or at the first armed
+controller step. Writes ``DIR/metrics.json`` (the paper's metrics, eq. in section "Experiments", via
+:func:`quadruped_control.analysis.metrics.compute_metrics`, plus health figures), ``DIR/attitude.png`` and
+``DIR/report.md``; returns the metrics dict.
+"""
+from __future__ import annotations
+
+import argparse
+import json
+import math
+import os
+import sys
+from dataclasses import dataclass, field
+from typing import Dict, List, Optional, Sequence
+
+import numpy as np
+
+from quadruped_common.monitoring import STALE_IMU, hold_kind
+from quadruped_common.so3 import geodesic_angle, geodesic_angles, quat_to_rot, rot_to_rpy, rotations_to_rpy
+from quadruped_control.analysis.metrics import compute_metrics
+
+#: Diagnostic values copied into the report (status name suffix -> keys).
+HEALTH_KEYS = {
+    "control loop": ("loop rate [Hz]", "period jitter p50 [ms]", "period jitter p99 [ms]",
+                     "step time p50 [ms]", "step time p99 [ms]", "overruns", "hold episodes",
+                     "stale-IMU hold episodes", "time held [s]", "held steps"),
+    "servo output": ("command rate [Hz]", "latency p50 [ms]", "latency p99 [ms]", "latency max [ms]",
+                     "clamped channels", "write errors", "watchdog tripped"),
+    "servo feedback": ("rate [Hz]", "read time p50 [ms]", "read time p99 [ms]", "mux errors"),
+    "imu": ("rate [Hz]", "CRC errors", "resync bytes", "disconnects"),
+}
+
+
+class BagReportError(RuntimeError):
+    """The bag lacks what the report needs (named in the message)."""
+
+
+@dataclass
+class BagData:
+    imu_t: List[float] = field(default_factory=list)
+    imu_q: List[Sequence[float]] = field(default_factory=list)
+    state_t: List[float] = field(default_factory=list)
+    state_setpoint: List[Sequence[float]] = field(default_factory=list)
+    state_geodesic: List[float] = field(default_factory=list)
+    state_armed: List[bool] = field(default_factory=list)
+    state_holding: List[bool] = field(default_factory=list)
+    state_hold_reason: List[str] = field(default_factory=list)
+    truth_t: List[float] = field(default_factory=list)
+    truth_q: List[Sequence[float]] = field(default_factory=list)
+    diagnostics: Dict[str, Dict[str, str]] = field(default_factory=dict)
+
+
+def _stamp(msg) -> float:
+    return msg.header.stamp.sec + 1e-9 * msg.header.stamp.nanosec
+
+
+def read_bags(paths: Sequence[str]) -> BagData:
+    """Collect the report's topics from one or more (split) bags."""
+    from pathlib import Path
+
+    from rosbags.highlevel import AnyReader, AnyReaderError
+    from rosbags.rosbag1 import ReaderError
+
+    data = BagData()
+    try:
+        _read_into(data, AnyReader([Path(p) for p in paths]))
+    except (AnyReaderError, ReaderError) as exc:
+        raise BagReportError("cannot read %s: %s" % (", ".join(paths), exc)) from None
+    return data
+
+
+def _read_into(data: BagData, reader) -> None:
+    with reader:
+        wanted = [c for c in reader.connections if c.topic in (
+            "/imu/data", "/controller_state", "/sim/pose", "/diagnostics")]
+        for connection, _timestamp, raw in reader.messages(connections=wanted):
+            msg = reader.deserialize(raw, connection.msgtype)
+            if connection.topic == "/imu/data":
+                o = msg.orientation
+                data.imu_t.append(_stamp(msg))
+                data.imu_q.append((o.x, o.y, o.z, o.w))
+            elif connection.topic == "/controller_state":
+                s = msg.setpoint
+                data.state_t.append(_stamp(msg))
+                data.state_setpoint.append((s.x, s.y, s.z, s.w))
+                data.state_geodesic.append(msg.geodesic_error)
+                data.state_armed.append(bool(msg.armed))
+                data.state_holding.append(bool(msg.holding))
+                data.state_hold_reason.append(str(msg.hold_reason))
+            elif connection.topic == "/sim/pose":
+                o = msg.pose.orientation
+                data.truth_t.append(_stamp(msg))
+                data.truth_q.append((o.x, o.y, o.z, o.w))
+            else:
+                for status in msg.status:
+                    data.diagnostics[status.name] = {kv.key: kv.value for kv in status.values}
+
+
+def _rotations(quaternions: Sequence[Sequence[float]]) -> np.ndarray:
+    """(N, 3, 3) rotations of (x, y, z, w) quaternions, normalised first (bags hold float32-rounded ones)."""
+    return np.array([quat_to_rot(np.asarray(q) / np.linalg.norm(q)) for q in quaternions])
+
+
+def _trial_start(data: BagData) -> float:
+    """Time of the last setpoint change while armed, else of the first armed step."""
+    armed = [i for i, a in enumerate(data.state_armed) if a]
+    if not armed:
+        raise BagReportError("the controller was never armed in this bag")
+    setpoints = np.array(data.state_setpoint)
+    start = armed[0]
+    for i in armed[1:]:
+        if np.max(np.abs(setpoints[i] - setpoints[i - 1])) > 1e-6:
+            start = i
+    return data.state_t[start]
+
+
+@dataclass(frozen=True)
+class HoldEpisode:
+    """Consecutive /controller_state steps with ``holding`` set: stamps of the first and last held
+    step and the reason the first one gave."""
+
+    start: float
+    end: float
+    reason: str
+
+    @property
+    def stale_imu(self) -> bool:
+        return hold_kind(self.reason) == STALE_IMU
+
+
+def hold_episodes(data: BagData) -> List[HoldEpisode]:
+    """The controller's hold episodes in stamp order (the diagnostics count them; this says when)."""
+    order = np.argsort(np.array(data.state_t), kind="stable")
+    episodes: List[HoldEpisode] = []
+    start = None
+    last = 0.0
+    reason = ""
+    for i in order:
+        t, holding = data.state_t[i], data.state_holding[i]
+        if holding and start is None:
+            start, reason = t, data.state_hold_reason[i] if i < len(data.state_hold_reason) else ""
+        elif not holding and start is not None:
+            episodes.append(HoldEpisode(start, last, reason))
+            start = None
+        last = t
+    if start is not None:
+        episodes.append(HoldEpisode(start, last, reason))
+    return episodes
+
+
+def health(data: BagData) -> Dict[str, Dict[str, str]]:
+    """Selected last diagnostic values per status (e.g. 'attitude_controller: control loop')."""
+    result: Dict[str, Dict[str, str]] = {}
+    for name, values in sorted(data.diagnostics.items()):
+        for suffix, keys in HEALTH_KEYS.items():
+            if name.endswith(suffix):
+                result[name] = {k: values[k] for k in keys if k in values}
+    return result
+
+
+def health_across_runs(runs: Sequence[Dict[str, Dict[str, str]]]) -> Dict[str, Dict[str, Dict[str, float]]]:
+    """min / median / max of every numeric health figure over several runs (``health()`` of each).
+
+    Figures missing or non-numeric in a run are left out of that figure's statistics; ``n`` says how
+    many runs had it.
+    """
+    collected: Dict[str, Dict[str, List[float]]] = {}
+    for run in runs:
+        for name, values in run.items():
+            for key, value in values.items():
+                try:
+                    number = float(value)
+                except (TypeError, ValueError):
+                    if str(value) in ("True", "False"):
+                        number = float(str(value) == "True")
+                    else:
+                        continue
+                collected.setdefault(name, {}).setdefault(key, []).append(number)
+    return {name: {key: {"min": float(np.min(v)), "median": float(np.median(v)), "max": float(np.max(v)),
+                         "n": float(len(v))} for key, v in figures.items()}
+            for name, figures in collected.items()}
+
+
+def analyse(data: BagData) -> Dict:
+    """The paper's metrics of the trial in ``data`` plus health figures."""
+    if len(data.imu_t) < 10 or len(data.state_t) < 10:
+        raise BagReportError("need /imu/data and /controller_state in the bag (got %d and %d messages)"
+                             % (len(data.imu_t), len(data.state_t)))
+    start = _trial_start(data)
+    # Bags need not be in stamp order (split bags, several publishers): sort, drop repeated stamps.
+    order = np.argsort(np.array(data.imu_t), kind="stable")
+    imu_t = np.array(data.imu_t)[order]
+    imu_q = [data.imu_q[i] for i in order]
+    unique = np.concatenate(([True], np.diff(imu_t) > 0))
+    imu_t = imu_t[unique]
+    imu_q = [q for q, u in zip(imu_q, unique) if u]
+    keep = imu_t >= start
+    if np.count_nonzero(keep) < 10:
+        raise BagReportError("fewer than 10 IMU samples after the maneuver started")
+    t = imu_t[keep] - start
+    R = _rotations([q for q, k in zip(imu_q, keep) if k])
+    rpy = rotations_to_rpy(R)
+    R_d = _rotations([data.state_setpoint[-1]])[0]
+    geodesic = geodesic_angles(R_d, R)
+    metrics = compute_metrics(t, rpy, np.array(rot_to_rpy(R_d)), geodesic)
+    metrics["setpoint_rpy_deg"] = [math.degrees(a) for a in rot_to_rpy(R_d)]
+    metrics["trial_start_unix"] = start
+    state_t = np.array(data.state_t)
+    holding = np.array(data.state_holding)[state_t >= start]
+    metrics["holding_fraction"] = float(np.mean(holding)) if holding.size else None
+    if data.truth_t:
+        truth_t = np.array(data.truth_t)
+        truth_R = _rotations(data.truth_q)
+        # IMU vs truth: how well the measured attitude tracks the simulated one (same stamps +- 10 ms).
+        idx = np.clip(np.searchsorted(truth_t, imu_t[keep]), 0, len(truth_t) - 1)
+        errors = [geodesic_angle(truth_R[j], R_k) for j, R_k in zip(idx, R)]
+        metrics["imu_vs_truth_deg"] = {"p50": math.degrees(float(np.percentile(errors, 50))),
+                                       "max": math.degrees(float(np.max(errors)))}
+    metrics["health"] = health(data)
+    metrics["_series"] = (t, rpy, geodesic)
+    return metrics
+
+
+def _fmt(value) -> str:
+    if value is None:
+        return "-"
+    if isinstance(value, bool):
+        return "yes" if value else "no"
+    if isinstance(value, float):
+        return "%.2f" % value
+    return str(value)
+
+
+def write_report(metrics: Dict, out_dir: str, title: str = "Simulated maneuver") -> str:
+    """Write metrics.json, attitude.png and report.md into ``out_dir``; returns the report path."""
+    from quadruped_control.analysis.plotting import plot_attitude
+
+    os.makedirs(out_dir, exist_ok=True)
+    t, rpy, geodesic = metrics.pop("_series")
+    setpoint = np.radians(metrics["setpoint_rpy_deg"])
+    plot_attitude(t, rpy, setpoint, geodesic, os.path.join(out_dir, "attitude.png"), title=title)
+    with open(os.path.join(out_dir, "metrics.json"), "w") as f:
+        json.dump(metrics, f, indent=2, sort_keys=True)
+    lines = ["# %s" % title, "",
+             "Setpoint roll/pitch/yaw: %s deg; initial geodesic error %.1f deg; settled: %s."
+             % (", ".join("%.1f" % v for v in metrics["setpoint_rpy_deg"]), metrics["theta_init_deg"],
+                _fmt(metrics["settled"])), "",
+             "| axis | t_r [s] | t_s [s] | e_ss [deg] | M_p [%] |", "|---|---|---|---|---|"]
+    for axis in ("roll", "pitch", "yaw"):
+        m = metrics[axis]
+        lines.append("| %s | %s | %s | %s | %s |" % (axis, _fmt(m["t_r"]), _fmt(m["t_s"]), _fmt(m["e_ss"]),
+                                                    _fmt(m["M_p"])))
+    if "imu_vs_truth_deg" in metrics:
+        lines += ["", "Measured (VN-100 path) vs simulated attitude: p50 %.3f deg, max %.3f deg."
+                  % (metrics["imu_vs_truth_deg"]["p50"], metrics["imu_vs_truth_deg"]["max"])]
+    lines += ["", "## Stack health (last diagnostics in the bag)", ""]
+    for name, values in metrics["health"].items():
+        lines.append("- **%s**: %s" % (name, ", ".join("%s %s" % kv for kv in values.items())))
+    lines += ["", "![attitude](attitude.png)", ""]
+    path = os.path.join(out_dir, "report.md")
+    with open(path, "w") as f:
+        f.write("\n".join(lines))
+    return path
+
+
+def main(argv: Optional[Sequence[str]] = None) -> int:
+    parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    parser.add_argument("bags", nargs="+", help="bag file(s) of one run (split parts together)")
+    parser.add_argument("--out", required=True, help="output folder")
+    parser.add_argument("--title", default="Recorded maneuver")
+    args = parser.parse_args(argv)
+    try:
+        metrics = analyse(read_bags(args.bags))
+    except (BagReportError, OSError) as exc:
+        print("bag_report: %s" % exc, file=sys.stderr)
+        return 1
+    path = write_report(metrics, args.out, args.title)
+    with open(path) as f:
+        print(f.read())
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,553 @@
+"""Leg kinematics of the underwater quadruped (paper section "Mathematical Modeling").
+
+Each leg is a symmetric planar five-bar linkage (actuated angles theta1, theta2; passive angles theta4,
+theta5, phi; Fig. 3b) whose plane is rotated about the leg frame's x axis by the hip servo (theta3,
+Fig. 3c). This module implements:
+
+- eq. (fk_EFG), (fk_phi), (fk_planar): five-bar forward kinematics, :func:`five_bar_fk`;
+- eq. (ik_dists), (ik_alphas), (ik_theta1245): five-bar inverse kinematics, :func:`five_bar_ik`;
+- eq. (fk_T), (ee_body): leg and body-frame foot position, :func:`leg_fk`, :func:`foot_position`;
+- eq. (ik_theta3) and the planar IK: :func:`joint_angles` (body-frame target -> servo angles), and
+  :func:`joint_angles_floats`, the same on plain floats (the controller's per-step IK);
+- eq. (J_leg): translational leg Jacobian, :func:`five_bar_jacobian`, :func:`foot_jacobian`;
+- eq. (ee_vel): floating-base Jacobian, :func:`floating_base_jacobian`.
+
+Geometry of the five-bar in its plane frame F_P: motor 1 at the origin, motor 2 at (c, 0); actuated
+link a1 ends at A = a1 (cos theta1, sin theta1), link a2 at B = (c, 0) + a2 (cos theta2, sin theta2);
+passive link a3 joins A to the foot, a4 joins B to the foot. theta4 = angle(a3) - theta1 and
+theta5 = angle(a4) - theta2 = phi - theta2 are the passive joint angles.
+
+Decisions (see also the docstrings):
+
+- Working mode: the IK of eq. (ik_theta1245) is the "elbows out" branch (theta1 turned clockwise from
+  the motor-1-to-foot line, theta2 counter-clockwise), i.e. theta4 in [0, pi], theta5 in [-pi, 0].
+  The "+" root of eq. (fk_phi) as printed picks the matching assembly mode (foot always on the
+  clockwise side of the line from elbow A to elbow B, one mode for all angles), so FK(IK(p)) == p;
+  both facts are checked by the tests. FK itself accepts any closable
+  (theta1, theta2); IK(FK(q)) == q only holds for elbows-out configurations.
+- Hip branch: eq. (ik_theta3) solves R_x(theta3) (l_y + y', l_z) = (y_d, z_d) with the root
+  l_y + y' = -sqrt(R^2 - l_z^2) <= 0, i.e. the five-bar points away from the hip axis (foot "below"
+  the motors in its plane). Joint configurations with l_y + y' > 0 (foot folded above the motors)
+  are valid for FK but IK maps their foot position to the other hip solution.
+- The hip formula eq. (ik_theta3) returns values in (-2 pi - pi/2, pi/2]; servo angles are brought
+  into their configured ranges by adding multiples of 2 pi, as are theta1 and theta2. A target whose
+  angles cannot be brought into range raises :class:`UnreachableError`; nothing here returns NaN.
+- eq. (J_leg) writes the five-bar columns as R_x(theta3) [-C11, C21, 0]^T, [-C12, C22, 0]^T with
+  Chavdarov's C_ij; here the 2x2 block is the exact derivative d(x_d, y')/d(theta1, theta2), derived
+  from the rigidity of the passive links (see :func:`five_bar_jacobian`), so [-C11, C21] and
+  [-C12, C22] are its columns whatever sign convention C_ij carry. The tests compare every Jacobian
+  with finite differences.
+"""
+from __future__ import annotations
+
+import math
+from typing import Optional, Sequence, Tuple, Union
+
+import numpy as np
+
+from quadruped_common.robot import LEGS, MIRROR_DIAG
+from quadruped_common.so3 import hat
+from quadruped_control.model.params import FiveBar, RobotParams
+
+NUM_LEGS = len(LEGS)
+
+ArrayLike = Union[Sequence[float], np.ndarray]
+
+TWO_PI = 2.0 * math.pi
+#: Rounding slack for arccos arguments and range checks (targets exactly on the boundary).
+_ROUND_TOL = 1e-12
+#: Angle slack (rad) when wrapping an angle into a servo range that ends exactly at it.
+_ANGLE_TOL = 1e-9
+#: |sin(phi - psi)| below this: the passive links are aligned (type-2 singularity, no Jacobian).
+_SINGULAR_TOL = 1e-9
+
+
+class UnreachableError(ValueError):
+    """A foot target (or joint configuration) the leg cannot realise.
+
+    Raised when a target is outside the five-bar reach, inside the hip offset (R < l_z), outside the
+    servo ranges, or not finite. ``leg`` is the leg number when known, ``reason`` the cause.
+    """
+
+    def __init__(self, reason: str, leg: Optional[int] = None) -> None:
+        self.reason = reason
+        self.leg = leg
+        message = reason if leg is None else "leg %d: %s" % (leg, reason)
+        super().__init__(message)
+
+
+# --------------------------------------------------------------------------------------------------
+# Helpers
+# --------------------------------------------------------------------------------------------------
+
+def _check_leg(leg: int) -> None:
+    if leg not in MIRROR_DIAG:
+        raise ValueError("leg must be one of %s, got %r" % (LEGS, leg))
+
+
+def _acos_checked(value: float, what: str) -> float:
+    """arccos that refuses arguments outside [-1, 1] (beyond rounding) instead of clipping silently."""
+    if value > 1.0:
+        if value > 1.0 + _ROUND_TOL:
+            raise UnreachableError("%s: arccos argument %.6g > 1" % (what, value))
+        return 0.0
+    if value < -1.0:
+        if value < -1.0 - _ROUND_TOL:
+            raise UnreachableError("%s: arccos argument %.6g < -1" % (what, value))
+        return math.pi
+    return math.acos(value)
+
+
+def wrap_into_range(angle: float, low: float, high: float) -> Optional[float]:
+    """``angle + 2 pi k`` inside [low, high] (with a 1e-9 rad slack), or None if there is none."""
+    k = math.ceil((low - _ANGLE_TOL - angle) / TWO_PI)
+    wrapped = angle + k * TWO_PI
+    if wrapped > high + _ANGLE_TOL:
+        return None
+    return wrapped
+
+
+def wrap_to_pi(angle: float) -> float:
+    """Angle wrapped into [-pi, pi)."""
+    return (angle + math.pi) % TWO_PI - math.pi
+
+
+# --------------------------------------------------------------------------------------------------
+# Five-bar linkage (plane frame F_P)
+# --------------------------------------------------------------------------------------------------
+
+def five_bar_fk(theta1: float, theta2: float, geometry: FiveBar) -> Tuple[float, float, float, float, float]:
+    """Foot position of the five-bar from the actuated angles, eq. (fk_EFG), (fk_phi), (fk_planar).
+
+    Returns ``(x_d, y_prime, phi, theta4, theta5)``: the foot in F_P, the absolute angle phi of link
+    a4, and the passive joint angles theta4 (link a3 relative to a1) and theta5 (a4 relative to a2,
+    phi = theta2 + theta5), both wrapped into [-pi, pi). Uses the "+" root of eq. (fk_phi), the
+    assembly mode that matches the elbows-out IK of eq. (ik_theta1245).
+
+    Raises :class:`UnreachableError` if E^2 + F^2 - G^2 < 0 (the passive links cannot close) or if
+    the two elbows coincide (phi undefined).
+    """
+    if not (math.isfinite(theta1) and math.isfinite(theta2)):
+        raise UnreachableError("five-bar angles must be finite, got (%r, %r)" % (theta1, theta2))
+    a1, a3, c = geometry.a1, geometry.a3, geometry.c
+    c1, s1 = math.cos(theta1), math.sin(theta1)
+    c2, s2 = math.cos(theta2), math.sin(theta2)
+    # eq. (fk_EFG), valid for the symmetric mechanism a1 = a2, a3 = a4 (enforced by params).
+    e = 2.0 * a3 * (c + a1 * (c2 - c1))
+    f = 2.0 * a1 * a3 * (s2 - s1)
+    g = c * c + 2.0 * a1 * a1 + 2.0 * c * a1 * c2 - 2.0 * c * a1 * c1 - 2.0 * a1 * a1 * math.cos(theta2 - theta1)
+    scale = 4.0 * a3 * a3 * (c + 2.0 * a1) ** 2  # magnitude of E^2 + F^2, for a relative tolerance
+    disc = e * e + f * f - g * g
+    if disc < -_ROUND_TOL * scale:
+        raise UnreachableError("five-bar cannot close at theta1=%.2f deg, theta2=%.2f deg (elbows %.4f m "
+                               "apart, passive links reach %.4f m)"
+                               % (math.degrees(theta1), math.degrees(theta2), math.sqrt(max(g, 0.0)),
+                                  geometry.a3 + geometry.a4))
+    if g < 1e-24:
+        raise UnreachableError("five-bar elbows coincide at theta1=%.2f deg, theta2=%.2f deg: foot undefined"
+                               % (math.degrees(theta1), math.degrees(theta2)))
+    phi = wrap_to_pi(2.0 * math.atan2(-f + math.sqrt(max(disc, 0.0)), g - e))  # eq. (fk_phi)
+    x_d = c + geometry.a2 * c2 + geometry.a4 * math.cos(phi)                     # eq. (fk_planar)
+    y_prime = geometry.a2 * s2 + geometry.a4 * math.sin(phi)
+    psi = math.atan2(y_prime - a1 * s1, x_d - a1 * c1)  # absolute angle of link a3
+    return x_d, y_prime, phi, wrap_to_pi(psi - theta1), wrap_to_pi(phi - theta2)
+
+
+def five_bar_ik(x_d: float, y_prime: float, geometry: FiveBar) -> Tuple[float, float, float, float]:
+    """Elbows-out inverse kinematics, eq. (ik_dists), (ik_alphas), (ik_theta1245).
+
+    Returns ``(theta1, theta2, theta4, theta5)`` with theta1 in (-2 pi, pi], theta2 in (-pi, 2 pi)
+    as the formulas give them (the caller wraps them into servo ranges), theta4 in [0, pi],
+    theta5 in [-pi, 0]. Raises :class:`UnreachableError` when an arccos argument leaves [-1, 1]
+    (foot out of reach of either side chain).
+    """
+    if not (math.isfinite(x_d) and math.isfinite(y_prime)):
+        raise UnreachableError("five-bar target must be finite, got (%r, %r)" % (x_d, y_prime))
+    a1, a2, a3, a4, c = geometry.a1, geometry.a2, geometry.a3, geometry.a4, geometry.c
+    d13 = math.hypot(x_d, y_prime)            # eq. (ik_dists)
+    d24 = math.hypot(x_d - c, y_prime)
+    if d13 < _ROUND_TOL or d24 < _ROUND_TOL:
+        raise UnreachableError("five-bar target (%.4f, %.4f) m is on a motor axis: out of reach"
+                               % (x_d, y_prime))
+    where = "five-bar target (%.4f, %.4f) m" % (x_d, y_prime)
+    alpha1 = _acos_checked((d13 * d13 + a1 * a1 - a3 * a3) / (2.0 * a1 * d13),
+                           where + " out of reach of motor 1 (distance %.4f m, reach [%.4f, %.4f] m)"
+                           % (d13, abs(a1 - a3), a1 + a3))
+    alpha2 = _acos_checked((d24 * d24 + a2 * a2 - a4 * a4) / (2.0 * a2 * d24),
+                           where + " out of reach of motor 2 (distance %.4f m, reach [%.4f, %.4f] m)"
+                           % (d24, abs(a2 - a4), a2 + a4))
+    theta1 = math.atan2(y_prime, x_d) - alpha1           # eq. (ik_theta1245)
+    theta2 = math.atan2(y_prime, x_d - c) + alpha2
+    theta4 = _acos_checked((d13 * d13 - a1 * a1 - a3 * a3) / (2.0 * a1 * a3), where + " (theta4)")
+    theta5 = -_acos_checked((d24 * d24 - a2 * a2 - a4 * a4) / (2.0 * a2 * a4), where + " (theta5)")
+    return theta1, theta2, theta4, theta5
+
+
+def five_bar_jacobian(theta1: float, theta2: float, geometry: FiveBar) -> np.ndarray:
+    """Closed-chain Jacobian d(x_d, y')/d(theta1, theta2) of the five-bar (2x2, analytic).
+
+    The passive links are rigid, so with unit vectors e3 = (cos psi, sin psi) along a3 and
+    e4 = (cos phi, sin phi) along a4: e3 . dp = e3 . dA = a1 sin(theta4) dtheta1 and
+    e4 . dp = e4 . dB = a2 sin(theta5) dtheta2. Solving the 2x2 system:
+
+        J = 1/sin(phi - psi) [[ a1 sin(theta4) sin(phi), -a2 sin(theta5) sin(psi)],
+                              [-a1 sin(theta4) cos(phi),  a2 sin(theta5) cos(psi)]]
+
+    This is the matrix whose columns eq. (J_leg) writes as [-C11, C21]^T and [-C12, C22]^T
+    (Chavdarov's closed-chain coefficients). Raises :class:`UnreachableError` at the type-2
+    singularity sin(phi - psi) = 0 (passive links aligned), where the foot velocity is undefined.
+    """
+    _, _, phi, theta4, theta5 = five_bar_fk(theta1, theta2, geometry)
+    psi = theta1 + theta4
+    det = math.sin(phi - psi)
+    if abs(det) < _SINGULAR_TOL:
+        raise UnreachableError("five-bar singular at theta1=%.2f deg, theta2=%.2f deg: passive links aligned"
+                               % (math.degrees(theta1), math.degrees(theta2)))
+    k1 = geometry.a1 * math.sin(theta4) / det
+    k2 = geometry.a2 * math.sin(theta5) / det
+    return np.array([[k1 * math.sin(phi), -k2 * math.sin(psi)],
+                     [-k1 * math.cos(phi), k2 * math.cos(psi)]])
+
+
+# --------------------------------------------------------------------------------------------------
+# Whole leg
+# --------------------------------------------------------------------------------------------------
+
+def _floats3(v: ArrayLike, what: str) -> Tuple[float, float, float]:
+    """Three Python floats from a 3-sequence or array (cheap; ValueError for another length)."""
+    values = v.tolist() if isinstance(v, np.ndarray) else v
+    if len(values) != 3:
+        raise ValueError("%s must have 3 elements, got %d" % (what, len(values)))
+    return float(values[0]), float(values[1]), float(values[2])
+
+
+def _q3(q: ArrayLike) -> Tuple[float, float, float]:
+    t1, t2, t3 = _floats3(q, "joint vector (theta1, theta2, theta3)")
+    if not (math.isfinite(t1) and math.isfinite(t2) and math.isfinite(t3)):
+        raise UnreachableError("joint angles must be finite, got (%r, %r, %r)" % (t1, t2, t3))
+    return t1, t2, t3
+
+
+def _leg_point(x_d: float, y_prime: float, theta3: float, params: RobotParams) -> Tuple[float, float, float]:
+    """eq. (fk_T): planar point (x_d, y') of F_P -> leg frame, rotated by the hip angle theta3."""
+    c3, s3 = math.cos(theta3), math.sin(theta3)
+    u = params.l_y + y_prime  # t_y + c3 y' = c3 (l_y + y') - s3 l_z, t_z + s3 y' = s3 (l_y + y') + c3 l_z
+    return x_d, c3 * u - s3 * params.l_z, s3 * u + c3 * params.l_z
+
+
+def leg_fk(q: ArrayLike, params: RobotParams) -> np.ndarray:
+    """Foot position p_e^L in the leg frame for q = (theta1, theta2, theta3), eq. (fk_T)."""
+    t1, t2, t3 = _q3(q)
+    x_d, y_prime, _, _, _ = five_bar_fk(t1, t2, params.five_bar)
+    return np.array(_leg_point(x_d, y_prime, t3, params))
+
+
+def foot_position(q: ArrayLike, leg: int, params: RobotParams) -> np.ndarray:
+    """Foot position r_e,i^B = o_i^B + M_i p_e^L in the body frame, eq. (ee_body), legs 1..4."""
+    _check_leg(leg)
+    t1, t2, t3 = _q3(q)
+    x_d, y_prime, _, _, _ = five_bar_fk(t1, t2, params.five_bar)
+    px, py, pz = _leg_point(x_d, y_prime, t3, params)
+    mx, my, mz = MIRROR_DIAG[leg]
+    ox, oy, oz = params.leg_origins[leg].tolist()
+    return np.array([ox + mx * px, oy + my * py, oz + mz * pz])
+
+
+def body_to_leg(r: ArrayLike, leg: int, params: RobotParams) -> np.ndarray:
+    """p_e^L = M_i^-1 (r_e,i^B - o_i^B) (start of section "Leg Inverse Kinematics"); M_i^-1 = M_i."""
+    _check_leg(leg)
+    rx, ry, rz = _floats3(r, "foot target")
+    mx, my, mz = MIRROR_DIAG[leg]
+    ox, oy, oz = params.leg_origins[leg].tolist()
+    return np.array([mx * (rx - ox), my * (ry - oy), mz * (rz - oz)])
+
+
+def leg_ik_full(p: ArrayLike, params: RobotParams, leg: Optional[int] = None) -> np.ndarray:
+    """All joint angles (theta1, theta2, theta3, theta4, theta5) for a leg-frame target p_e^L.
+
+    eq. (ik_theta3) for the hip, then y' = y_d cos theta3 + z_d sin theta3 - l_y and the five-bar IK.
+    theta1, theta2, theta3 are wrapped by multiples of 2 pi into ``params.joint_limits``.
+    Raises :class:`UnreachableError` (naming ``leg`` if given) when the target is not finite, inside
+    the hip offset (R < l_z), out of the five-bar reach, or needs an angle outside a servo range.
+    """
+    x_d, y_d, z_d = _floats3(p, "leg-frame target")
+    try:
+        return _leg_ik_full(x_d, y_d, z_d, params)
+    except UnreachableError as exc:
+        if leg is None:
+            raise
+        raise UnreachableError(exc.reason, leg) from None
+
+
+def _leg_ik_full(x_d: float, y_d: float, z_d: float, params: RobotParams) -> np.ndarray:
+    if not (math.isfinite(x_d) and math.isfinite(y_d) and math.isfinite(z_d)):
+        raise UnreachableError("target (%r, %r, %r) is not finite" % (x_d, y_d, z_d))
+    l_z = params.l_z
+    radius = math.hypot(y_d, z_d)
+    if radius < l_z:
+        raise UnreachableError("target (%.4f, %.4f, %.4f) m is %.4f m from the hip axis, closer than the "
+                               "five-bar plane offset l_z = %.4f m" % (x_d, y_d, z_d, radius, l_z))
+    # eq. (ik_theta3); min() guards l_z / R against rounding just above 1 at R == l_z.
+    theta3_raw = math.atan2(z_d, y_d) - math.acos(min(l_z / radius, 1.0)) - 0.5 * math.pi
+    limits = params.joint_limits
+    theta3 = wrap_into_range(theta3_raw, limits.theta3[0], limits.theta3[1])
+    if theta3 is None:
+        raise UnreachableError("hip angle %.2f deg (mod 360) is outside the hip servo range [%.1f, %.1f] deg"
+                               % (math.degrees(wrap_to_pi(theta3_raw)), math.degrees(limits.theta3[0]),
+                                  math.degrees(limits.theta3[1])))
+    y_prime = y_d * math.cos(theta3) + z_d * math.sin(theta3) - params.l_y
+    theta1_raw, theta2_raw, theta4, theta5 = five_bar_ik(x_d, y_prime, params.five_bar)
+    theta1 = wrap_into_range(theta1_raw, limits.theta1[0], limits.theta1[1])
+    if theta1 is None:
+        raise UnreachableError("theta1 = %.2f deg (mod 360) is outside its servo range [%.1f, %.1f] deg"
+                               % (math.degrees(wrap_to_pi(theta1_raw)), math.degrees(limits.theta1[0]),
+                                  math.degrees(limits.theta1[1])))
+    theta2 = wrap_into_range(theta2_raw, limits.theta2[0], limits.theta2[1])
+    if theta2 is None:
+        raise UnreachableError("theta2 = %.2f deg (mod 360) is outside its servo range [%.1f, %.1f] deg"
+                               % (math.degrees(wrap_to_pi(theta2_raw)), math.degrees(limits.theta2[0]),
+                                  math.degrees(limits.theta2[1])))
+    return np.array([theta1, theta2, theta3, theta4, theta5])
+
+
+def joint_angles_full(r: ArrayLike, leg: int, params: RobotParams) -> np.ndarray:
+    """(theta1, theta2, theta3, theta4, theta5) for body-frame foot target ``r`` of ``leg``.
+
+    See :func:`leg_ik_full`; the target is first mapped to the leg frame by inverting eq. (ee_body).
+    """
+    _check_leg(leg)
+    rx, ry, rz = _floats3(r, "foot target")
+    mx, my, mz = MIRROR_DIAG[leg]
+    ox, oy, oz = params.leg_origins[leg].tolist()  # plain floats: numpy scalars make this 2x slower
+    try:
+        return _leg_ik_full(mx * (rx - ox), my * (ry - oy), mz * (rz - oz), params)
+    except UnreachableError as exc:
+        raise UnreachableError(exc.reason, leg) from None
+
+
+def joint_angles(r: ArrayLike, leg: int, params: RobotParams) -> np.ndarray:
+    """Servo angles (theta1, theta2, theta3) within their ranges that put the foot of ``leg`` at ``r``.
+
+    ``r`` is the body-frame target r_e,i^B; eq. (ee_body) inverted, eq. (ik_theta3) .. (ik_theta1245).
+    Raises :class:`UnreachableError` (a ValueError) naming the leg and the cause; never returns NaN.
+    Computed by :func:`joint_angles_floats` (the same values as ``joint_angles_full(r, leg, params)[:3]``).
+    """
+    rx, ry, rz = _floats3(r, "foot target")
+    return np.array(joint_angles_floats(rx, ry, rz, leg, params))
+
+
+# Constants of :func:`joint_angles_floats`, cached per RobotParams object (frozen, so safe).
+_IK_CACHE: "dict[int, Tuple[RobotParams, tuple]]" = {}
+#: The most recently used entry of _IK_CACHE (rebound atomically), checked first.
+_IK_LAST: "Tuple[Optional[RobotParams], tuple]" = (None, ())
+
+
+def _ik_constants(params: RobotParams) -> tuple:
+    global _IK_LAST
+    entry = _IK_CACHE.get(id(params))
+    if entry is not None and entry[0] is params:
+        _IK_LAST = entry
+        return entry[1]
+    fb, limits = params.five_bar, params.joint_limits
+    legs = {}
+    for leg in LEGS:
+        mx, my, mz = MIRROR_DIAG[leg]
+        legs[leg] = (mx, my, mz) + tuple(params.leg_origins[leg].tolist())
+    values = (legs, float(fb.a1), float(fb.a2), float(fb.a3), float(fb.a4), float(fb.c), float(params.l_y),
+              float(params.l_z)) + tuple(float(x) for x in limits.theta1 + limits.theta2 + limits.theta3)
+    if len(_IK_CACHE) > 64:
+        _IK_CACHE.clear()
+    _IK_CACHE[id(params)] = _IK_LAST = (params, values)
+    return values
+
+
+def joint_angles_floats(rx: float, ry: float, rz: float, leg: int, params: RobotParams) -> Tuple[float, float, float]:
+    """:func:`joint_angles` on plain floats: (theta1, theta2, theta3) for the body-frame target (rx, ry, rz).
+
+    The same formulas in the same floating-point order (eq. (ee_body) inverted, eq. (ik_theta3),
+    (ik_dists), (ik_alphas), (ik_theta1245), wrapped into the servo ranges), without numpy and with the
+    geometry read from a per-``params`` cache: the controller's per-step IK. Any target that is not
+    plainly reachable is handed to :func:`joint_angles_full`, which raises the proper
+    :class:`UnreachableError` (or returns its result for the rare rounding-boundary cases). The tests
+    compare the two bit for bit.
+    """
+    last = _IK_LAST
+    constants = last[1] if last[0] is params else _ik_constants(params)
+    legs, a1, a2, a3, a4, c, l_y, l_z, low1, high1, low2, high2, low3, high3 = constants
+    frame = legs.get(leg)
+    if frame is not None:
+        mx, my, mz, ox, oy, oz = frame
+        x_d, y_d, z_d = mx * (rx - ox), my * (ry - oy), mz * (rz - oz)
+        radius = math.hypot(y_d, z_d)
+        if radius >= l_z and math.isfinite(x_d + radius):  # also rejects NaN
+            # eq. (ik_theta3), then wrap_into_range into the hip servo range
+            theta3 = math.atan2(z_d, y_d) - math.acos(min(l_z / radius, 1.0)) - 0.5 * math.pi
+            theta3 = theta3 + math.ceil((low3 - _ANGLE_TOL - theta3) / TWO_PI) * TWO_PI
+            if theta3 <= high3 + _ANGLE_TOL:
+                y_prime = y_d * math.cos(theta3) + z_d * math.sin(theta3) - l_y
+                # five_bar_ik without theta4, theta5 (their arccos arguments are only range-checked)
+                d13 = math.hypot(x_d, y_prime)
+                d24 = math.hypot(x_d - c, y_prime)
+                if d13 >= _ROUND_TOL and d24 >= _ROUND_TOL:
+                    k1 = (d13 * d13 + a1 * a1 - a3 * a3) / (2.0 * a1 * d13)
+                    k2 = (d24 * d24 + a2 * a2 - a4 * a4) / (2.0 * a2 * d24)
+                    k4 = (d13 * d13 - a1 * a1 - a3 * a3) / (2.0 * a1 * a3)
+                    k5 = (d24 * d24 - a2 * a2 - a4 * a4) / (2.0 * a2 * a4)
+                    if -1.0 <= k1 <= 1.0 and -1.0 <= k2 <= 1.0 and abs(k4) <= 1.0 + _ROUND_TOL \
+                            and abs(k5) <= 1.0 + _ROUND_TOL:
+                        theta1 = math.atan2(y_prime, x_d) - math.acos(k1)
+                        theta2 = math.atan2(y_prime, x_d - c) + math.acos(k2)
+                        theta1 = theta1 + math.ceil((low1 - _ANGLE_TOL - theta1) / TWO_PI) * TWO_PI
+                        theta2 = theta2 + math.ceil((low2 - _ANGLE_TOL - theta2) / TWO_PI) * TWO_PI
+                        if theta1 <= high1 + _ANGLE_TOL and theta2 <= high2 + _ANGLE_TOL:
+                            return theta1, theta2, theta3
+    t1, t2, t3 = joint_angles_full((rx, ry, rz), leg, params)[:3].tolist()
+    return t1, t2, t3
+
+
+def foot_jacobian(q: ArrayLike, leg: int, params: RobotParams) -> np.ndarray:
+    """Translational leg Jacobian J_P,i^B = d r_e,i^B / d(theta1, theta2, theta3), eq. (J_leg), 3x3.
+
+    Columns: M_i R_x(theta3) [J_fb[:, k], 0] for the five-bar motors (J_fb from
+    :func:`five_bar_jacobian`) and M_i (x_hat x p_e^L) for the hip.
+    """
+    _check_leg(leg)
+    t1, t2, t3 = _q3(q)
+    j = five_bar_jacobian(t1, t2, params.five_bar)
+    x_d, y_prime, _, _, _ = five_bar_fk(t1, t2, params.five_bar)
+    _, py, pz = _leg_point(x_d, y_prime, t3, params)
+    c3, s3 = math.cos(t3), math.sin(t3)
+    mx, my, mz = MIRROR_DIAG[leg]
+    return np.array([[mx * j[0, 0], mx * j[0, 1], 0.0],
+                     [my * c3 * j[1, 0], my * c3 * j[1, 1], -my * pz],   # x_hat x p = (0, -p_z, p_y)
+                     [mz * s3 * j[1, 0], mz * s3 * j[1, 1], mz * py]])
+
+
+def floating_base_jacobian(q: ArrayLike, leg: int, R: ArrayLike, params: RobotParams) -> np.ndarray:
+    """J_P,i^W = [I_3, -R [r_e,i^B]_x, R J_P,i^B], eq. (ee_vel), 3x9.
+
+    Maps u = (v_B^W, omega_B^B, theta_dot_i) to the foot's world-frame velocity, eq. (fb_jac).
+    """
+    R = np.asarray(R, dtype=float)
+    if R.shape != (3, 3):
+        raise ValueError("R must be 3x3, got shape %s" % (R.shape,))
+    r = foot_position(q, leg, params)
+    out = np.empty((3, 9))
+    out[:, 0:3] = np.eye(3)
+    out[:, 3:6] = -R @ hat(r)
+    out[:, 6:9] = R @ foot_jacobian(q, leg, params)
+    return out
+
+
+# --------------------------------------------------------------------------------------------------
+# Limits
+# --------------------------------------------------------------------------------------------------
+
+def within_limits(q: ArrayLike, params: RobotParams, tol: float = 1e-9) -> bool:
+    """True if (theta1, theta2, theta3) are finite and inside their servo ranges (+ ``tol`` rad)."""
+    if len(q) != 3:
+        raise ValueError("joint vector must have 3 elements, got %d" % len(q))
+    limits = params.joint_limits
+    for value, (low, high) in zip(q, (limits.theta1, limits.theta2, limits.theta3)):
+        value = float(value)
+        if not (math.isfinite(value) and low - tol <= value <= high + tol):
+            return False
+    return True
+
+
+def clamp_to_limits(q: ArrayLike, params: RobotParams) -> np.ndarray:
+    """(theta1, theta2, theta3) clipped into the servo ranges; ValueError for non-finite input."""
+    arr = np.asarray(q, dtype=float).reshape(-1)
+    if arr.shape != (3,):
+        raise ValueError("joint vector must have 3 elements, got shape %s" % (np.shape(q),))
+    if not np.all(np.isfinite(arr)):
+        raise ValueError("joint vector has non-finite elements: %s" % (arr,))
+    bounds = params.joint_limits.as_array()
+    return np.clip(arr, bounds[:, 0], bounds[:, 1])
+
+
+# Geometry constants of :func:`leg_kinematics`, cached per RobotParams object (frozen, so safe):
+# (a1, a2, a3, a4, c, l_y, l_z, scale) and per leg (o_x, o_y, o_z, m_x, m_y, m_z).
+_GEOMETRY_CACHE: "dict[int, Tuple[RobotParams, tuple]]" = {}
+
+
+def _leg_geometry(params: RobotParams) -> tuple:
+    entry = _GEOMETRY_CACHE.get(id(params))
+    if entry is not None and entry[0] is params:
+        return entry[1]
+    fb = params.five_bar
+    a1, a3, c = fb.a1, fb.a3, fb.c
+    values = (fb.a1, fb.a2, fb.a3, fb.a4, fb.c, params.l_y, params.l_z, 4.0 * a3 * a3 * (c + 2.0 * a1) ** 2,
+              tuple(tuple(float(x) for x in params.leg_origins[leg].tolist()) + tuple(MIRROR_DIAG[leg])
+                    for leg in LEGS))
+    if len(_GEOMETRY_CACHE) > 64:
+        _GEOMETRY_CACHE.clear()
+    _GEOMETRY_CACHE[id(params)] = (params, values)
+    return values
+
+
+def leg_kinematics(q: Sequence[Sequence[float]], q_dot: Sequence[Sequence[float]],
+                   params: RobotParams) -> list:
+    """Foot positions and joint-induced foot velocities of all legs in one pass, on floats.
+
+    For each leg i (rows of ``q``, ``q_dot``: legs 1..4 x (theta1, theta2, theta3)) returns the list
+    [x, y, z, vx, vy, vz] of r_e,i^B (eq. (ee_body)) and J_P,i^B(q_i) q_dot_i (eq. (J_leg)), body frame.
+    The same formulas as :func:`~quadruped_control.model.kinematics.foot_position` and
+    :func:`~quadruped_control.model.kinematics.foot_jacobian` (equal to rounding), with the five-bar forward
+    kinematics evaluated once per leg instead of three times. Any configuration that is not regular
+    (five-bar cannot close, elbows coincide, singular, non-finite) is handed to those functions, which
+    raise the proper :class:`~quadruped_control.model.kinematics.UnreachableError`.
+    """
+    if len(q) != NUM_LEGS or len(q_dot) != NUM_LEGS:
+        raise ValueError("q and q_dot must have %d rows (legs), got %d and %d" % (NUM_LEGS, len(q), len(q_dot)))
+    flat = leg_kinematics_flat(q, q_dot, params)
+    return [list(flat[i:i + 6]) for i in range(0, 6 * NUM_LEGS, 6)]
+
+
+def leg_kinematics_flat(q: Sequence[Sequence[float]], q_dot: Sequence[Sequence[float]],
+                        params: RobotParams) -> Tuple[float, ...]:
+    """:func:`leg_kinematics` as one flat tuple (legs 1..4 x [x, y, z, vx, vy, vz]): the simulator's path."""
+    a1, a2, a3, a4, c, l_y, l_z, scale, frames = _leg_geometry(params)
+    out: Tuple[float, ...] = ()
+    cos, sin, atan2, sqrt = math.cos, math.sin, math.atan2, math.sqrt
+    for (t1, t2, t3), (d1, d2, d3), (ox, oy, oz, mx, my, mz) in zip(q, q_dot, frames):
+        c1, s1, c2, s2 = cos(t1), sin(t1), cos(t2), sin(t2)
+        # eq. (fk_EFG), (fk_phi), (fk_planar) as in kinematics.five_bar_fk
+        e = 2.0 * a3 * (c + a1 * (c2 - c1))
+        f = 2.0 * a1 * a3 * (s2 - s1)
+        gg = c * c + 2.0 * a1 * a1 + 2.0 * c * a1 * c2 - 2.0 * c * a1 * c1 - 2.0 * a1 * a1 * cos(t2 - t1)
+        disc = e * e + f * f - gg * gg
+        if not (disc >= -1e-12 * scale and gg >= 1e-24):  # also catches NaN
+            return _slow_leg_kinematics(q, q_dot, params)
+        phi = 2.0 * atan2(-f + sqrt(disc if disc > 0.0 else 0.0), gg - e)
+        cphi, sphi = cos(phi), sin(phi)
+        x_d = c + a2 * c2 + a4 * cphi
+        y_p = a2 * s2 + a4 * sphi
+        psi = atan2(y_p - a1 * s1, x_d - a1 * c1)
+        det = sin(phi - psi)
+        if not abs(det) >= 1e-9:
+            return _slow_leg_kinematics(q, q_dot, params)
+        k1 = a1 * sin(psi - t1) / det
+        k2 = a2 * sin(phi - t2) / det
+        # five-bar Jacobian (kinematics.five_bar_jacobian) times (d1, d2)
+        jx = k1 * sphi * d1 - k2 * sin(psi) * d2
+        jy = -k1 * cphi * d1 + k2 * cos(psi) * d2
+        # eq. (fk_T): hip rotation, then eq. (ee_body)
+        c3, s3 = cos(t3), sin(t3)
+        u = l_y + y_p
+        py = c3 * u - s3 * l_z
+        pz = s3 * u + c3 * l_z
+        out += (ox + mx * x_d, oy + my * py, oz + mz * pz,
+                mx * jx, my * (c3 * jy - pz * d3), mz * (s3 * jy + py * d3))
+    return out
+
+
+def _slow_leg_kinematics(q: Sequence[Sequence[float]], q_dot: Sequence[Sequence[float]],
+                         params: RobotParams) -> Tuple[float, ...]:
+    """Reference path of :func:`leg_kinematics` through the kinematics module (raises its errors)."""
+    out: Tuple[float, ...] = ()
+    for row, leg in enumerate(LEGS):
+        position = foot_position(q[row], leg, params)
+        velocity = foot_jacobian(q[row], leg, params) @ np.asarray(q_dot[row], dtype=float)
+        out += tuple(position.tolist() + velocity.tolist())
+    return out

@@ -1,0 +1,395 @@
+"""ROS glue of the attitude controller: topics, parameters, arming service, reconfigure, diagnostics.
+
+All decisions live in :class:`quadruped_control.control.supervisor.ControlSupervisor` and the controller object
+it wraps (the same :class:`~quadruped_control.control.controller.AttitudeController` the offline simulator
+steps). This module only moves data between ROS and those objects.
+
+Subscribes
+  imu/data               sensor_msgs/Imu                 world ENU <- base_link FLU (REP-145)
+  joint_states           sensor_msgs/JointState          measured joint angles / velocities
+  attitude_setpoint      geometry_msgs/QuaternionStamped R_d, world ENU <- body FLU
+  attitude_setpoint_rpy_deg  geometry_msgs/Vector3Stamped  R_d as roll, pitch, yaw in DEGREES (unit in the name, REP-103)
+                                                         (R = Rz(yaw) Ry(pitch) Rx(roll))
+Publishes
+  servo_command          quadruped_msgs/ServoCommand   12 pulse widths (us) + joint targets,
+                                                             header.stamp = the IMU sample's stamp
+  controller_state       quadruped_msgs/ControllerState  telemetry of every step (stamp: step time)
+  diagnostics            diagnostic_msgs/DiagnosticArray
+Services
+  ~arm                   std_srvs/SetBool   legs move only when armed
+Parameters
+  ~gain_set (experiment) ~controller_yaml ~robot_yaml ~hardware_yaml ~calibration_yaml ~vn100_yaml
+                         (package config/; vn100.yaml gives the IMU's plausible ranges)
+  ~loop_rate (100 Hz)    ~imu_rate (200 Hz: the loop steps on every imu_rate/loop_rate-th sample, so
+                          the command leaves right after the sample that caused it)
+  ~imu_max_age (0.05 s)  ~arm_on_start (false)   ~setpoint_rpy_deg ([0, 0, 0])
+  ~stroke_scheme (stroke.scheme of controller.yaml: paper | coordinated)
+  dynamic_reconfigure (AttitudeController.cfg): k_p k_i k_d k_aw tau_max t_rec t_pow_max stroke_scheme
+                         (a scheme switch is smooth: the feet return to the nominal pose first)
+"""
+from __future__ import annotations
+
+import math
+import re
+import threading
+import time
+from typing import List, Optional
+
+import numpy as np
+import rospy
+from diagnostic_msgs.msg import DiagnosticStatus
+from diagnostic_updater import DiagnosticStatusWrapper, Updater
+from dynamic_reconfigure.server import Server as ReconfigureServer
+from geometry_msgs.msg import Point, Quaternion, QuaternionStamped, Vector3, Vector3Stamped
+from sensor_msgs.msg import Imu, JointState
+from std_srvs.srv import SetBool, SetBoolResponse
+
+from quadruped_common.config import ParameterError
+from quadruped_common.imu_plausibility import SensorLimits
+from quadruped_common.monitoring import STALE_IMU, HoldEpisodes, RateMonitor, WindowStatistics, hold_kind
+from quadruped_common.node_startup import start_node
+from quadruped_common.robot import JOINT_NAMES
+from quadruped_common.so3 import quat_to_rot, rot_to_quat, rpy_to_rot
+from quadruped_control.control.controller import AttitudeController
+from quadruped_control.control.controller_config import TUNABLE_BOUNDS, apply_tunables, load_controller_config
+from quadruped_control.control.supervisor import ControlSupervisor
+from quadruped_control.model.params import load_robot_params
+from quadruped_drivers.calibration import load_servo_calibration
+from quadruped_drivers.hardware_config import load_hardware_config
+from quadruped_drivers.vn100.settings import load_vn100_settings
+from quadruped_msgs.msg import ControllerState, ServoCommand
+from underwater_quadruped.cfg import AttitudeControllerConfig
+
+_PHASE_CODES = {"recovery": ControllerState.PHASE_RECOVERY, "power": ControllerState.PHASE_POWER,
+                "hold": ControllerState.PHASE_HOLD}
+
+
+def _problem_kind(problem: str) -> str:
+    return re.sub(r"[-+]?[0-9.]+", "#", problem)
+
+
+def _optional_path(name: str) -> Optional[str]:
+    value = rospy.get_param(name, "")
+    return value or None
+
+
+def make_pulse_map(calibration, hardware):
+    """Joint angles -> pulse widths through the servo calibration, clamped to the channel limits."""
+    low, high = hardware.min_us, hardware.max_us
+
+    def pulse_map(angles: np.ndarray) -> np.ndarray:
+        return np.clip(calibration.angles_to_pulses(angles), low, high)
+
+    return pulse_map
+
+
+class AttitudeControllerNode:
+    def __init__(self) -> None:
+        robot = load_robot_params(_optional_path("~robot_yaml"))
+        gain_set = rospy.get_param("~gain_set", "experiment")
+        self.config = load_controller_config(_optional_path("~controller_yaml"), gain_set)
+        scheme = rospy.get_param("~stroke_scheme", "") or self.config.stroke_scheme
+        self.config = self.config.replace(stroke_scheme=scheme)
+        hardware = load_hardware_config(_optional_path("~hardware_yaml"))
+        calibration = load_servo_calibration(_optional_path("~calibration_yaml"))
+        self.loop_rate = float(rospy.get_param("~loop_rate", 100.0))
+        imu_rate = float(rospy.get_param("~imu_rate", 200.0))
+        if not (self.loop_rate > 0 and imu_rate >= self.loop_rate):
+            raise ParameterError("need imu_rate >= loop_rate > 0, got imu_rate %r, loop_rate %r"
+                                 % (imu_rate, self.loop_rate))
+        self.decimation = max(1, int(round(imu_rate / self.loop_rate)))
+        self.period = 1.0 / self.loop_rate
+
+        # IMU plausibility: the sensor's ranges from vn100.yaml, the same values the driver checks.
+        vn100 = load_vn100_settings(_optional_path("~vn100_yaml"))
+        imu_limits = SensorLimits(max_angular_rate=vn100["max_angular_rate"], max_acceleration=vn100["max_acceleration"],
+                                  unit_tolerance=vn100["quaternion_norm_tolerance"])
+        self.config = self.config.replace(max_angular_rate=imu_limits.max_angular_rate)
+        controller = AttitudeController(robot, self.config)
+        roll, pitch, yaw = [math.radians(v) for v in rospy.get_param("~setpoint_rpy_deg", [0.0, 0.0, 0.0])]
+        controller.set_setpoint(rpy_to_rot(roll, pitch, yaw))
+        self.supervisor = ControlSupervisor(controller, make_pulse_map(calibration, hardware),
+                                            max_imu_age=float(rospy.get_param("~imu_max_age", 0.05)),
+                                            armed=bool(rospy.get_param("~arm_on_start", False)),
+                                            imu_limits=imu_limits)
+        self.reported_imu_drops = 0
+        self.lock = threading.Lock()
+        self.imu_count = 0
+        self.last_step_wall: Optional[float] = None
+        self.sim_time = bool(rospy.get_param("/use_sim_time", False))
+        if self.sim_time:
+            self._wait_for_clock()
+        # ROS clock (simulated time under use_sim_time) of the last step; the start counts as one, so
+        # the fallback timer's first step comes 1.5 periods after start-up (deterministic in lock-step).
+        self.last_step_time: float = rospy.get_time()
+        self.hold_episodes = HoldEpisodes()
+        self.jitter = WindowStatistics(2000)
+        self.step_time = WindowStatistics(2000)
+        self.overruns = 0
+        self.loop_monitor = RateMonitor(2.0)
+        self.imu_monitor = RateMonitor(2.0)
+        self.joint_monitor = RateMonitor(2.0)
+        self.last_problem = ""
+        self.joint_index = {name: i for i, name in enumerate(JOINT_NAMES)}
+
+        self.command_pub = rospy.Publisher("servo_command", ServoCommand, queue_size=10)
+        self.state_pub = rospy.Publisher("controller_state", ControllerState, queue_size=10)
+        self.diagnostics = Updater()
+        self.diagnostics.setHardwareID("none")  # no hardware of its own (diagnostic_updater convention)
+        self.diagnostics.add("control loop", self._diagnose_loop)
+        self.diagnostics.add("inputs", self._diagnose_inputs)
+
+        # Seed the reconfigure parameters from the chosen gain set: the server reads them at start-up
+        # instead of the .cfg defaults, so gain_set:=experiment is not overwritten by the defaults.
+        gains = self.config.gains
+        for name, value in (("k_p", gains.k_p), ("k_i", gains.k_i), ("k_d", gains.k_d),
+                            ("k_aw", gains.k_aw), ("tau_max", self.config.tau_max),
+                            ("t_rec", self.config.t_rec), ("t_pow_max", self.config.t_pow_max)):
+            rospy.set_param("~" + name, float(value))
+        rospy.set_param("~stroke_scheme", self.config.stroke_scheme)
+        self.reconfigure = ReconfigureServer(AttitudeControllerConfig, self._on_reconfigure)
+
+        rospy.Service("~arm", SetBool, self._on_arm)
+        rospy.Subscriber("joint_states", JointState, self._on_joint_states, queue_size=5)
+        rospy.Subscriber("attitude_setpoint", QuaternionStamped, self._on_setpoint, queue_size=1)
+        rospy.Subscriber("attitude_setpoint_rpy_deg", Vector3Stamped, self._on_setpoint_rpy, queue_size=1)
+        rospy.Subscriber("imu/data", Imu, self._on_imu, queue_size=5, tcp_nodelay=True)
+        # Fallback: when IMU samples stop, this timer still ticks the supervisor so that it holds.
+        self.fallback_timer = rospy.Timer(rospy.Duration(self.period), self._on_fallback_timer)
+        rospy.loginfo("attitude controller: gain set '%s' (K_p %.3g K_i %.3g K_d %.3g K_aw %.3g), "
+                      "%.0f Hz stepped every %d IMU samples, %s strokes, %s", gain_set, gains.k_p, gains.k_i,
+                      gains.k_d, gains.k_aw, self.loop_rate, self.decimation, self.config.stroke_scheme,
+                      "ARMED" if self.supervisor.armed else "disarmed (call ~arm)")
+
+    # ---- callbacks -----------------------------------------------------------------------------
+
+    def _on_imu(self, msg: Imu) -> None:
+        o, w = msg.orientation, msg.angular_velocity
+        with self.lock:
+            a = msg.linear_acceleration
+            dropped = self.supervisor.set_imu((o.x, o.y, o.z, o.w), (w.x, w.y, w.z), msg.header.stamp.to_sec(),
+                                              (a.x, a.y, a.z))
+            self.imu_monitor.tick(time.monotonic())
+            self.imu_count += 1
+            due = self.imu_count % self.decimation == 0
+        if dropped:
+            rospy.logwarn_throttle(1.0, "attitude controller: IMU sample dropped: %s" % dropped)
+        if due:
+            if self.sim_time:
+                self._wait_for_next_clock()
+            self._step()
+
+    def _wait_for_clock(self) -> None:
+        """Under use_sim_time, wait for the first /clock so that timers start at a valid time."""
+        while not rospy.is_shutdown() and rospy.get_time() == 0.0:
+            time.sleep(0.01)
+
+    def _wait_for_next_clock(self, timeout: float = 1.0) -> None:
+        """Under use_sim_time, an IMU sample can overtake the /clock message of its step (different
+        connections): the step waits until the clock has moved past the previous step."""
+        deadline = time.monotonic() + timeout
+        while rospy.get_time() <= self.last_step_time and time.monotonic() < deadline \
+                and not rospy.is_shutdown():
+            time.sleep(0.0002)
+
+    def _on_fallback_timer(self, _event) -> None:
+        # Judged on the ROS clock, like the timer itself: under use_sim_time (lock-step simulation) a
+        # slow machine must not make the fallback step in between two IMU-driven steps.
+        if rospy.get_time() - self.last_step_time > 1.5 * self.period:
+            self._step()
+
+    def _on_joint_states(self, msg: JointState) -> None:
+        positions = np.full(12, np.nan)
+        velocities = np.full(12, np.nan)
+        for k, name in enumerate(msg.name):
+            i = self.joint_index.get(name)
+            if i is None:
+                continue
+            if k < len(msg.position):
+                positions[i] = msg.position[k]
+            if k < len(msg.velocity):
+                velocities[i] = msg.velocity[k]
+        with self.lock:
+            self.supervisor.set_joint_feedback(positions, velocities, msg.header.stamp.to_sec())
+            self.joint_monitor.tick(time.monotonic())
+
+    def _set_setpoint(self, R: np.ndarray, text: str) -> None:
+        with self.lock:
+            self.supervisor.controller.set_setpoint(R)
+        rospy.loginfo("attitude setpoint: %s", text)
+
+    def _on_setpoint(self, msg: QuaternionStamped) -> None:
+        q = np.array([msg.quaternion.x, msg.quaternion.y, msg.quaternion.z, msg.quaternion.w])
+        if not np.all(np.isfinite(q)) or abs(np.linalg.norm(q) - 1.0) > 1e-3:
+            rospy.logerr("attitude setpoint rejected: quaternion %s is not a finite unit quaternion", q)
+            return
+        self._set_setpoint(quat_to_rot(q / np.linalg.norm(q)), "quaternion %s" % np.round(q, 4))
+
+    def _on_setpoint_rpy(self, msg: Vector3Stamped) -> None:
+        rpy = np.array([msg.vector.x, msg.vector.y, msg.vector.z])
+        if not np.all(np.isfinite(rpy)):
+            rospy.logerr("attitude setpoint rejected: roll/pitch/yaw %s not finite", rpy)
+            return
+        self._set_setpoint(rpy_to_rot(*np.radians(rpy)), "roll %.1f pitch %.1f yaw %.1f deg" % tuple(rpy))
+
+    def _on_arm(self, request) -> SetBoolResponse:
+        with self.lock:
+            message = self.supervisor.arm(bool(request.data))
+        rospy.logwarn("attitude controller %s", message)
+        return SetBoolResponse(success=True, message=message)
+
+    def _on_reconfigure(self, config, _level):
+        """Validate and apply live gains/timing; an invalid update (NaN, out of range, t_rec < 2 t_pow_max)
+        is refused as a whole, logged and reverted; this callback never raises."""
+        current = self.supervisor.controller.config
+        try:
+            updated = apply_tunables(current, {name: getattr(config, name) for name in TUNABLE_BOUNDS})
+            updated = updated.replace(stroke_scheme=config.stroke_scheme)
+        except (ValueError, TypeError, AttributeError) as exc:
+            rospy.logerr("reconfigure refused (values kept): %s", exc)
+            for name in TUNABLE_BOUNDS:
+                setattr(config, name, getattr(current.gains if name.startswith("k_") else current, name))
+            config.stroke_scheme = current.stroke_scheme
+            return config
+        with self.lock:
+            self.supervisor.controller.set_gains(updated.gains)
+            self.supervisor.controller.set_timing(t_rec=updated.t_rec, t_pow_max=updated.t_pow_max,
+                                                  tau_max=updated.tau_max)
+            self.supervisor.controller.set_stroke_scheme(updated.stroke_scheme)
+        old_values = dict(vars(current.gains), tau_max=current.tau_max, t_rec=current.t_rec, t_pow_max=current.t_pow_max)
+        new_values = dict(vars(updated.gains), tau_max=updated.tau_max, t_rec=updated.t_rec, t_pow_max=updated.t_pow_max)
+        changed = ["%s %.4g -> %.4g" % (name, old_values[name], new_values[name]) for name in TUNABLE_BOUNDS
+                   if abs(old_values[name] - new_values[name]) > 1e-12]
+        if updated.stroke_scheme != current.stroke_scheme:
+            changed.append("stroke_scheme %s -> %s (switching once the feet are at the nominal pose)"
+                           % (current.stroke_scheme, updated.stroke_scheme))
+        if changed:
+            rospy.loginfo("reconfigure: %s", ", ".join(changed))
+        return config
+
+    # ---- the control step ------------------------------------------------------------------------
+
+    def _step(self) -> None:
+        if rospy.is_shutdown():
+            return
+        started = time.monotonic()
+        with self.lock:
+            if self.last_step_wall is not None:
+                period = started - self.last_step_wall
+                self.jitter.add(abs(period - self.period))
+                if period > 2.0 * self.period:
+                    self.overruns += 1
+            self.last_step_wall = started
+            self.loop_monitor.tick(started)
+            # Controller time and the clock the IMU stamps are judged against; it also stamps this
+            # step's controller_state (the moment of the decision, not of the publish, which can wait
+            # behind other threads).
+            step_stamp = rospy.Time.now()
+            now = step_stamp.to_sec()
+            self.last_step_time = now
+            result = self.supervisor.tick(now, now)
+            held = bool(result.problem) and result.armed
+            self.hold_episodes.update(now, held, hold_kind(result.problem) if held else "")
+        # Log on a change of the kind of problem (numbers such as the sample age change every step).
+        if _problem_kind(result.problem) != _problem_kind(self.last_problem):
+            if result.problem:
+                rospy.logwarn("attitude controller holding the safe pose: %s", result.problem)
+            elif self.last_problem:
+                rospy.loginfo("attitude controller stroking again (was: %s)", self.last_problem)
+        self.last_problem = result.problem
+        stamp = rospy.Time.from_sec(result.imu_stamp) if result.imu_stamp is not None else rospy.Time.now()
+        try:
+            # The servo command first: it is what the IMU-to-PWM latency is measured on.
+            if result.pulse_widths_us is not None:
+                command = ServoCommand()
+                command.header.stamp = stamp
+                command.name = list(JOINT_NAMES)
+                command.pulse_width_us = result.pulse_widths_us.tolist()
+                command.joint_target = result.joint_targets.tolist()
+                self.command_pub.publish(command)
+            self.state_pub.publish(self._state_message(result, step_stamp))
+        except rospy.ROSException:
+            if not rospy.core.is_shutdown_requested():
+                raise
+            return  # shutting down: the publishers are already closed
+        self.step_time.add(time.monotonic() - started)
+        self.diagnostics.update()
+
+    def _state_message(self, result, stamp) -> ControllerState:
+        record = result.output.state
+        msg = ControllerState()
+        msg.header.stamp = stamp
+        msg.header.frame_id = "base_link"
+        x, y, z, w = rot_to_quat(record.setpoint)
+        msg.setpoint = Quaternion(x, y, z, w)
+        msg.attitude_error = Vector3(*record.e_R)
+        msg.geodesic_error = float(record.geodesic_error)
+        msg.torque_command = Vector3(*record.tau_cmd)
+        msg.torque_saturated = Vector3(*record.tau_sat)
+        msg.integral = Vector3(*record.integral)
+        msg.torque_estimated = Vector3(*result.torque_estimated)
+        msg.armed = result.armed
+        msg.holding = bool(record.holding)
+        msg.hold_reason = result.problem
+        msg.pair_phase = [_PHASE_CODES[p] for p in record.pair_phase]
+        msg.pair_phase_time = [float(v) for v in record.pair_phase_time]
+        msg.foot_targets = [Point(*p) for p in np.asarray(record.foot_targets)]
+        return msg
+
+    # ---- diagnostics -----------------------------------------------------------------------------
+
+    def _diagnose_loop(self, stat: DiagnosticStatusWrapper) -> DiagnosticStatusWrapper:
+        now = time.monotonic()
+        rate = self.loop_monitor.rate(now)
+        jitter = self.jitter.summary(1e3)
+        compute = self.step_time.summary(1e3)
+        if self.last_problem and self.supervisor.armed:
+            stat.summary(DiagnosticStatus.WARN, "holding safe pose: %s" % self.last_problem)
+        elif rate < 0.9 * self.loop_rate:
+            stat.summary(DiagnosticStatus.WARN, "loop at %.1f Hz, below %.0f Hz" % (rate, self.loop_rate))
+        else:
+            stat.summary(DiagnosticStatus.OK, "armed, stroking" if self.supervisor.armed else "disarmed")
+        stat.add("armed", str(self.supervisor.armed))
+        stat.add("hold reason", self.last_problem)
+        stat.add("loop rate [Hz]", "%.2f" % rate)
+        stat.add("period jitter p50 [ms]", "%.3f" % jitter["p50"])
+        stat.add("period jitter p99 [ms]", "%.3f" % jitter["p99"])
+        stat.add("step time p50 [ms]", "%.3f" % compute["p50"])
+        stat.add("step time p99 [ms]", "%.3f" % compute["p99"])
+        stat.add("overruns", str(self.overruns))
+        stat.add("held steps", str(self.hold_episodes.held_ticks))
+        stat.add("hold episodes", str(self.hold_episodes.episodes))
+        stat.add("stale-IMU hold episodes", str(self.hold_episodes.episodes_of(STALE_IMU)))
+        stat.add("time held [s]", "%.3f" % self.hold_episodes.time_held)
+        stat.add("controller errors", str(self.supervisor.controller_errors))
+        return stat
+
+    def _diagnose_inputs(self, stat: DiagnosticStatusWrapper) -> DiagnosticStatusWrapper:
+        now = time.monotonic()
+        problem = self.supervisor.imu_problem(rospy.get_time())
+        joints = self.joint_monitor.rate(now)
+        drops = self.supervisor.imu_dropped
+        new_drops, self.reported_imu_drops = drops - self.reported_imu_drops, drops
+        if problem:
+            stat.summary(DiagnosticStatus.ERROR, problem)
+        elif new_drops:
+            stat.summary(DiagnosticStatus.WARN, "%d implausible IMU samples dropped (last: %s)"
+                         % (new_drops, self.supervisor.last_imu_drop))
+        elif joints == 0.0:
+            stat.summary(DiagnosticStatus.WARN, "no joint_states (torque estimate unavailable)")
+        else:
+            stat.summary(DiagnosticStatus.OK, "IMU and joint feedback fresh")
+        stat.add("imu rate [Hz]", "%.1f" % self.imu_monitor.rate(now))
+        stat.add("joint_states rate [Hz]", "%.1f" % joints)
+        stat.add("imu samples received", str(self.supervisor.imu_received))
+        stat.add("imu samples dropped (implausible)", str(drops))
+        for reason, count in sorted(self.supervisor.imu_drop_reasons.items()):
+            stat.add("dropped: %s" % reason, str(count))
+        stat.add("last dropped sample", self.supervisor.last_imu_drop)
+        stat.add("joint readings outside the servo range", str(self.supervisor.joint_readings_implausible))
+        return stat
+
+
+def main(argv: Optional[List[str]] = None) -> None:
+    start_node("attitude_controller", AttitudeControllerNode)
+    rospy.spin()

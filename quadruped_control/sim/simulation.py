@@ -1,0 +1,543 @@
+"""Offline closed-loop simulation of the underwater quadruped (paper section "Simulation Validation").
+
+Two layers:
+
+- :class:`PlantSimulator`: the simulated robot alone. It takes the 12 commanded joint angles of one
+  period, passes them through a servo model (:mod:`quadruped_control.sim.servo_model`; the paper's ideal
+  servos by default), and advances the paper's floating-base model eq. (trans), (rot) with RK4 on SO(3)
+  (:class:`~quadruped_control.sim.plants.paper.FloatingBaseModel`) over the period. Over a step the joints are
+  taken to move linearly from their angles at its start to those at its end: the held input is their
+  midpoint and the finite-difference velocity (:func:`~quadruped_control.sim.plants.paper.held_joint_input`),
+  as the paper obtains q_dot "through finite differences". Used without a controller by the ROS
+  ``sim_node`` behind the fake buses.
+- :class:`ClosedLoopSimulation`: the plant plus the same
+  :class:`~quadruped_control.control.controller.AttitudeController` object the ROS node runs, at the paper's
+  dt = 0.01 s: at t_k = k dt the controller measures (R, omega) (optionally with IMU noise), commands
+  joint targets, and the plant holds them over [t_k, t_k+1). :meth:`ClosedLoopSimulation.run`
+  returns a :class:`SimulationResult` with every signal as arrays and the paper's metrics
+  (:mod:`quadruped_control.analysis.metrics`).
+
+Beyond the paper (all off by default, so the defaults are the paper's simulation): a rate-limited servo
+model, IMU noise driven by ``seed``, and a centre-of-buoyancy offset giving a restoring torque.
+Settings live in the ``simulation:`` section of ``config/simulation.yaml``.
+"""
+from __future__ import annotations
+
+import csv
+import math
+import time
+from dataclasses import dataclass, field
+from typing import Any, Callable, Dict, List, Mapping, Optional, Sequence, Tuple, Union
+
+import numpy as np
+
+from quadruped_common.config import ParameterError, check_keys, integer, load_config, lookup, number, string, vector
+from quadruped_common.robot import LEGS
+from quadruped_common.so3 import exp_so3, geodesic_angles, is_rotation, rotations_to_quaternions, rotations_to_rpy
+from quadruped_control.analysis.metrics import compute_metrics, moving_average_centered
+from quadruped_control.control.controller import AttitudeController, ControllerOutput
+from quadruped_control.control.controller_config import ControllerConfig
+from quadruped_control.model.kinematics import UnreachableError, joint_angles
+from quadruped_control.model.params import RobotParams
+from quadruped_control.sim.plants.paper import FloatingBaseModel, RigidBodyState
+from quadruped_control.sim.servo_model import IdealServo, ServoModel, ServoParams, make_servo_model, servo_params_from_dict
+
+ArrayLike = Union[Sequence[float], Sequence[Sequence[float]], np.ndarray]
+
+#: progress(t_simulated, duration) callback of :meth:`ClosedLoopSimulation.run`.
+ProgressCallback = Callable[[float, float], None]
+
+__all__ = [
+    "ClosedLoopSimulation",
+    "PlantSimulator",
+    "SimulationError",
+    "SimulationResult",
+    "SimulationSettings",
+    "load_simulation_settings",
+    "nominal_joint_angles",
+]
+
+
+class SimulationError(RuntimeError):
+    """The closed loop cannot continue (the plant diverged or was driven into an impossible pose)."""
+
+
+# --------------------------------------------------------------------------------------------------
+# Settings
+# --------------------------------------------------------------------------------------------------
+
+@dataclass(frozen=True)
+class SimulationSettings:
+    """The ``simulation:`` section of ``config/simulation.yaml``.
+
+    ``dt``: step (s); ``servo_model``: default servo model name; ``servo``: rate-limited servo
+    parameters; ``attitude_noise``: std of the IMU attitude error (rad, rotation vector);
+    ``gyro_noise``: std per gyro axis (rad/s).
+    """
+
+    dt: float = 0.01
+    servo_model: str = "ideal"
+    servo: ServoParams = field(default_factory=lambda: ServoParams(95.0 * math.pi / 30.0, 0.03))
+    attitude_noise: float = 0.0
+    gyro_noise: float = 0.0
+
+
+def simulation_settings_from_dict(tree: Mapping[str, Any]) -> SimulationSettings:
+    """Validate a parsed simulation.yaml tree: the ``simulation:`` section (typed result) and the study
+    sections ``paper_sim`` and ``robustness`` when present (read by the simulate CLI)."""
+    key = "simulation"
+    section = check_keys(lookup(tree, key), key, ("dt", "servo_model", "servo", "sensor_noise"))
+    noise = check_keys(section.get("sensor_noise", {}), key + ".sensor_noise", ("attitude_deg", "gyro"))
+    if "paper_sim" in tree:
+        paper = check_keys(tree["paper_sim"], "paper_sim", ("setpoints_deg", "initial_rpy_deg", "duration", "gains"))
+        vector(paper.get("setpoints_deg", [0.0]), "paper_sim.setpoints_deg", low=-360.0, high=360.0)
+        vector(paper.get("initial_rpy_deg", [0.0] * 3), "paper_sim.initial_rpy_deg", 3, -360.0, 360.0)
+        number(paper.get("duration", 1.0), "paper_sim.duration", 0.0, 1e5, low_open=True)
+        string(paper.get("gains", "simulation"), "paper_sim.gains")
+    if "robustness" in tree:
+        robust = check_keys(tree["robustness"], "robustness", ("initial_perturbation_deg", "seeds"))
+        number(robust.get("initial_perturbation_deg", 0.0), "robustness.initial_perturbation_deg", 0.0, 90.0)
+        seeds = robust.get("seeds", [1])
+        if not isinstance(seeds, list) or not seeds:
+            raise ParameterError("parameter 'robustness.seeds' must be a non-empty list of integers, got %r" % (seeds,))
+        for index, seed in enumerate(seeds):
+            integer(seed, "robustness.seeds[%d]" % index, 0, 2 ** 32 - 1)
+    return SimulationSettings(
+        dt=number(section.get("dt", 0.01), key + ".dt", 0.0, 1.0, low_open=True),
+        servo_model=string(section.get("servo_model", "ideal"), key + ".servo_model", ("ideal", "rate-limited")),
+        servo=servo_params_from_dict(tree),
+        attitude_noise=math.radians(number(noise.get("attitude_deg", 0.0), key + ".sensor_noise.attitude_deg", 0.0, 90.0)),
+        gyro_noise=number(noise.get("gyro", 0.0), key + ".sensor_noise.gyro", 0.0, 10.0),
+    )
+
+
+def load_simulation_settings(path: Optional[str] = None) -> SimulationSettings:
+    """Load and validate the ``simulation:`` section (default file: the package's config/simulation.yaml)."""
+    return load_config(path, "simulation.yaml", simulation_settings_from_dict)
+
+
+def load_simulation_tree(path: Optional[str] = None) -> Dict[str, Any]:
+    """The whole simulation.yaml (study sections included), validated by :func:`simulation_settings_from_dict`."""
+    def build(tree: Dict[str, Any]) -> Dict[str, Any]:
+        simulation_settings_from_dict(tree)
+        return tree
+    return load_config(path, "simulation.yaml", build)
+
+
+def nominal_joint_angles(robot: RobotParams) -> np.ndarray:
+    """Joint angles (4, 3) that put every foot at its nominal position (the stroke cycle's start)."""
+    return np.array([joint_angles(robot.nominal_foot_body(leg), leg, robot) for leg in LEGS])
+
+
+def _rotation(R: ArrayLike, name: str) -> np.ndarray:
+    M = np.array(R, dtype=float)
+    if M.shape != (3, 3) or not is_rotation(M, 1e-6):
+        raise ValueError("%s must be a 3x3 rotation matrix (finite, R^T R = I, det +1), got %r" % (name, R))
+    return M
+
+
+# --------------------------------------------------------------------------------------------------
+# Plant
+# --------------------------------------------------------------------------------------------------
+
+class PlantSimulator:
+    """The simulated robot: servo model + joint command hold + floating-base model, no controller.
+
+    ``robot``: model parameters; ``servo_model``: a :class:`~quadruped_control.sim.servo_model.ServoModel`
+    (default the paper's :class:`~quadruped_control.sim.servo_model.IdealServo`); ``initial_rotation``:
+    R_B^W at rest (default level); ``restoring_offset``: optional centre of buoyancy relative to the
+    centre of mass in the body frame (m), see :class:`~quadruped_control.sim.plants.paper.FloatingBaseModel`;
+    ``initial_joints``: (4, 3) or (12,) servo angles at start (default: feet at the nominal position);
+    ``dt``: default step (s); ``model``: the plant's equations of motion (default the paper's
+    :class:`~quadruped_control.sim.plants.paper.FloatingBaseModel`; :mod:`quadruped_control.sim.plants`).
+
+    :meth:`step` takes the 12 commanded joint angles (JOINT_NAMES order, or (4, 3)). Commands outside a
+    servo's range are clamped to it (a servo cannot turn further; ``clamped_joints`` counts them).
+    A malformed or non-finite command raises ValueError and leaves the plant unchanged; a command whose
+    joint motion the five-bar cannot follow, or a diverging integration, raises :class:`SimulationError`
+    and also leaves it unchanged.
+    """
+
+    def __init__(self, robot: RobotParams, servo_model: Optional[ServoModel] = None,
+                 initial_rotation: Optional[ArrayLike] = None, restoring_offset: Optional[ArrayLike] = None,
+                 initial_joints: Optional[ArrayLike] = None, dt: float = 0.01,
+                 model: Optional[FloatingBaseModel] = None) -> None:
+        self.robot = robot
+        if model is not None and restoring_offset is not None:
+            raise ValueError("give either a plant model or a restoring_offset, not both")
+        self.model = model if model is not None else FloatingBaseModel(robot, restoring_offset=restoring_offset)
+        self.servo = servo_model if servo_model is not None else IdealServo()
+        dt = float(dt)
+        if not (math.isfinite(dt) and dt > 0.0):
+            raise ValueError("dt must be a positive finite number of seconds, got %r" % (dt,))
+        self.dt = dt
+        limits = robot.joint_limits.as_array()
+        self._low = np.tile(limits[:, 0], (4, 1))
+        self._high = np.tile(limits[:, 1], (4, 1))
+        self._bounds: Tuple[float, ...] = tuple(limits.reshape(6).tolist())  # (low1, high1, .., low3, high3)
+        self.clamped_joints = 0
+        self.time = 0.0
+        self.reset(initial_rotation, initial_joints)
+
+    # ---- state -------------------------------------------------------------------------------
+
+    def reset(self, rotation: Optional[ArrayLike] = None, joints: Optional[ArrayLike] = None,
+              state: Optional[RigidBodyState] = None) -> None:
+        """Start again at rest (or at ``state``), with the servos at ``joints`` (default nominal pose)."""
+        if state is not None:
+            if rotation is not None:
+                raise ValueError("give either rotation or state, not both")
+            self._state = state.validate()
+        else:
+            R = np.eye(3) if rotation is None else _rotation(rotation, "initial rotation")
+            self._state = RigidBodyState(rotation=R)
+        self.model.attach(self._state)
+        q = nominal_joint_angles(self.robot) if joints is None else self._command(joints)
+        # The initial pose must be one the legs can take.
+        self.model.leg_input(q, np.zeros((4, 3)))
+        self.servo.reset(q)
+        self._q = self.servo.position
+        self._q_rows: List[List[float]] = self._q.tolist()  # self._q as floats
+        self._q_dot_start = self._q
+        self._h = self.dt
+        self._command_q = q.copy()
+        self.time = 0.0
+        self.clamped_joints = 0
+
+    @property
+    def state(self) -> RigidBodyState:
+        """Current floating-base state (a copy)."""
+        return self._state.copy()
+
+    @property
+    def joint_positions(self) -> np.ndarray:
+        """Current servo angles (4, 3), rad (a copy)."""
+        return np.array(self._q)
+
+    @property
+    def joint_velocities(self) -> np.ndarray:
+        """Average servo velocities over the last step (4, 3), rad/s (zero before the first step)."""
+        return (self._q - self._q_dot_start) / self._h
+
+    @property
+    def last_command(self) -> np.ndarray:
+        """The last accepted (clamped) command (4, 3), rad."""
+        return self._command_q.copy()
+
+    def _command(self, q_cmd: ArrayLike) -> np.ndarray:
+        q = np.array(q_cmd, dtype=float)
+        if q.shape == (12,):
+            q = q.reshape(4, 3)
+        if q.shape != (4, 3):
+            raise ValueError("joint command must have shape (12,) or (4, 3), got %s" % (q.shape,))
+        if not np.all(np.isfinite(q)):
+            raise ValueError("joint command has non-finite elements: %s" % (q.reshape(-1).tolist(),))
+        return q
+
+    # ---- stepping ----------------------------------------------------------------------------
+
+    def step(self, q_cmd: ArrayLike, dt: Optional[float] = None) -> RigidBodyState:
+        """Hold the command ``q_cmd`` for ``dt`` s (default the plant's dt); returns the new state (a copy)."""
+        h = self.dt if dt is None else float(dt)
+        if not (math.isfinite(h) and h > 0.0):
+            raise ValueError("dt must be a positive finite number of seconds, got %r" % (dt,))
+        return self._advance(self._command(q_cmd), h).copy()
+
+    def _outside_count(self, rows: Sequence[Sequence[float]]) -> int:
+        """Number of joint commands in ``rows`` (4 x 3 floats) outside their servo range; NaN counts."""
+        l1, h1, l2, h2, l3, h3 = self._bounds
+        count = 0
+        for t1, t2, t3 in rows:
+            if not (l1 <= t1 <= h1 and l2 <= t2 <= h2 and l3 <= t3 <= h3):
+                count += (not l1 <= t1 <= h1) + (not l2 <= t2 <= h2) + (not l3 <= t3 <= h3)
+        return count
+
+    def _advance(self, command: np.ndarray, h: float, rows: Optional[List[List[float]]] = None,
+                 count: Optional[int] = None) -> RigidBodyState:
+        """:meth:`step` for a checked (4, 3) finite command and a positive ``h``; returns the plant's
+        own state object (states are never mutated in place, so it stays valid). ``rows``:
+        ``command.tolist()`` and ``count``: its :meth:`_outside_count`, if the caller has them.
+
+        The held input (midpoint and finite difference of the servo angles) is formed on floats, with
+        the same arithmetic as the array expressions 0.5 * (q_start + q_end) and (q_end - q_start) / h.
+        """
+        if rows is None:
+            rows = command.tolist()
+        if count is None:
+            count = self._outside_count(rows)
+        clamped = np.clip(command, self._low, self._high) if count else command
+        q_start = self._q
+        servo_before = q_start  # the servo's position array is replaced, never mutated
+        q_end = self.servo.update_trusted(clamped, h)
+        # An ideal servo reaches the (unclamped) command exactly: its floats are already at hand.
+        end_rows = rows if (count == 0 and type(self.servo) is IdealServo) else q_end.tolist()
+        mid = []
+        rate = []
+        for (a1, a2, a3), (b1, b2, b3) in zip(self._q_rows, end_rows):
+            mid.append((0.5 * (a1 + b1), 0.5 * (a2 + b2), 0.5 * (a3 + b3)))
+            rate.append(((b1 - a1) / h, (b2 - a2) / h, (b3 - a3) / h))
+        try:
+            new_state = self.model.step_trusted(self._state, mid, rate, h)
+        except (UnreachableError, ArithmeticError, RuntimeError) as exc:
+            self.servo.reset(servo_before)
+            raise SimulationError("plant step at t = %.3f s failed: %s" % (self.time, exc)) from None
+        self.clamped_joints += count
+        self._state = new_state
+        self._q = q_end
+        self._q_rows = end_rows
+        self._q_dot_start = q_start
+        self._h = h
+        self._command_q = clamped
+        self.time += h
+        return new_state
+
+
+# --------------------------------------------------------------------------------------------------
+# Result
+# --------------------------------------------------------------------------------------------------
+
+@dataclass
+class SimulationResult:
+    """Recorded closed-loop trial; row k is the instant t_k at which the controller measured and acted.
+
+    ``rotation`` (N, 3, 3) true R_B^W; ``quaternion`` (N, 4) (x, y, z, w); ``rpy`` (N, 3) rad;
+    ``omega`` (N, 3) rad/s (true, body); ``tau_cmd``, ``tau_sat`` (N, 3) N m; ``saturated`` (N,) bool;
+    ``geodesic`` (N,) true geodesic error, rad; ``pair_phase`` (N, P) str; ``holding`` (N,) bool;
+    ``joint_targets`` (N, 12) commanded, ``joint_positions`` (N, 12) servo angles, rad;
+    ``setpoint`` R_d; ``info``: the trial's settings (JSON-ready).
+    """
+
+    t: np.ndarray
+    rotation: np.ndarray
+    omega: np.ndarray
+    tau_cmd: np.ndarray
+    tau_sat: np.ndarray
+    saturated: np.ndarray
+    pair_phase: np.ndarray
+    holding: np.ndarray
+    joint_targets: np.ndarray
+    joint_positions: np.ndarray
+    setpoint: np.ndarray
+    info: Dict[str, Any]
+    wall_time: float = 0.0
+    #: (N, 3) centre-of-mass position in the world frame, m (zeros if not recorded).
+    position: Optional[np.ndarray] = None
+
+    def __post_init__(self) -> None:
+        if self.position is None:
+            self.position = np.zeros((self.t.size, 3))
+        self.quaternion = rotations_to_quaternions(self.rotation)
+        self.rpy = rotations_to_rpy(self.rotation)
+        self.setpoint_rpy = rotations_to_rpy(self.setpoint[None, :, :])[0]
+        self.geodesic = geodesic_angles(self.setpoint, self.rotation)
+
+    @property
+    def duration(self) -> float:
+        return float(self.t[-1] - self.t[0]) if self.t.size else 0.0
+
+    @property
+    def real_time_factor(self) -> float:
+        """Simulated seconds per wall-clock second of the run."""
+        return (self.duration + self.info.get("dt", 0.01)) / self.wall_time if self.wall_time > 0 else math.inf
+
+    def geodesic_smoothed(self) -> np.ndarray:
+        """Geodesic error after the centred 3 s moving average (rad)."""
+        return moving_average_centered(self.geodesic, self.t)
+
+    def metrics(self) -> Dict[str, Any]:
+        """The paper's metrics of this trial (:func:`quadruped_control.analysis.metrics.compute_metrics`)."""
+        return compute_metrics(self.t, self.rpy, self.setpoint_rpy, self.geodesic)
+
+    #: Column names of :meth:`write_csv` (angles in degrees, everything else SI).
+    CSV_COLUMNS: Tuple[str, ...] = (
+        "t", "qx", "qy", "qz", "qw", "roll_deg", "pitch_deg", "yaw_deg",
+        "roll_setpoint_deg", "pitch_setpoint_deg", "yaw_setpoint_deg", "omega_x", "omega_y", "omega_z",
+        "tau_cmd_x", "tau_cmd_y", "tau_cmd_z", "tau_sat_x", "tau_sat_y", "tau_sat_z", "saturated",
+        "geodesic_deg", "geodesic_smoothed_deg", "com_x", "com_y", "com_z")
+
+    def write_csv(self, path: str) -> None:
+        """Time series as CSV: :attr:`CSV_COLUMNS`, then ``phase_pair<i>`` per leg pair and ``holding``."""
+        pairs = self.pair_phase.shape[1] if self.pair_phase.ndim == 2 else 0
+        header = list(self.CSV_COLUMNS) + ["phase_pair%d" % (i + 1) for i in range(pairs)] + ["holding"]
+        numeric = np.column_stack((
+            self.t, self.quaternion, np.degrees(self.rpy), np.tile(np.degrees(self.setpoint_rpy), (self.t.size, 1)),
+            self.omega, self.tau_cmd, self.tau_sat, self.saturated.astype(float), np.degrees(self.geodesic),
+            np.degrees(self.geodesic_smoothed()), self.position))
+        with open(path, "w", newline="") as stream:
+            writer = csv.writer(stream)
+            writer.writerow(header)
+            for k in range(self.t.size):
+                row = ["%.2f" % numeric[k, 0]] + ["%.9g" % v for v in numeric[k, 1:20]] \
+                    + ["%d" % int(numeric[k, 20])] + ["%.6g" % v for v in numeric[k, 21:]]
+                row += [str(p) for p in self.pair_phase[k]] + ["%d" % int(self.holding[k])]
+                writer.writerow(row)
+
+
+# --------------------------------------------------------------------------------------------------
+# Closed loop
+# --------------------------------------------------------------------------------------------------
+
+class ClosedLoopSimulation:
+    """Controller + plant at the controller's period (the paper's RK4 with dt = 0.01 s).
+
+    ``robot``: model parameters (controller and plant share them: the paper's simulation has no model
+    mismatch); ``controller_config``: gains etc.; ``servo_model``: a ServoModel or a name ('ideal',
+    'rate-limited'), default ideal; ``initial_R``, ``setpoint_R``: rotations; ``restoring_offset``:
+    optional centre of buoyancy offset (m, body frame); ``seed``: seeds the IMU noise;
+    ``attitude_noise`` (rad), ``gyro_noise`` (rad/s): IMU noise std (default 0, the paper);
+    ``model``: the plant's equations of motion (default the paper's, :mod:`quadruped_control.sim.plants`);
+    ``controller_enabled`` False keeps the controller in its hold state, so the legs stay at the
+    nominal pose (passive dynamics: ballast checks, physics tests).
+    """
+
+    def __init__(self, robot: RobotParams, controller_config: ControllerConfig,
+                 servo_model: Union[ServoModel, str, None] = None, initial_R: Optional[ArrayLike] = None,
+                 setpoint_R: Optional[ArrayLike] = None, restoring_offset: Optional[ArrayLike] = None,
+                 seed: int = 0, attitude_noise: float = 0.0, gyro_noise: float = 0.0,
+                 model: Optional[FloatingBaseModel] = None, controller_enabled: bool = True) -> None:
+        if isinstance(servo_model, str):
+            servo_model = make_servo_model(servo_model)
+        for name, value in (("attitude_noise", attitude_noise), ("gyro_noise", gyro_noise)):
+            if not (math.isfinite(value) and value >= 0.0):
+                raise ValueError("%s must be a finite non-negative std, got %r" % (name, value))
+        self.robot = robot
+        self.config = controller_config
+        self.dt = float(controller_config.dt)
+        self.initial_R = np.eye(3) if initial_R is None else _rotation(initial_R, "initial_R")
+        self.setpoint_R = np.eye(3) if setpoint_R is None else _rotation(setpoint_R, "setpoint_R")
+        self.restoring_offset = None if restoring_offset is None else np.array(restoring_offset, dtype=float)
+        self.seed = int(seed)
+        self.attitude_noise = float(attitude_noise)
+        self.gyro_noise = float(gyro_noise)
+        self.controller = AttitudeController(robot, controller_config)
+        self.controller.set_setpoint(self.setpoint_R)
+        self.controller_enabled = bool(controller_enabled)
+        self.plant = PlantSimulator(robot, servo_model, initial_rotation=self.initial_R,
+                                    restoring_offset=self.restoring_offset, dt=self.dt, model=model)
+        self._rng = np.random.default_rng(self.seed)
+        self.k = 0
+        self.holds = 0
+
+    @property
+    def time(self) -> float:
+        """Time of the next control step, s (k dt, not accumulated: no drift)."""
+        return self.k * self.dt
+
+    def _measure(self, state: RigidBodyState) -> Tuple[np.ndarray, np.ndarray]:
+        R, omega = state.rotation, state.omega
+        if self.attitude_noise > 0.0:
+            R = R @ exp_so3(self._rng.normal(0.0, self.attitude_noise, 3))
+        if self.gyro_noise > 0.0:
+            omega = omega + self._rng.normal(0.0, self.gyro_noise, 3)
+        return R, omega
+
+    def step(self) -> Tuple[RigidBodyState, ControllerOutput]:
+        """One control period: measure at t_k, control, hold the joint targets until t_k+1.
+
+        Returns (state at t_k, controller output at t_k). A measurement the controller rejects puts it
+        in its hold (safe) state for the step, as the ROS node does.
+        """
+        t = self.time
+        state = self.plant._state  # noqa: SLF001 (read-only use; the plant never mutates states)
+        R, omega = self._measure(state)
+        if not self.controller_enabled:
+            output = self.controller.hold(t, "controller off")
+        else:
+            try:
+                output = self.controller.step(t, R, omega)
+            except ValueError as exc:
+                self.holds += 1
+                output = self.controller.hold(t, "bad measurement: %s" % exc)
+        targets = output.joint_targets
+        plant = self.plant
+        # The controller guarantees (4, 3) finite targets; a target inside its servo range is finite.
+        rows = targets.tolist() if targets.shape == (4, 3) else None
+        count = plant._outside_count(rows) if rows is not None else 0  # noqa: SLF001
+        if rows is None or (count and not np.isfinite(targets).all()):
+            raise SimulationError("controller returned invalid joint targets at t = %.3f s: %r" % (t, targets))
+        plant._advance(targets, self.dt, rows, count)  # noqa: SLF001 (checked above)
+        self.k += 1
+        return state, output
+
+    def run(self, duration: float, progress: Optional[ProgressCallback] = None,
+            progress_interval: float = 2.0) -> SimulationResult:
+        """Simulate ``duration`` s from the current state; records round(duration / dt) + 1 samples
+        (t = 0 .. duration inclusive: the last sample is measured, the plant is not stepped past it).
+
+        ``progress(t, duration)`` is called at most every ``progress_interval`` s of wall time and at
+        the end. Raises :class:`SimulationError` if the plant diverges.
+        """
+        duration = float(duration)
+        if not (math.isfinite(duration) and duration > 0.0):
+            raise ValueError("duration must be a positive finite number of seconds, got %r" % (duration,))
+        steps = int(round(duration / self.dt))
+        n = steps + 1
+        times: List[float] = []
+        states: List[RigidBodyState] = []
+        records: List[Any] = []
+        targets: List[np.ndarray] = []
+        positions: List[np.ndarray] = []
+        start = time.perf_counter()
+        last_report = start
+        step = self.step
+        for i in range(n):
+            positions.append(self.plant._q)  # noqa: SLF001 (arrays are replaced, never mutated)
+            times.append(self.time)
+            if i < steps:
+                state, output = step()
+            else:  # last sample: measure and record, do not advance
+                state = self.plant._state  # noqa: SLF001
+                R, w = self._measure(state)
+                try:
+                    if not self.controller_enabled:
+                        raise ValueError("controller off")
+                    output = self.controller.step(self.time, R, w)
+                except ValueError as exc:
+                    output = self.controller.hold(self.time, "bad measurement: %s" % exc)
+            states.append(state)
+            records.append(output.state)
+            targets.append(output.joint_targets)
+            if progress is not None and (i & 63) == 0:
+                now = time.perf_counter()
+                if now - last_report >= progress_interval:
+                    last_report = now
+                    progress(times[-1], duration)
+        wall = time.perf_counter() - start
+        if progress is not None:
+            progress(times[-1], duration)
+        t_rec = np.array(times)
+        rotation = np.array([s.rotation for s in states])
+        omega = np.array([s.omega for s in states])
+        position = np.array([s.position for s in states])
+        tau_cmd = np.array([r.tau_cmd for r in records], dtype=float).reshape(n, 3)
+        tau_sat = np.array([r.tau_sat for r in records], dtype=float).reshape(n, 3)
+        saturated = np.array([bool(r.saturated) for r in records])
+        holding = np.array([bool(r.holding) for r in records])
+        phases = [tuple(r.pair_phase) for r in records]
+        target_array = np.array(targets, dtype=float).reshape(n, 12)
+        position_array = np.array(positions, dtype=float).reshape(n, 12)
+        info = {
+            "dt": self.dt,
+            "duration": duration,
+            "gains": {"k_p": self.config.gains.k_p, "k_i": self.config.gains.k_i, "k_d": self.config.gains.k_d,
+                      "k_aw": self.config.gains.k_aw},
+            "t_rec": self.config.t_rec,
+            "t_pow_max": self.config.t_pow_max,
+            "tau_max": self.config.tau_max,
+            "pairs": [list(p) for p in self.config.pairs],
+            "normalize_force_direction": bool(self.config.normalize_force_direction),
+            "servo_model": self.plant.servo.name,
+            "restoring_offset": None if self.restoring_offset is None else self.restoring_offset.tolist(),
+            "seed": self.seed,
+            "attitude_noise_deg": math.degrees(self.attitude_noise),
+            "gyro_noise": self.gyro_noise,
+            "clamped_joint_commands": self.plant.clamped_joints,
+            "controller_holds": self.holds,
+            "plant": getattr(self.plant.model, "name", "paper"),
+            "controller": "on" if self.controller_enabled else "off",
+        }
+        return SimulationResult(t=t_rec, rotation=rotation, omega=omega, position=position, tau_cmd=tau_cmd, tau_sat=tau_sat,
+                                saturated=saturated, pair_phase=np.array(phases, dtype=str), holding=holding,
+                                joint_targets=target_array, joint_positions=position_array,
+                                setpoint=self.setpoint_R.copy(),
+                                info=info, wall_time=wall)
