@@ -8,12 +8,13 @@ import pytest
 
 from quadruped_common.so3 import rot_to_quat, rpy_to_rot
 from quadruped_control.analysis.bag_report import BagReportError, analyse, main, read_bags
+from tests.repo import REPO_ROOT
 
 rosbags = pytest.importorskip("rosbags")
 from rosbags.rosbag1 import Writer  # noqa: E402
 from rosbags.typesys import Stores, get_types_from_msg, get_typestore  # noqa: E402
 
-MSG_DIR = os.path.join(os.path.dirname(__file__), "..", "quadruped_msgs", "msg")
+MSG_DIR = os.path.join(REPO_ROOT, "quadruped_msgs", "msg")
 STATE_TYPE = "quadruped_msgs/msg/ControllerState"
 
 

@@ -12,8 +12,8 @@ import pytest
 
 from quadruped_control import simulate
 from quadruped_control.sim.simulation import SimulationResult
+from tests.repo import REPO_ROOT as ROOT
 
-ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 
 
 def test_single_trial_writes_csv_metrics_and_figure(tmp_path, capsys) -> None:

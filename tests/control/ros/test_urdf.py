@@ -23,8 +23,8 @@ from quadruped_control.model.kinematics import foot_position, joint_angles
 from quadruped_control.model.params import load_robot_params
 from quadruped_control.ros.visualization import (PASSIVE_JOINT_NAMES, VISUAL_JOINT_NAMES, VisualizationError,
                                              visual_joint_state)
+from tests.repo import REPO_ROOT as ROOT
 
-ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 XACRO_FILE = os.path.join(ROOT, "urdf", "underwater_quadruped.urdf.xacro")
 
 
