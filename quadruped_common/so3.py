@@ -26,6 +26,19 @@ _SMALL_ANGLE = 1e-4
 _MIN_QUAT_NORM = 1e-9
 
 
+TWO_PI = 2.0 * math.pi
+
+
+def wrap_angle(angle: Union[float, np.ndarray]) -> Union[float, np.ndarray]:
+    """Angle(s) in radians wrapped into [-pi, pi): the project's one wrapping convention.
+
+    A float gives a float (the kinematics' hot path, no numpy); anything else an array.
+    """
+    if isinstance(angle, float):
+        return (angle + math.pi) % TWO_PI - math.pi
+    return (np.asarray(angle, dtype=float) + math.pi) % TWO_PI - math.pi
+
+
 def _vec3(w: ArrayLike, name: str = "vector") -> np.ndarray:
     v = np.asarray(w, dtype=float).reshape(-1)
     if v.shape != (3,):

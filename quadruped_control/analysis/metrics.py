@@ -37,6 +37,8 @@ from typing import Any, Dict, Optional, Sequence, Tuple, Union
 
 import numpy as np
 
+from quadruped_common.so3 import wrap_angle
+
 ArrayLike = Union[Sequence[float], Sequence[Sequence[float]], np.ndarray]
 
 #: Width of the centred moving average, s (paper, section "Experiments").
@@ -66,13 +68,7 @@ __all__ = [
     "moving_average_centered",
     "resample_uniform",
     "settling_time",
-    "wrap_angle",
 ]
-
-
-def wrap_angle(angle: Union[float, np.ndarray]) -> Union[float, np.ndarray]:
-    """Angle(s) in radians wrapped into [-pi, pi)."""
-    return (np.asarray(angle, dtype=float) + math.pi) % (2.0 * math.pi) - math.pi
 
 
 def _time_vector(t: ArrayLike) -> np.ndarray:

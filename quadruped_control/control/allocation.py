@@ -26,7 +26,7 @@ along the perpendicular component of tau_i. Degenerate cases (zero torque, foot 
 foot on the torque axis) give a zero force direction and zero speed, never NaN.
 
 :func:`estimate_body_torque` evaluates eq. (torque_leg) from measured joint motion (telemetry, and
-the way the paper estimated tau_max).
+the way the paper estimated tau_max) with the paw drag law of :mod:`quadruped_control.model.hydrodynamics`.
 """
 from __future__ import annotations
 
@@ -35,6 +35,7 @@ from typing import Optional, Sequence, Tuple, Union
 
 import numpy as np
 
+from quadruped_control.model.hydrodynamics import paw_drag_wrench_f
 from quadruped_control.model.kinematics import leg_kinematics
 from quadruped_control.model.params import RobotParams
 
@@ -216,15 +217,16 @@ def estimate_body_torque(q: ArrayLike, q_dot: ArrayLike, R: ArrayLike, omega: Ar
     rot = np.asarray(R, dtype=float)
     if rot.shape != (3, 3) or not np.all(np.isfinite(rot)):
         raise ValueError("R must be a finite 3x3 rotation matrix")
-    w = np.array(_floats3(omega, "omega"))
-    v_b = np.zeros(3) if v_body_world is None else np.array(_floats3(v_body_world, "v_body_world"))
+    wx, wy, wz = _floats3(omega, "omega")
+    if v_body_world is None:
+        bx = by = bz = 0.0
+    else:  # R^T v_B^W: the body velocity in body axes
+        vx, vy, vz = _floats3(v_body_world, "v_body_world")
+        (r0, r1, r2), (r3, r4, r5), (r6, r7, r8) = rot.tolist()
+        bx, by, bz = r0 * vx + r3 * vy + r6 * vz, r1 * vx + r4 * vy + r7 * vz, r2 * vx + r5 * vy + r8 * vz
     # Foot positions r_i and joint-induced velocities J_P,i^B q_dot_i of all legs in one float pass
-    # (the simulator's fast path: the same formulas as foot_position / foot_jacobian).
-    kinematics = np.array(leg_kinematics(q_arr.reshape(4, 3).tolist(), q_dot_arr.reshape(4, 3).tolist(), robot))
-    feet = kinematics[:, :3]
-    # Foot velocity in body axes, R^T v_e,i^W = R^T v_B^W + omega x r_i + J_P,i^B q_dot_i; the drag
-    # F = -k |v| v (eq. drag) is rotation invariant, so the torque r_i x (R^T F_i^W) of eq. (torque_leg)
-    # is computed in body axes directly (hydrodynamics.leg_wrench does the same via the world frame).
-    u = np.cross(w, feet) + kinematics[:, 3:] + rot.T @ v_b
-    force_body = -robot.drag_constant * np.sqrt(np.einsum("ij,ij->i", u, u))[:, None] * u
-    return np.cross(feet, force_body).sum(axis=0)
+    # (kinematics.leg_kinematics), then the paw drag torques summed in body axes (the drag is rotation
+    # invariant): hydrodynamics.paw_drag_wrench_f, the float twin of hydrodynamics.leg_wrench.
+    feet = leg_kinematics(q_arr.reshape(4, 3).tolist(), q_dot_arr.reshape(4, 3).tolist(), robot)
+    _, _, _, tx, ty, tz = paw_drag_wrench_f(feet, robot.drag_constant, bx, by, bz, wx, wy, wz)
+    return np.array([tx, ty, tz])

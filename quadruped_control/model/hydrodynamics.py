@@ -1,40 +1,57 @@
 """Hydrodynamic forces on the underwater quadruped (paper section "Mathematical Modeling").
 
 - Paw drag and its transmission to the body, eq. (drag), (virtual_work), (force_leg), (torque_leg):
-  :func:`paw_drag_force`, :func:`leg_wrench`.
-- Net paw buoyancy and its torque on the body, eq. (buoy_force), (buoy_torque): :func:`paw_buoyancy`.
+  :func:`paw_drag_force`, :func:`leg_wrench`; fast path :func:`paw_drag_wrench_f`.
+- Net paw buoyancy and its torque on the body, eq. (buoy_force), (buoy_torque): :func:`paw_buoyancy`;
+  fast path :func:`paw_buoyancy_f`.
 - MuJoCo's inertia-box body drag, eq. (inertia_box), (quad), (visc): :func:`inertia_box`,
   :func:`body_drag` (force and torque both in the body frame; eq. (drag_total) rotates the force to
-  the world frame, which :mod:`quadruped_control.sim.plants.paper` does).
+  the world frame, which :mod:`quadruped_control.sim.plants.paper` does), computed by
+  :func:`body_drag_f`.
 
 Frames: superscript W is the ENU world frame, B the body frame (forward-left-up), R = R_B^W maps body
 vectors to world vectors. All functions are pure; the per-leg functions accept one leg (shape (3,))
 or a stack of legs (shape (N, 3)) and return the same leading shape.
 
-The coefficients that depend only on the parameters are gathered in :class:`BodyDragCoefficients`
-so the integrator computes them once instead of at every Runge-Kutta stage.
+Every force law is written here once, and the plants (:mod:`quadruped_control.sim.plants`) and the
+torque estimate of :func:`quadruped_control.control.allocation.estimate_body_torque` use it. The
+readable functions take and return numpy arrays in the frames the paper writes them in and check
+their input. The functions ending in ``_f`` are their fast paths: plain floats in body axes, no
+checks, for the integrator (four Runge-Kutta stages per 10 ms step, where numpy's per-call overhead
+on 3-vectors would cost several times the arithmetic) and the controller's telemetry; the tests
+compare each with its readable twin. The coefficients that depend only on the parameters are
+gathered in :class:`BodyDragCoefficients` so the integrator computes them once.
 """
 from __future__ import annotations
 
 import math
 from dataclasses import dataclass
-from typing import Sequence, Tuple, Union
+from typing import Iterable, Sequence, Tuple, Union
 
 import numpy as np
 
 from quadruped_common.config import ParameterError
+from quadruped_common.so3 import hat
 from quadruped_control.model.params import RobotParams
 
 ArrayLike = Union[Sequence[float], Sequence[Sequence[float]], np.ndarray]
+
+#: Six floats of one leg: foot position r_e,i^B, then the joint-induced foot velocity J_P,i^B q_dot_i (body).
+FootRow = Sequence[float]
+Wrench6 = Tuple[float, float, float, float, float, float]
 
 __all__ = [
     "BodyDragCoefficients",
     "body_drag",
     "body_drag_coefficients",
+    "body_drag_f",
     "inertia_box",
     "leg_wrench",
     "paw_buoyancy",
+    "paw_buoyancy_f",
     "paw_drag_force",
+    "paw_drag_wrench_f",
+    "torso_buoyancy_torque_matrix",
 ]
 
 
@@ -100,6 +117,35 @@ def leg_wrench(v_foot_world: ArrayLike, r_foot_body: ArrayLike, R: ArrayLike,
     return force_world, _cross(r, force_body)
 
 
+def paw_drag_wrench_f(feet: Iterable[FootRow], drag_constant: float, bx: float, by: float, bz: float,
+                      wx: float, wy: float, wz: float) -> Wrench6:
+    """Fast path of :func:`leg_wrench` summed over the legs, on floats: eq. (drag), (force_leg),
+    (torque_leg) in body axes, (sum_i R^T F_i^W, sum_i tau_i^B).
+
+    ``feet``: one row (r_x, r_y, r_z, c_x, c_y, c_z) per leg, the foot position r_e,i^B and the
+    joint-induced foot velocity c_i = J_P,i^B q_dot_i; (bx, by, bz) = R^T v_B^W, the body velocity in body
+    axes; (wx, wy, wz) = omega_B^B. The foot velocity in body axes is u_i = R^T v_e,i^W =
+    b + omega x r_i + c_i (eq. (fb_jac)); the drag is rotation invariant, so R^T F_i^W = -k |u_i| u_i
+    and tau_i^B = r_i x (R^T F_i^W). No input checks (the integrator's stages and the controller's
+    torque estimate call it on values they built).
+    """
+    sqrt = math.sqrt
+    fx = fy = fz = tx = ty = tz = 0.0
+    for px, py, pz, cx, cy, cz in feet:
+        ux = bx + wy * pz - wz * py + cx
+        uy = by + wz * px - wx * pz + cy
+        uz = bz + wx * py - wy * px + cz
+        s = -drag_constant * sqrt(ux * ux + uy * uy + uz * uz)
+        gx, gy, gz = s * ux, s * uy, s * uz                   # eq. (drag), (force_leg), body axes
+        fx += gx
+        fy += gy
+        fz += gz
+        tx += py * gz - pz * gy                                # eq. (torque_leg)
+        ty += pz * gx - px * gz
+        tz += px * gy - py * gx
+    return fx, fy, fz, tx, ty, tz
+
+
 # --------------------------------------------------------------------------------------------------
 # Paw buoyancy, eq. (buoy_force), (buoy_torque)
 # --------------------------------------------------------------------------------------------------
@@ -127,9 +173,41 @@ def paw_buoyancy(r_feet_body: ArrayLike, R: ArrayLike, params: RobotParams) -> T
     return force_world, torque_body
 
 
+def paw_buoyancy_f(feet: Sequence[FootRow], net_paw_buoyancy: float) -> Tuple[float, Tuple[float, ...]]:
+    """Fast path of :func:`paw_buoyancy`, eq. (buoy_force), (buoy_torque), on floats, for legs held over
+    an integration step: (F_z, U) with F_buoyancy^W = (0, 0, F_z) and tau_buoyancy^B = U (R^T z_hat).
+
+    ``feet``: rows whose first three floats are r_e,i^B (the rows of :func:`paw_drag_wrench_f`);
+    ``net_paw_buoyancy``: B_net = g rho V_s - m_s g of one paw, N. U = B_net hat(sum_i r_i) is a
+    row-major 9-tuple: the torque (sum_i r_i) x (R^T B_net z_hat) is linear in R^T z_hat, so the
+    integrator forms U once per step and the stages only multiply it by the third row of R.
+    """
+    sx = sy = sz = 0.0
+    for foot in feet:
+        sx += foot[0]
+        sy += foot[1]
+        sz += foot[2]
+    sx *= net_paw_buoyancy
+    sy *= net_paw_buoyancy
+    sz *= net_paw_buoyancy
+    return len(feet) * net_paw_buoyancy, (0.0, -sz, sy, sz, 0.0, -sx, -sy, sx, 0.0)
+
+
 # --------------------------------------------------------------------------------------------------
 # Inertia-box body drag, eq. (inertia_box), (quad), (visc)
 # --------------------------------------------------------------------------------------------------
+
+def torso_buoyancy_torque_matrix(buoyancy: float, center_of_buoyancy: ArrayLike) -> np.ndarray:
+    """U_cb = B hat(r_cb): the torso buoyancy B (N) acting at the centre of buoyancy r_cb^B (m, body frame,
+    relative to the centre of mass) gives the moment r_cb x (R^T [0, 0, B]) = U_cb (R^T z_hat) about the
+    centre of mass (N m, body frame).
+
+    Not in the paper, whose centre of buoyancy is at the centre of mass (section "Body Dynamics"): the
+    restoring torque of the paper plant's optional centre-of-buoyancy offset and of the tank plant's
+    hydrostatics. A matrix because R^T z_hat (the third row of R) is what changes from step to step.
+    """
+    return float(buoyancy) * hat(_finite_vectors(center_of_buoyancy, "center_of_buoyancy").reshape(3))
+
 
 def inertia_box(params: RobotParams) -> Tuple[float, float, float]:
     """Half-lengths (r_x, r_y, r_z) in m of the box with the body's mass and inertia, eq. (inertia_box).
@@ -165,11 +243,28 @@ class BodyDragCoefficients:
     visc_force: float        # 6 pi beta r_eq, kg/s
     visc_torque: float       # 8 pi beta r_eq^3, kg m^2 / s
 
-    def forces(self, v_body: np.ndarray, omega_body: np.ndarray) -> Tuple[np.ndarray, np.ndarray]:
-        """(f_D + f_V, g_D + g_V) for body-frame v_B^B, omega_B^B (float arrays of shape (3,)); no checks."""
-        force = -(self.quad_force * np.abs(v_body) + self.visc_force) * v_body
-        torque = -(self.quad_torque * np.abs(omega_body) + self.visc_torque) * omega_body
-        return force, torque
+    @property
+    def flat(self) -> Tuple[float, ...]:
+        """The eight coefficients as floats, in the order :func:`body_drag_f` takes them."""
+        return tuple(self.quad_force.tolist() + self.quad_torque.tolist() + [self.visc_force, self.visc_torque])
+
+
+def body_drag_f(coefficients: Sequence[float], bx: float, by: float, bz: float, wx: float, wy: float,
+                wz: float) -> Wrench6:
+    """The inertia-box body drag (f_D + f_V, g_D + g_V), eq. (quad) + (visc), on floats, body frame:
+    the one implementation, behind :func:`body_drag` and the integrator's stages.
+
+    ``coefficients``: :attr:`BodyDragCoefficients.flat` (q_x, q_y, q_z, p_x, p_y, p_z, c_f, c_g);
+    (bx, by, bz) = v_B^B, (wx, wy, wz) = omega_B^B. No input checks.
+    """
+    qf0, qf1, qf2, qg0, qg1, qg2, cf, cg = coefficients
+    # |x| inline (the value of abs(), without the call)
+    return (-(qf0 * (bx if bx >= 0.0 else -bx) + cf) * bx,
+            -(qf1 * (by if by >= 0.0 else -by) + cf) * by,
+            -(qf2 * (bz if bz >= 0.0 else -bz) + cf) * bz,
+            -(qg0 * (wx if wx >= 0.0 else -wx) + cg) * wx,
+            -(qg1 * (wy if wy >= 0.0 else -wy) + cg) * wy,
+            -(qg2 * (wz if wz >= 0.0 else -wz) + cg) * wz)
 
 
 def body_drag_coefficients(params: RobotParams) -> BodyDragCoefficients:
@@ -199,4 +294,5 @@ def body_drag(v_body: ArrayLike, omega_body: ArrayLike, params: RobotParams) -> 
     if v.shape != (3,) or w.shape != (3,):
         raise ValueError("body velocity and angular velocity must have shape (3,), got %s and %s"
                          % (v.shape, w.shape))
-    return body_drag_coefficients(params).forces(v, w)
+    wrench = body_drag_f(body_drag_coefficients(params).flat, *(v.tolist() + w.tolist()))
+    return np.array(wrench[:3]), np.array(wrench[3:])

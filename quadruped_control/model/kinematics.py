@@ -10,7 +10,14 @@ Fig. 3c). This module implements:
 - eq. (ik_theta3) and the planar IK: :func:`joint_angles` (body-frame target -> servo angles), and
   :func:`joint_angles_floats`, the same on plain floats (the controller's per-step IK);
 - eq. (J_leg): translational leg Jacobian, :func:`five_bar_jacobian`, :func:`foot_jacobian`;
-- eq. (ee_vel): floating-base Jacobian, :func:`floating_base_jacobian`.
+- eq. (ee_vel): floating-base Jacobian, :func:`floating_base_jacobian`;
+- the simulator's fast path :func:`leg_kinematics_flat`: r_e,i^B and J_P,i^B q_dot_i of all legs on
+  floats, without numpy (the plant needs them at every integration step).
+
+Each forward-kinematics equation is written once, in a float core that the readable functions and the
+fast path share: ``_five_bar_closure`` (eq. (fk_EFG), (fk_phi), (fk_planar)), ``_five_bar_rates``
+(the five-bar block of eq. (J_leg)), ``_leg_point`` (eq. (fk_T)), ``_leg_rate`` (eq. (J_leg) times the
+joint rates) and ``_ee_body`` (eq. (ee_body)).
 
 Geometry of the five-bar in its plane frame F_P: motor 1 at the origin, motor 2 at (c, 0); actuated
 link a1 ends at A = a1 (cos theta1, sin theta1), link a2 at B = (c, 0) + a2 (cos theta2, sin theta2);
@@ -46,14 +53,13 @@ from typing import Optional, Sequence, Tuple, Union
 import numpy as np
 
 from quadruped_common.robot import LEGS, MIRROR_DIAG
-from quadruped_common.so3 import hat
+from quadruped_common.so3 import TWO_PI, hat, wrap_angle
 from quadruped_control.model.params import FiveBar, RobotParams
 
 NUM_LEGS = len(LEGS)
 
 ArrayLike = Union[Sequence[float], np.ndarray]
 
-TWO_PI = 2.0 * math.pi
 #: Rounding slack for arccos arguments and range checks (targets exactly on the boundary).
 _ROUND_TOL = 1e-12
 #: Angle slack (rad) when wrapping an angle into a servo range that ends exactly at it.
@@ -107,50 +113,76 @@ def wrap_into_range(angle: float, low: float, high: float) -> Optional[float]:
     return wrapped
 
 
-def wrap_to_pi(angle: float) -> float:
-    """Angle wrapped into [-pi, pi)."""
-    return (angle + math.pi) % TWO_PI - math.pi
-
-
 # --------------------------------------------------------------------------------------------------
 # Five-bar linkage (plane frame F_P)
 # --------------------------------------------------------------------------------------------------
 
-def five_bar_fk(theta1: float, theta2: float, geometry: FiveBar) -> Tuple[float, float, float, float, float]:
-    """Foot position of the five-bar from the actuated angles, eq. (fk_EFG), (fk_phi), (fk_planar).
+def _closure_scale(a1: float, a3: float, c: float) -> float:
+    """Magnitude of E^2 + F^2 of eq. (fk_EFG), for the relative tolerance of the closure test."""
+    return 4.0 * a3 * a3 * (c + 2.0 * a1) ** 2
 
-    Returns ``(x_d, y_prime, phi, theta4, theta5)``: the foot in F_P, the absolute angle phi of link
-    a4, and the passive joint angles theta4 (link a3 relative to a1) and theta5 (a4 relative to a2,
-    phi = theta2 + theta5), both wrapped into [-pi, pi). Uses the "+" root of eq. (fk_phi), the
-    assembly mode that matches the elbows-out IK of eq. (ik_theta1245).
 
-    Raises :class:`UnreachableError` if E^2 + F^2 - G^2 < 0 (the passive links cannot close) or if
-    the two elbows coincide (phi undefined).
-    """
+def _closure_error(theta1: float, theta2: float, disc: float, g: float, a1: float, a3: float, a4: float,
+                   c: float) -> UnreachableError:
+    """Why :func:`_five_bar_closure` cannot assemble the five-bar at (theta1, theta2)."""
     if not (math.isfinite(theta1) and math.isfinite(theta2)):
-        raise UnreachableError("five-bar angles must be finite, got (%r, %r)" % (theta1, theta2))
-    a1, a3, c = geometry.a1, geometry.a3, geometry.c
+        return UnreachableError("five-bar angles must be finite, got (%r, %r)" % (theta1, theta2))
+    if disc < -_ROUND_TOL * _closure_scale(a1, a3, c):
+        return UnreachableError("five-bar cannot close at theta1=%.2f deg, theta2=%.2f deg (elbows %.4f m "
+                                "apart, passive links reach %.4f m)"
+                                % (math.degrees(theta1), math.degrees(theta2), math.sqrt(max(g, 0.0)), a3 + a4))
+    return UnreachableError("five-bar elbows coincide at theta1=%.2f deg, theta2=%.2f deg: foot undefined"
+                            % (math.degrees(theta1), math.degrees(theta2)))
+
+
+def _five_bar_closure(theta1: float, theta2: float, a1: float, a2: float, a3: float, a4: float,
+                      c: float) -> Tuple[float, float, float, float]:
+    """The one implementation of the five-bar forward kinematics, eq. (fk_EFG), (fk_phi), (fk_planar), on
+    floats: the core of :func:`five_bar_fk`, :func:`five_bar_jacobian`, :func:`foot_position`,
+    :func:`foot_jacobian` and the simulator's :func:`leg_kinematics_flat`.
+
+    Returns ``(x_d, y_prime, phi, psi)``: the foot in F_P and the absolute angles of the passive links
+    a4 (phi, the "+" root of eq. (fk_phi)) and a3 (psi), not wrapped. ``theta1``, ``theta2`` must be
+    finite (the callers check). Raises :class:`UnreachableError` if E^2 + F^2 - G^2 < 0 (the passive
+    links cannot close) or if the two elbows coincide (phi undefined).
+    """
     c1, s1 = math.cos(theta1), math.sin(theta1)
     c2, s2 = math.cos(theta2), math.sin(theta2)
     # eq. (fk_EFG), valid for the symmetric mechanism a1 = a2, a3 = a4 (enforced by params).
     e = 2.0 * a3 * (c + a1 * (c2 - c1))
     f = 2.0 * a1 * a3 * (s2 - s1)
     g = c * c + 2.0 * a1 * a1 + 2.0 * c * a1 * c2 - 2.0 * c * a1 * c1 - 2.0 * a1 * a1 * math.cos(theta2 - theta1)
-    scale = 4.0 * a3 * a3 * (c + 2.0 * a1) ** 2  # magnitude of E^2 + F^2, for a relative tolerance
     disc = e * e + f * f - g * g
-    if disc < -_ROUND_TOL * scale:
-        raise UnreachableError("five-bar cannot close at theta1=%.2f deg, theta2=%.2f deg (elbows %.4f m "
-                               "apart, passive links reach %.4f m)"
-                               % (math.degrees(theta1), math.degrees(theta2), math.sqrt(max(g, 0.0)),
-                                  geometry.a3 + geometry.a4))
-    if g < 1e-24:
-        raise UnreachableError("five-bar elbows coincide at theta1=%.2f deg, theta2=%.2f deg: foot undefined"
-                               % (math.degrees(theta1), math.degrees(theta2)))
-    phi = wrap_to_pi(2.0 * math.atan2(-f + math.sqrt(max(disc, 0.0)), g - e))  # eq. (fk_phi)
-    x_d = c + geometry.a2 * c2 + geometry.a4 * math.cos(phi)                     # eq. (fk_planar)
-    y_prime = geometry.a2 * s2 + geometry.a4 * math.sin(phi)
-    psi = math.atan2(y_prime - a1 * s1, x_d - a1 * c1)  # absolute angle of link a3
-    return x_d, y_prime, phi, wrap_to_pi(psi - theta1), wrap_to_pi(phi - theta2)
+    # The relative tolerance only matters at the edge of the workspace; NaN fails every comparison.
+    if not ((disc >= 0.0 or disc >= -_ROUND_TOL * _closure_scale(a1, a3, c)) and g >= 1e-24):
+        raise _closure_error(theta1, theta2, disc, g, a1, a3, a4, c)
+    phi = 2.0 * math.atan2(-f + math.sqrt(disc if disc > 0.0 else 0.0), g - e)  # eq. (fk_phi)
+    x_d = c + a2 * c2 + a4 * math.cos(phi)                                       # eq. (fk_planar)
+    y_prime = a2 * s2 + a4 * math.sin(phi)
+    return x_d, y_prime, phi, math.atan2(y_prime - a1 * s1, x_d - a1 * c1)
+
+
+def _checked_closure(theta1: float, theta2: float, geometry: FiveBar) -> Tuple[float, float, float, float]:
+    """:func:`_five_bar_closure` for the public functions: refuses non-finite angles first."""
+    if not (math.isfinite(theta1) and math.isfinite(theta2)):
+        raise UnreachableError("five-bar angles must be finite, got (%r, %r)" % (theta1, theta2))
+    return _five_bar_closure(theta1, theta2, geometry.a1, geometry.a2, geometry.a3, geometry.a4, geometry.c)
+
+
+def five_bar_fk(theta1: float, theta2: float, geometry: FiveBar) -> Tuple[float, float, float, float, float]:
+    """Foot position of the five-bar from the actuated angles, eq. (fk_EFG), (fk_phi), (fk_planar).
+
+    Returns ``(x_d, y_prime, phi, theta4, theta5)``: the foot in F_P, the absolute angle phi of link
+    a4, and the passive joint angles theta4 (link a3 relative to a1) and theta5 (a4 relative to a2,
+    phi = theta2 + theta5), all three wrapped into [-pi, pi). Uses the "+" root of eq. (fk_phi), the
+    assembly mode that matches the elbows-out IK of eq. (ik_theta1245). Computed by the float core
+    :func:`_five_bar_closure`.
+
+    Raises :class:`UnreachableError` for non-finite angles, if E^2 + F^2 - G^2 < 0 (the passive links
+    cannot close) or if the two elbows coincide (phi undefined).
+    """
+    x_d, y_prime, phi, psi = _checked_closure(theta1, theta2, geometry)
+    return x_d, y_prime, wrap_angle(phi), wrap_angle(psi - theta1), wrap_angle(phi - theta2)
 
 
 def five_bar_ik(x_d: float, y_prime: float, geometry: FiveBar) -> Tuple[float, float, float, float]:
@@ -183,6 +215,21 @@ def five_bar_ik(x_d: float, y_prime: float, geometry: FiveBar) -> Tuple[float, f
     return theta1, theta2, theta4, theta5
 
 
+def _five_bar_rates(theta1: float, theta2: float, phi: float, psi: float, a1: float,
+                    a2: float) -> Tuple[float, float, float, float]:
+    """The one implementation of the five-bar Jacobian d(x_d, y')/d(theta1, theta2) (the five-bar block
+    of eq. (J_leg), see :func:`five_bar_jacobian`), on floats, at a configuration of
+    :func:`_five_bar_closure` (link angles phi of a4 and psi of a3). Returns (J11, J12, J21, J22);
+    raises :class:`UnreachableError` at the type-2 singularity sin(phi - psi) = 0."""
+    det = math.sin(phi - psi)
+    if not abs(det) >= _SINGULAR_TOL:
+        raise UnreachableError("five-bar singular at theta1=%.2f deg, theta2=%.2f deg: passive links aligned"
+                               % (math.degrees(theta1), math.degrees(theta2)))
+    k1 = a1 * math.sin(psi - theta1) / det  # a1 sin(theta4) / sin(phi - psi)
+    k2 = a2 * math.sin(phi - theta2) / det  # a2 sin(theta5) / sin(phi - psi)
+    return k1 * math.sin(phi), -(k2 * math.sin(psi)), -k1 * math.cos(phi), k2 * math.cos(psi)
+
+
 def five_bar_jacobian(theta1: float, theta2: float, geometry: FiveBar) -> np.ndarray:
     """Closed-chain Jacobian d(x_d, y')/d(theta1, theta2) of the five-bar (2x2, analytic).
 
@@ -196,17 +243,11 @@ def five_bar_jacobian(theta1: float, theta2: float, geometry: FiveBar) -> np.nda
     This is the matrix whose columns eq. (J_leg) writes as [-C11, C21]^T and [-C12, C22]^T
     (Chavdarov's closed-chain coefficients). Raises :class:`UnreachableError` at the type-2
     singularity sin(phi - psi) = 0 (passive links aligned), where the foot velocity is undefined.
+    Computed by the float cores :func:`_five_bar_closure` and :func:`_five_bar_rates`.
     """
-    _, _, phi, theta4, theta5 = five_bar_fk(theta1, theta2, geometry)
-    psi = theta1 + theta4
-    det = math.sin(phi - psi)
-    if abs(det) < _SINGULAR_TOL:
-        raise UnreachableError("five-bar singular at theta1=%.2f deg, theta2=%.2f deg: passive links aligned"
-                               % (math.degrees(theta1), math.degrees(theta2)))
-    k1 = geometry.a1 * math.sin(theta4) / det
-    k2 = geometry.a2 * math.sin(theta5) / det
-    return np.array([[k1 * math.sin(phi), -k2 * math.sin(psi)],
-                     [-k1 * math.cos(phi), k2 * math.cos(psi)]])
+    _, _, phi, psi = _checked_closure(theta1, theta2, geometry)
+    j11, j12, j21, j22 = _five_bar_rates(theta1, theta2, phi, psi, geometry.a1, geometry.a2)
+    return np.array([[j11, j12], [j21, j22]])
 
 
 # --------------------------------------------------------------------------------------------------
@@ -228,29 +269,47 @@ def _q3(q: ArrayLike) -> Tuple[float, float, float]:
     return t1, t2, t3
 
 
-def _leg_point(x_d: float, y_prime: float, theta3: float, params: RobotParams) -> Tuple[float, float, float]:
-    """eq. (fk_T): planar point (x_d, y') of F_P -> leg frame, rotated by the hip angle theta3."""
-    c3, s3 = math.cos(theta3), math.sin(theta3)
-    u = params.l_y + y_prime  # t_y + c3 y' = c3 (l_y + y') - s3 l_z, t_z + s3 y' = s3 (l_y + y') + c3 l_z
-    return x_d, c3 * u - s3 * params.l_z, s3 * u + c3 * params.l_z
+def _leg_point(x_d: float, y_prime: float, c3: float, s3: float, l_y: float,
+               l_z: float) -> Tuple[float, float, float]:
+    """eq. (fk_T): planar point (x_d, y') of F_P -> leg frame, rotated by the hip angle theta3
+    (c3, s3 = cos theta3, sin theta3)."""
+    u = l_y + y_prime  # t_y + c3 y' = c3 (l_y + y') - s3 l_z, t_z + s3 y' = s3 (l_y + y') + c3 l_z
+    return x_d, c3 * u - s3 * l_z, s3 * u + c3 * l_z
+
+
+def _leg_rate(j11: float, j12: float, j21: float, j22: float, c3: float, s3: float, p_y: float, p_z: float,
+              d1: float, d2: float, d3: float) -> Tuple[float, float, float]:
+    """eq. (J_leg) applied to joint rates: the leg-frame foot velocity for (d1, d2, d3) = q_dot, i.e.
+    R_x(theta3) [J_fb (d1, d2), 0] + (x_hat x p_e^L) d3, with J_fb = [[j11, j12], [j21, j22]] from
+    :func:`_five_bar_rates`, c3, s3 = cos theta3, sin theta3 and (p_y, p_z) the leg-frame foot of
+    :func:`_leg_point`. The one implementation of the leg Jacobian: :func:`foot_jacobian` evaluates it
+    at unit joint rates."""
+    jx = j11 * d1 + j12 * d2
+    jy = j21 * d1 + j22 * d2
+    return jx, c3 * jy - p_z * d3, s3 * jy + p_y * d3  # x_hat x p = (0, -p_z, p_y)
+
+
+def _ee_body(frame: Tuple[float, ...], px: float, py: float, pz: float) -> Tuple[float, float, float]:
+    """eq. (ee_body): r_e,i^B = o_i^B + M_i p_e^L for a leg ``frame`` (o_x, o_y, o_z, m_x, m_y, m_z) of
+    :func:`_geometry` (M_i = diag(m_x, m_y, m_z))."""
+    ox, oy, oz, mx, my, mz = frame
+    return ox + mx * px, oy + my * py, oz + mz * pz
 
 
 def leg_fk(q: ArrayLike, params: RobotParams) -> np.ndarray:
     """Foot position p_e^L in the leg frame for q = (theta1, theta2, theta3), eq. (fk_T)."""
     t1, t2, t3 = _q3(q)
-    x_d, y_prime, _, _, _ = five_bar_fk(t1, t2, params.five_bar)
-    return np.array(_leg_point(x_d, y_prime, t3, params))
+    x_d, y_prime, _, _ = _checked_closure(t1, t2, params.five_bar)
+    return np.array(_leg_point(x_d, y_prime, math.cos(t3), math.sin(t3), params.l_y, params.l_z))
 
 
 def foot_position(q: ArrayLike, leg: int, params: RobotParams) -> np.ndarray:
     """Foot position r_e,i^B = o_i^B + M_i p_e^L in the body frame, eq. (ee_body), legs 1..4."""
     _check_leg(leg)
     t1, t2, t3 = _q3(q)
-    x_d, y_prime, _, _, _ = five_bar_fk(t1, t2, params.five_bar)
-    px, py, pz = _leg_point(x_d, y_prime, t3, params)
-    mx, my, mz = MIRROR_DIAG[leg]
-    ox, oy, oz = params.leg_origins[leg].tolist()
-    return np.array([ox + mx * px, oy + my * py, oz + mz * pz])
+    x_d, y_prime, _, _ = _checked_closure(t1, t2, params.five_bar)
+    px, py, pz = _leg_point(x_d, y_prime, math.cos(t3), math.sin(t3), params.l_y, params.l_z)
+    return np.array(_ee_body(_geometry(params)[0][leg], px, py, pz))
 
 
 def body_to_leg(r: ArrayLike, leg: int, params: RobotParams) -> np.ndarray:
@@ -293,19 +352,19 @@ def _leg_ik_full(x_d: float, y_d: float, z_d: float, params: RobotParams) -> np.
     theta3 = wrap_into_range(theta3_raw, limits.theta3[0], limits.theta3[1])
     if theta3 is None:
         raise UnreachableError("hip angle %.2f deg (mod 360) is outside the hip servo range [%.1f, %.1f] deg"
-                               % (math.degrees(wrap_to_pi(theta3_raw)), math.degrees(limits.theta3[0]),
+                               % (math.degrees(wrap_angle(theta3_raw)), math.degrees(limits.theta3[0]),
                                   math.degrees(limits.theta3[1])))
     y_prime = y_d * math.cos(theta3) + z_d * math.sin(theta3) - params.l_y
     theta1_raw, theta2_raw, theta4, theta5 = five_bar_ik(x_d, y_prime, params.five_bar)
     theta1 = wrap_into_range(theta1_raw, limits.theta1[0], limits.theta1[1])
     if theta1 is None:
         raise UnreachableError("theta1 = %.2f deg (mod 360) is outside its servo range [%.1f, %.1f] deg"
-                               % (math.degrees(wrap_to_pi(theta1_raw)), math.degrees(limits.theta1[0]),
+                               % (math.degrees(wrap_angle(theta1_raw)), math.degrees(limits.theta1[0]),
                                   math.degrees(limits.theta1[1])))
     theta2 = wrap_into_range(theta2_raw, limits.theta2[0], limits.theta2[1])
     if theta2 is None:
         raise UnreachableError("theta2 = %.2f deg (mod 360) is outside its servo range [%.1f, %.1f] deg"
-                               % (math.degrees(wrap_to_pi(theta2_raw)), math.degrees(limits.theta2[0]),
+                               % (math.degrees(wrap_angle(theta2_raw)), math.degrees(limits.theta2[0]),
                                   math.degrees(limits.theta2[1])))
     return np.array([theta1, theta2, theta3, theta4, theta5])
 
@@ -336,28 +395,34 @@ def joint_angles(r: ArrayLike, leg: int, params: RobotParams) -> np.ndarray:
     return np.array(joint_angles_floats(rx, ry, rz, leg, params))
 
 
-# Constants of :func:`joint_angles_floats`, cached per RobotParams object (frozen, so safe).
-_IK_CACHE: "dict[int, Tuple[RobotParams, tuple]]" = {}
-#: The most recently used entry of _IK_CACHE (rebound atomically), checked first.
-_IK_LAST: "Tuple[Optional[RobotParams], tuple]" = (None, ())
+# Geometry constants of the float paths (:func:`joint_angles_floats`, :func:`leg_kinematics_flat`,
+# :func:`foot_position`), cached per RobotParams object (frozen, so safe).
+_GEOMETRY_CACHE: "dict[int, Tuple[RobotParams, tuple]]" = {}
+#: The most recently used entry of _GEOMETRY_CACHE (rebound atomically), checked first.
+_GEOMETRY_LAST: "Tuple[Optional[RobotParams], tuple]" = (None, ())
 
 
-def _ik_constants(params: RobotParams) -> tuple:
-    global _IK_LAST
-    entry = _IK_CACHE.get(id(params))
+def _geometry(params: RobotParams) -> tuple:
+    """(frames, frame rows, a1, a2, a3, a4, c, l_y, l_z, low1, high1, low2, high2, low3, high3) as floats:
+    ``frames[leg]`` = (o_x, o_y, o_z, m_x, m_y, m_z) of eq. (ee_body), ``frame rows`` the same in the
+    order of LEGS, then the five-bar, hip and servo-range constants."""
+    global _GEOMETRY_LAST
+    last = _GEOMETRY_LAST
+    if last[0] is params:
+        return last[1]
+    entry = _GEOMETRY_CACHE.get(id(params))
     if entry is not None and entry[0] is params:
-        _IK_LAST = entry
+        _GEOMETRY_LAST = entry
         return entry[1]
     fb, limits = params.five_bar, params.joint_limits
-    legs = {}
-    for leg in LEGS:
-        mx, my, mz = MIRROR_DIAG[leg]
-        legs[leg] = (mx, my, mz) + tuple(params.leg_origins[leg].tolist())
-    values = (legs, float(fb.a1), float(fb.a2), float(fb.a3), float(fb.a4), float(fb.c), float(params.l_y),
-              float(params.l_z)) + tuple(float(x) for x in limits.theta1 + limits.theta2 + limits.theta3)
-    if len(_IK_CACHE) > 64:
-        _IK_CACHE.clear()
-    _IK_CACHE[id(params)] = _IK_LAST = (params, values)
+    frames = {leg: tuple(float(x) for x in params.leg_origins[leg].tolist()) + tuple(MIRROR_DIAG[leg])
+              for leg in LEGS}
+    values = (frames, tuple(frames[leg] for leg in LEGS), float(fb.a1), float(fb.a2), float(fb.a3), float(fb.a4),
+              float(fb.c), float(params.l_y), float(params.l_z)) \
+        + tuple(float(x) for x in limits.theta1 + limits.theta2 + limits.theta3)
+    if len(_GEOMETRY_CACHE) > 64:
+        _GEOMETRY_CACHE.clear()
+    _GEOMETRY_CACHE[id(params)] = _GEOMETRY_LAST = (params, values)
     return values
 
 
@@ -371,12 +436,12 @@ def joint_angles_floats(rx: float, ry: float, rz: float, leg: int, params: Robot
     :class:`UnreachableError` (or returns its result for the rare rounding-boundary cases). The tests
     compare the two bit for bit.
     """
-    last = _IK_LAST
-    constants = last[1] if last[0] is params else _ik_constants(params)
-    legs, a1, a2, a3, a4, c, l_y, l_z, low1, high1, low2, high2, low3, high3 = constants
-    frame = legs.get(leg)
+    last = _GEOMETRY_LAST
+    constants = last[1] if last[0] is params else _geometry(params)
+    frames, _, a1, a2, a3, a4, c, l_y, l_z, low1, high1, low2, high2, low3, high3 = constants
+    frame = frames.get(leg)
     if frame is not None:
-        mx, my, mz, ox, oy, oz = frame
+        ox, oy, oz, mx, my, mz = frame
         x_d, y_d, z_d = mx * (rx - ox), my * (ry - oy), mz * (rz - oz)
         radius = math.hypot(y_d, z_d)
         if radius >= l_z and math.isfinite(x_d + radius):  # also rejects NaN
@@ -409,18 +474,19 @@ def foot_jacobian(q: ArrayLike, leg: int, params: RobotParams) -> np.ndarray:
     """Translational leg Jacobian J_P,i^B = d r_e,i^B / d(theta1, theta2, theta3), eq. (J_leg), 3x3.
 
     Columns: M_i R_x(theta3) [J_fb[:, k], 0] for the five-bar motors (J_fb from
-    :func:`five_bar_jacobian`) and M_i (x_hat x p_e^L) for the hip.
+    :func:`five_bar_jacobian`) and M_i (x_hat x p_e^L) for the hip: the foot velocities of
+    :func:`_leg_rate` for unit joint rates.
     """
     _check_leg(leg)
     t1, t2, t3 = _q3(q)
-    j = five_bar_jacobian(t1, t2, params.five_bar)
-    x_d, y_prime, _, _, _ = five_bar_fk(t1, t2, params.five_bar)
-    _, py, pz = _leg_point(x_d, y_prime, t3, params)
+    fb = params.five_bar
+    x_d, y_prime, phi, psi = _checked_closure(t1, t2, fb)
+    j11, j12, j21, j22 = _five_bar_rates(t1, t2, phi, psi, fb.a1, fb.a2)
     c3, s3 = math.cos(t3), math.sin(t3)
-    mx, my, mz = MIRROR_DIAG[leg]
-    return np.array([[mx * j[0, 0], mx * j[0, 1], 0.0],
-                     [my * c3 * j[1, 0], my * c3 * j[1, 1], -my * pz],   # x_hat x p = (0, -p_z, p_y)
-                     [mz * s3 * j[1, 0], mz * s3 * j[1, 1], mz * py]])
+    _, py, pz = _leg_point(x_d, y_prime, c3, s3, params.l_y, params.l_z)
+    columns = [_leg_rate(j11, j12, j21, j22, c3, s3, py, pz, d1, d2, d3)
+               for d1, d2, d3 in ((1.0, 0.0, 0.0), (0.0, 1.0, 0.0), (0.0, 0.0, 1.0))]
+    return np.array(MIRROR_DIAG[leg])[:, None] * np.array(columns).T
 
 
 def floating_base_jacobian(q: ArrayLike, leg: int, R: ArrayLike, params: RobotParams) -> np.ndarray:
@@ -466,37 +532,13 @@ def clamp_to_limits(q: ArrayLike, params: RobotParams) -> np.ndarray:
     return np.clip(arr, bounds[:, 0], bounds[:, 1])
 
 
-# Geometry constants of :func:`leg_kinematics`, cached per RobotParams object (frozen, so safe):
-# (a1, a2, a3, a4, c, l_y, l_z, scale) and per leg (o_x, o_y, o_z, m_x, m_y, m_z).
-_GEOMETRY_CACHE: "dict[int, Tuple[RobotParams, tuple]]" = {}
-
-
-def _leg_geometry(params: RobotParams) -> tuple:
-    entry = _GEOMETRY_CACHE.get(id(params))
-    if entry is not None and entry[0] is params:
-        return entry[1]
-    fb = params.five_bar
-    a1, a3, c = fb.a1, fb.a3, fb.c
-    values = (fb.a1, fb.a2, fb.a3, fb.a4, fb.c, params.l_y, params.l_z, 4.0 * a3 * a3 * (c + 2.0 * a1) ** 2,
-              tuple(tuple(float(x) for x in params.leg_origins[leg].tolist()) + tuple(MIRROR_DIAG[leg])
-                    for leg in LEGS))
-    if len(_GEOMETRY_CACHE) > 64:
-        _GEOMETRY_CACHE.clear()
-    _GEOMETRY_CACHE[id(params)] = (params, values)
-    return values
-
-
 def leg_kinematics(q: Sequence[Sequence[float]], q_dot: Sequence[Sequence[float]],
                    params: RobotParams) -> list:
     """Foot positions and joint-induced foot velocities of all legs in one pass, on floats.
 
     For each leg i (rows of ``q``, ``q_dot``: legs 1..4 x (theta1, theta2, theta3)) returns the list
     [x, y, z, vx, vy, vz] of r_e,i^B (eq. (ee_body)) and J_P,i^B(q_i) q_dot_i (eq. (J_leg)), body frame.
-    The same formulas as :func:`~quadruped_control.model.kinematics.foot_position` and
-    :func:`~quadruped_control.model.kinematics.foot_jacobian` (equal to rounding), with the five-bar forward
-    kinematics evaluated once per leg instead of three times. Any configuration that is not regular
-    (five-bar cannot close, elbows coincide, singular, non-finite) is handed to those functions, which
-    raise the proper :class:`~quadruped_control.model.kinematics.UnreachableError`.
+    See :func:`leg_kinematics_flat`.
     """
     if len(q) != NUM_LEGS or len(q_dot) != NUM_LEGS:
         raise ValueError("q and q_dot must have %d rows (legs), got %d and %d" % (NUM_LEGS, len(q), len(q_dot)))
@@ -506,48 +548,25 @@ def leg_kinematics(q: Sequence[Sequence[float]], q_dot: Sequence[Sequence[float]
 
 def leg_kinematics_flat(q: Sequence[Sequence[float]], q_dot: Sequence[Sequence[float]],
                         params: RobotParams) -> Tuple[float, ...]:
-    """:func:`leg_kinematics` as one flat tuple (legs 1..4 x [x, y, z, vx, vy, vz]): the simulator's path."""
-    a1, a2, a3, a4, c, l_y, l_z, scale, frames = _leg_geometry(params)
+    """:func:`leg_kinematics` as one flat tuple (legs 1..4 x [x, y, z, vx, vy, vz]): the simulator's path.
+
+    The float fast path of :func:`foot_position` and :func:`foot_jacobian` times q_dot: the same float
+    cores (:func:`_five_bar_closure`, :func:`_five_bar_rates`, :func:`_leg_point`, :func:`_leg_rate`,
+    :func:`_ee_body`), with the five-bar closed once per leg instead of once per function and no numpy
+    (the tests compare the two). It exists for speed: the plant evaluates it at every integration step
+    and the supervisor at every tick. Angles must be finite (the callers check); a configuration the
+    five-bar cannot assemble, or a singular one, raises :class:`UnreachableError`.
+    """
+    last = _GEOMETRY_LAST
+    constants = last[1] if last[0] is params else _geometry(params)
+    _, frames, a1, a2, a3, a4, c, l_y, l_z = constants[:9]
+    cos, sin = math.cos, math.sin
     out: Tuple[float, ...] = ()
-    cos, sin, atan2, sqrt = math.cos, math.sin, math.atan2, math.sqrt
-    for (t1, t2, t3), (d1, d2, d3), (ox, oy, oz, mx, my, mz) in zip(q, q_dot, frames):
-        c1, s1, c2, s2 = cos(t1), sin(t1), cos(t2), sin(t2)
-        # eq. (fk_EFG), (fk_phi), (fk_planar) as in kinematics.five_bar_fk
-        e = 2.0 * a3 * (c + a1 * (c2 - c1))
-        f = 2.0 * a1 * a3 * (s2 - s1)
-        gg = c * c + 2.0 * a1 * a1 + 2.0 * c * a1 * c2 - 2.0 * c * a1 * c1 - 2.0 * a1 * a1 * cos(t2 - t1)
-        disc = e * e + f * f - gg * gg
-        if not (disc >= -1e-12 * scale and gg >= 1e-24):  # also catches NaN
-            return _slow_leg_kinematics(q, q_dot, params)
-        phi = 2.0 * atan2(-f + sqrt(disc if disc > 0.0 else 0.0), gg - e)
-        cphi, sphi = cos(phi), sin(phi)
-        x_d = c + a2 * c2 + a4 * cphi
-        y_p = a2 * s2 + a4 * sphi
-        psi = atan2(y_p - a1 * s1, x_d - a1 * c1)
-        det = sin(phi - psi)
-        if not abs(det) >= 1e-9:
-            return _slow_leg_kinematics(q, q_dot, params)
-        k1 = a1 * sin(psi - t1) / det
-        k2 = a2 * sin(phi - t2) / det
-        # five-bar Jacobian (kinematics.five_bar_jacobian) times (d1, d2)
-        jx = k1 * sphi * d1 - k2 * sin(psi) * d2
-        jy = -k1 * cphi * d1 + k2 * cos(psi) * d2
-        # eq. (fk_T): hip rotation, then eq. (ee_body)
+    for (t1, t2, t3), (d1, d2, d3), frame in zip(q, q_dot, frames):
+        x_d, y_prime, phi, psi = _five_bar_closure(t1, t2, a1, a2, a3, a4, c)
+        j11, j12, j21, j22 = _five_bar_rates(t1, t2, phi, psi, a1, a2)
         c3, s3 = cos(t3), sin(t3)
-        u = l_y + y_p
-        py = c3 * u - s3 * l_z
-        pz = s3 * u + c3 * l_z
-        out += (ox + mx * x_d, oy + my * py, oz + mz * pz,
-                mx * jx, my * (c3 * jy - pz * d3), mz * (s3 * jy + py * d3))
-    return out
-
-
-def _slow_leg_kinematics(q: Sequence[Sequence[float]], q_dot: Sequence[Sequence[float]],
-                         params: RobotParams) -> Tuple[float, ...]:
-    """Reference path of :func:`leg_kinematics` through the kinematics module (raises its errors)."""
-    out: Tuple[float, ...] = ()
-    for row, leg in enumerate(LEGS):
-        position = foot_position(q[row], leg, params)
-        velocity = foot_jacobian(q[row], leg, params) @ np.asarray(q_dot[row], dtype=float)
-        out += tuple(position.tolist() + velocity.tolist())
+        px, py, pz = _leg_point(x_d, y_prime, c3, s3, l_y, l_z)
+        vx, vy, vz = _leg_rate(j11, j12, j21, j22, c3, s3, py, pz, d1, d2, d3)
+        out += _ee_body(frame, px, py, pz) + (frame[3] * vx, frame[4] * vy, frame[5] * vz)  # M_i J^L q_dot
     return out

@@ -19,6 +19,7 @@ from typing import Dict, List, Optional, Sequence, Tuple
 import numpy as np
 
 from quadruped_common.robot import JOINT_NAMES, LEGS, joint_index
+from quadruped_common.so3 import wrap_angle
 from quadruped_control.model.kinematics import five_bar_fk
 from quadruped_control.model.params import FiveBar, RobotParams
 
@@ -45,12 +46,6 @@ _CLOSURE_MARGIN = 1e-9
 
 class VisualizationError(ValueError):
     """Input that cannot be drawn truthfully (missing joints, non-finite values, open five-bar)."""
-
-
-def wrap_angle(angle: float) -> float:
-    """Angle wrapped to (-pi, pi]."""
-    wrapped = math.atan2(math.sin(angle), math.cos(angle))
-    return math.pi if wrapped == -math.pi else wrapped
 
 
 def knee_angles(theta1: float, theta2: float, five_bar: FiveBar) -> Tuple[float, float]:

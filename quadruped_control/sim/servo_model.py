@@ -26,6 +26,7 @@ from typing import Any, Mapping, Optional, Sequence, Union
 import numpy as np
 
 from quadruped_common.config import ParameterError, check_keys, load_config, lookup, number
+from quadruped_control.sim.plants.rigid_body import check_dt
 
 ArrayLike = Union[Sequence[float], Sequence[Sequence[float]], np.ndarray]
 
@@ -39,6 +40,7 @@ __all__ = [
     "ServoModel",
     "ServoParams",
     "load_servo_params",
+    "rate_limited_lag_step",
     "make_servo_model",
 ]
 
@@ -50,13 +52,6 @@ def _joints(value: ArrayLike, name: str) -> np.ndarray:
     if not np.all(np.isfinite(arr)):
         raise ValueError("%s has non-finite elements: %s" % (name, arr.reshape(-1).tolist()))
     return arr
-
-
-def _positive_dt(dt: float) -> float:
-    dt = float(dt)
-    if not (math.isfinite(dt) and dt > 0.0):
-        raise ValueError("dt must be a positive finite number of seconds, got %r" % (dt,))
-    return dt
 
 
 @dataclass(frozen=True)
@@ -96,7 +91,7 @@ class ServoModel:
     def update(self, q_cmd: ArrayLike, dt: float) -> np.ndarray:
         """Advance ``dt`` seconds towards the held command ``q_cmd``; returns the new angles."""
         command = _joints(q_cmd, "servo command")
-        dt = _positive_dt(dt)
+        dt = check_dt(dt)
         if self._q is None:
             self._q = command.copy()
             return command
@@ -142,58 +137,42 @@ class RateLimitedServo(ServoModel):
         self.params = params
 
     def _advance(self, q: np.ndarray, command: np.ndarray, dt: float) -> np.ndarray:
-        """The exact step on plain floats (12 joints: faster than a dozen small numpy operations); the
-        same element-wise formulas as :meth:`_advance_array` (math.exp may differ from np.exp by an ulp)."""
         w_max, tau = self.params.max_speed, self.params.time_constant
-        exp = math.exp
-        out = []
-        if tau <= 1e-9 * dt:  # no lag to speak of (and no overflow in dt / tau): pure rate limiter
-            step = w_max * dt
-            for x, c in zip(q.ravel().tolist(), command.ravel().tolist()):
-                e = c - x
-                if e > 0.0:
-                    out.append(x + (e if e < step else step))
-                elif e < 0.0:
-                    out.append(x - (-e if -e < step else step))
-                else:  # zero, or NaN (kept, as np.sign gives NaN)
-                    out.append(x + e * 0.0 if e != e else x)
-            return np.array(out).reshape(q.shape)
-        knee = w_max * tau                                # |e| below which the lag is linear
-        for x, c in zip(q.ravel().tolist(), command.ravel().tolist()):
-            e = c - x
-            magnitude = e if e >= 0.0 else -e
-            t_saturated = (magnitude - knee) / w_max
-            if not t_saturated > 0.0:
-                t_saturated = 0.0
-            if t_saturated >= dt:
-                new_magnitude = magnitude - w_max * dt
-            else:
-                remaining = dt - t_saturated
-                new_magnitude = (magnitude if magnitude < knee else knee) * exp(-(remaining if remaining > 0.0 else 0.0)
-                                                                                / tau)
-            if e > 0.0:
-                out.append(c - new_magnitude)
-            elif e < 0.0:
-                out.append(c + new_magnitude)
-            else:  # zero error: stays; NaN propagates as in the array formulas
-                out.append(c - e * new_magnitude if e != e else c)
-        return np.array(out).reshape(q.shape)
+        return np.array([rate_limited_lag_step(x, c, w_max, tau, dt)
+                         for x, c in zip(q.ravel().tolist(), command.ravel().tolist())]).reshape(q.shape)
 
-    def _advance_array(self, q: np.ndarray, command: np.ndarray, dt: float) -> np.ndarray:
-        """Reference of :meth:`_advance` with numpy array operations (used by the tests)."""
-        w_max, tau = self.params.max_speed, self.params.time_constant
-        error = command - q
-        magnitude = np.abs(error)
-        sign = np.sign(error)
-        if tau <= 1e-9 * dt:  # no lag to speak of (and no overflow in dt / tau): pure rate limiter
-            return q + sign * np.minimum(magnitude, w_max * dt)
-        knee = w_max * tau                                # |e| below which the lag is linear
-        t_saturated = np.maximum(0.0, (magnitude - knee) / w_max)
-        remaining = np.maximum(0.0, dt - t_saturated)
-        linear_error = np.minimum(magnitude, knee) * np.exp(-remaining / tau)
-        saturated_only = t_saturated >= dt
-        new_magnitude = np.where(saturated_only, magnitude - w_max * dt, linear_error)
-        return command - sign * new_magnitude
+
+def rate_limited_lag_step(q: float, command: float, max_speed: float, time_constant: float, dt: float) -> float:
+    """One joint of :class:`RateLimitedServo` after ``dt`` s with ``command`` held: the exact solution of
+    dq/dt = clip((q_cmd - q) / T, -w_max, w_max).
+
+    With e = q_cmd - q the joint runs at w_max for t_sat = max(0, (|e| - w_max T) / w_max), then the
+    error decays as exp(-t / T) from |e| <= w_max T; T <= 1e-9 dt is a pure rate limiter (no overflow
+    in dt / T). On floats: twelve joints per step are faster than a dozen small numpy operations. A NaN
+    command or angle gives NaN.
+    """
+    error = command - q
+    if error != error:
+        return error
+    if time_constant <= 1e-9 * dt:
+        step = max_speed * dt
+        if error > 0.0:
+            return q + (error if error < step else step)
+        if error < 0.0:
+            return q - (-error if -error < step else step)
+        return q
+    magnitude = error if error >= 0.0 else -error
+    knee = max_speed * time_constant  # |e| below which the lag is linear
+    t_saturated = (magnitude - knee) / max_speed if magnitude > knee else 0.0
+    if t_saturated >= dt:
+        new_magnitude = magnitude - max_speed * dt
+    else:
+        new_magnitude = (magnitude if magnitude < knee else knee) * math.exp(-(dt - t_saturated) / time_constant)
+    if error > 0.0:
+        return command - new_magnitude
+    if error < 0.0:
+        return command + new_magnitude
+    return command
 
 
 def servo_params_from_dict(tree: Mapping[str, Any], robot_yaml: Optional[str] = None) -> ServoParams:

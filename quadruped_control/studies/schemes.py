@@ -16,7 +16,6 @@ the simulated joints) against tau_sat, and the fraction of time some pair is in 
 from __future__ import annotations
 
 import json
-import math
 import os
 import time
 from typing import Any, Dict, List, Optional, Sequence, Tuple

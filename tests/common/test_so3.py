@@ -6,6 +6,7 @@ import pytest
 from hypothesis import assume, given, settings
 from hypothesis import strategies as st
 
+from quadruped_common import so3
 from quadruped_common.so3 import (attitude_error, exp_so3, geodesic_angle, hat, is_rotation, log_so3,
                                    orthonormalize, quat_conjugate, quat_multiply, quat_normalize,
                                    quat_to_rot, rot_to_quat, rot_to_rpy, rot_x, rot_y, rot_z, rpy_to_rot,
@@ -206,3 +207,20 @@ def test_is_rotation_rejects_non_rotations():
     assert not is_rotation(2.0 * np.eye(3))
     assert not is_rotation(np.full((3, 3), math.nan))
     assert not is_rotation(np.eye(2))
+
+
+@given(st.floats(-1e3, 1e3))
+def test_wrap_angle_is_in_range_and_keeps_the_direction(angle):
+    wrapped = so3.wrap_angle(angle)
+    assert isinstance(wrapped, float)
+    assert -math.pi <= wrapped < math.pi
+    assert math.cos(wrapped) == pytest.approx(math.cos(angle), abs=1e-9)
+    assert math.sin(wrapped) == pytest.approx(math.sin(angle), abs=1e-9)
+    assert float(so3.wrap_angle(np.array([angle]))[0]) == wrapped  # the array form agrees exactly
+
+
+def test_wrap_angle_convention_is_half_open_at_pi():
+    assert so3.wrap_angle(math.pi) == -math.pi
+    assert so3.wrap_angle(-math.pi) == -math.pi
+    np.testing.assert_allclose(so3.wrap_angle([3 * math.pi, -0.5 * math.pi - 4 * math.pi]), [-math.pi, -0.5 * math.pi])
+

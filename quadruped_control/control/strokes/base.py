@@ -16,15 +16,17 @@ makes the feet jump).
 from __future__ import annotations
 
 import abc
+import bisect
 import math
-from typing import Any, Callable, List, Optional, Sequence, Tuple
+from typing import Callable, List, Optional, Sequence, Tuple
 
 from quadruped_common.config import ParameterError
 from quadruped_common.robot import LEGS
 from quadruped_control.model.kinematics import UnreachableError
 from quadruped_control.model.params import RobotParams
 
-__all__ = ["PHASE_HOLD", "PHASE_POWER", "PHASE_RECOVERY", "IkFunction", "StrokeScheme", "Vec3", "VelocityCommand"]
+__all__ = ["PHASE_HOLD", "PHASE_POWER", "PHASE_RECOVERY", "IkFunction", "PairState", "StrokePath", "StrokeScheme", "TIME_EPS",
+           "Vec3", "VelocityCommand", "cubic_time_profile"]
 
 Vec3 = Tuple[float, float, float]
 
@@ -37,6 +39,89 @@ IkFunction = Callable[[Vec3, int], Vec3]
 #: (leg, r_body at the start of the power phase[, share]) -> foot velocity command v^cmd (body frame, m/s):
 #: eq. (foot_vel) with the leg's torque tau_i = share * tau_sat (default share 1/4, the paper's equal split).
 VelocityCommand = Callable[..., Vec3]
+
+
+#: Slack when comparing phase times with durations (durations are sums of 0.01 s steps).
+TIME_EPS = 1e-9
+
+
+def cubic_time_profile(u: float) -> float:
+    """s(u) = 3 u^2 - 2 u^3 for u clipped into [0, 1]: s(0) = 0, s(1) = 1, s'(0) = s'(1) = 0."""
+    if u <= 0.0:
+        return 0.0
+    if u >= 1.0:
+        return 1.0
+    return u * u * (3.0 - 2.0 * u)
+
+
+class StrokePath:
+    """The recorded power trajectory of one foot: points (body frame) with their IK solutions.
+
+    Point 0 is the stroke's start. :meth:`at_arc_length` interpolates linearly at a given arc length
+    from the start; consecutive duplicate points are not stored, so a path of zero length has one point.
+    """
+
+    __slots__ = ("points", "joints", "cumulative")
+
+    def __init__(self, point: Vec3, joints: Vec3) -> None:
+        self.points: List[Vec3] = [point]
+        self.joints: List[Vec3] = [joints]
+        self.cumulative: List[float] = [0.0]
+
+    def append(self, point: Vec3, joints: Vec3) -> None:
+        """Record the next point (ignored if it equals the last one)."""
+        lx, ly, lz = self.points[-1]
+        step = math.hypot(point[0] - lx, point[1] - ly, point[2] - lz)
+        if step == 0.0:
+            return
+        self.points.append(point)
+        self.joints.append(joints)
+        self.cumulative.append(self.cumulative[-1] + step)
+
+    @property
+    def length(self) -> float:
+        """Arc length of the path, m."""
+        return self.cumulative[-1]
+
+    @property
+    def start(self) -> Vec3:
+        return self.points[0]
+
+    @property
+    def end(self) -> Vec3:
+        return self.points[-1]
+
+    def at_arc_length(self, a: float) -> Tuple[Vec3, int]:
+        """Point at arc length ``a`` (clipped to [0, length]) and the index of the nearest recorded point."""
+        cumulative = self.cumulative
+        total = cumulative[-1]
+        if a <= 0.0 or total <= 0.0:
+            return self.points[0], 0
+        last = len(cumulative) - 1
+        if a >= total:
+            return self.points[last], last
+        j = bisect.bisect_right(cumulative, a) - 1  # cumulative[j] <= a < cumulative[j + 1]
+        seg = cumulative[j + 1] - cumulative[j]
+        w = (a - cumulative[j]) / seg
+        (x0, y0, z0), (x1, y1, z1) = self.points[j], self.points[j + 1]
+        nearest = j if w < 0.5 else j + 1
+        return (x0 + w * (x1 - x0), y0 + w * (y1 - y0), z0 + w * (z1 - z0)), nearest
+
+
+class PairState:
+    """State of one leg pair that every scheme keeps: its ``legs``, ``phase`` and the ``time`` since the
+    phase started, the feet's ``paths`` (recovery / hold motion of each leg of the pair) and the latched
+    foot ``velocities`` of a power phase (read by :attr:`StrokeScheme.pair_phase_time` and
+    :attr:`StrokeScheme.velocity_commands`). Schemes add their own slots in a subclass."""
+
+    __slots__ = ("legs", "phase", "time", "paths", "velocities")
+
+    def __init__(self, legs: Tuple[int, int], phase: str) -> None:
+        self.legs = legs
+        self.phase = phase
+        self.time = 0.0
+        self.paths: List[StrokePath] = []
+        self.velocities: List[Vec3] = [(0.0, 0.0, 0.0), (0.0, 0.0, 0.0)]
 
 
 class StrokeScheme(abc.ABC):
@@ -54,9 +139,28 @@ class StrokeScheme(abc.ABC):
     holding: bool
     hold_time: float
     pairs: Tuple[Tuple[int, int], Tuple[int, int]]
-    #: Per-pair state of the scheme; each has ``legs``, ``phase``, ``time`` and ``velocities`` (latched
-    #: foot velocity per leg of the pair), read by :attr:`pair_phase_time` and :attr:`velocity_commands`.
-    _pairs: List[Any]
+    #: Per-pair state of the scheme (:class:`PairState`).
+    _pairs: List[PairState]
+
+    def __init__(self, robot: RobotParams, pairs: Sequence[Sequence[int]], t_rec: float, t_pow_max: float) -> None:
+        """What every scheme sets first: robot, validated pairs and timing, servo ranges, no feet yet. A
+        scheme then sets its own attributes and calls :meth:`_start`."""
+        self.robot = robot
+        self.pairs = self._checked_pairs(pairs)
+        self.t_rec = self.t_pow_max = 0.0
+        self.set_timing(t_rec, t_pow_max)
+        limits = robot.joint_limits
+        self._bounds = (limits.theta1, limits.theta2, limits.theta3)
+        self.positions = []
+        self.joints = []
+        self.holding = False
+        self.hold_time = 0.0
+
+    def _start(self, pair_state: Callable[[Tuple[int, int]], PairState]) -> None:
+        """Nominal feet (ParameterError if unreachable), one ``pair_state`` per pair, cycle at its start."""
+        self._set_nominal(self.robot)
+        self._pairs = [pair_state(self.pairs[0]), pair_state(self.pairs[1])]
+        self.reset()
 
     # ---- shared set-up -------------------------------------------------------------------------
 
@@ -109,9 +213,29 @@ class StrokeScheme(abc.ABC):
     def advance(self, dt: float, velocity_command: VelocityCommand) -> None:
         """Advance by ``dt`` s (>= 0) while stroking; leaves a hold first (restarting the cycle)."""
 
-    @abc.abstractmethod
     def hold(self, dt: float) -> None:
-        """Safe state: no new power strokes, the feet go back to the nominal pose; advance ``dt`` s."""
+        """Safe state: no new power strokes, the feet go back to the nominal pose; advance ``dt`` s.
+
+        A non-finite or negative ``dt`` counts as 0. The first call enters the hold
+        (:meth:`_enter_hold`), later ones count ``hold_time``; every call moves the feet
+        (:meth:`_hold_step`)."""
+        if not (math.isfinite(dt) and dt >= 0.0):
+            dt = 0.0
+        if not self.holding:
+            self.holding = True
+            self.hold_time = 0.0
+            self._enter_hold()
+        else:
+            self.hold_time += dt
+        self._hold_step(dt)
+
+    @abc.abstractmethod
+    def _enter_hold(self) -> None:
+        """Start the way back to the nominal pose (called once, when a hold begins)."""
+
+    @abc.abstractmethod
+    def _hold_step(self, dt: float) -> None:
+        """Move the feet ``dt`` s further on their way back while holding."""
 
     @property
     @abc.abstractmethod

@@ -50,8 +50,8 @@ from typing import List, Optional, Sequence, Tuple
 
 from quadruped_common.config import ParameterError
 from quadruped_common.robot import LEGS, MIRROR_DIAG
-from quadruped_control.control.strokes.base import PHASE_HOLD, PHASE_POWER, PHASE_RECOVERY, StrokeScheme, Vec3, VelocityCommand
-from quadruped_control.control.strokes.paper import StrokePath, cubic_time_profile
+from quadruped_control.control.strokes.base import (PHASE_HOLD, PHASE_POWER, PHASE_RECOVERY, TIME_EPS, PairState,
+                                                    StrokePath, StrokeScheme, Vec3, VelocityCommand, cubic_time_profile)
 from quadruped_control.control.strokes.workspace import Workspace, leg_workspace
 from quadruped_control.model.kinematics import UnreachableError, joint_angles_floats
 from quadruped_control.model.params import RobotParams
@@ -64,7 +64,6 @@ DRAG_OPTIMAL_RECOVERY_RATIO = 1.0 + math.sqrt(2.0)
 CUBIC_PEAK_TO_MEAN = 1.5
 #: Share of tau_sat per leg while one pair strokes.
 PAIR_SHARE = 0.5
-_TIME_EPS = 1e-9
 _READY = "ready"  # internal: back at the start point, waiting for the hand-over (reported as recovery)
 
 
@@ -98,20 +97,17 @@ class CoordinatedParams:
             object.__setattr__(self, name, float(value))
 
 
-class _Pair:
-    """State of one leg pair."""
+class _Pair(PairState):
+    """State of one leg pair of the coordinated scheme (``paths``: recovery / hold paths, from the current
+    point to the target)."""
 
-    __slots__ = ("legs", "phase", "time", "duration", "segment", "paths", "strokes", "velocities", "t_pow_last")
+    __slots__ = ("duration", "segment", "strokes", "t_pow_last")
 
     def __init__(self, legs: Tuple[int, int]) -> None:
-        self.legs = legs
-        self.phase = _READY
-        self.time = 0.0
+        super().__init__(legs, _READY)
         self.duration = 0.0        # recovery: duration of the cubic motion along ``paths``
         self.segment = 0.0         # power: time since the velocity was last latched
-        self.paths: List[StrokePath] = []    # recovery / hold paths, from the current point to the target
         self.strokes: List[StrokePath] = []  # power: the recorded stroke of each leg
-        self.velocities: List[Vec3] = [(0.0, 0.0, 0.0), (0.0, 0.0, 0.0)]
         self.t_pow_last = 0.0      # duration of the last finished power stroke
 
 
@@ -127,26 +123,15 @@ class CoordinatedStrokes(StrokeScheme):
 
     def __init__(self, robot: RobotParams, pairs: Sequence[Sequence[int]] = ((1, 3), (2, 4)),
                  t_rec: float = 1.5, t_pow_max: float = 0.5, params: Optional[CoordinatedParams] = None) -> None:
-        self.robot = robot
         self.params = params if params is not None else CoordinatedParams()
-        self.pairs = self._checked_pairs(pairs)
-        self.t_rec = self.t_pow_max = 0.0
-        self.set_timing(t_rec, t_pow_max)
-        limits = robot.joint_limits
-        self._bounds = (limits.theta1, limits.theta2, limits.theta3)
+        super().__init__(robot, pairs, t_rec, t_pow_max)
         margin = math.radians(self.params.joint_margin_deg)
         self._margin_bounds = tuple((lo + margin, hi - margin) for lo, hi in self._bounds)
         self._max_joint_step_rate = self.params.speed_fraction * float(robot.servo_no_load_speed)
         self.workspace: Workspace = leg_workspace(robot, joint_margin=margin, radius=self.params.workspace_radius)
         self._frames = {leg: (MIRROR_DIAG[leg], tuple(robot.leg_origins[leg].tolist())) for leg in LEGS}
-        self._set_nominal(robot)
-        self.positions: List[Vec3] = []
-        self.joints: List[Vec3] = []
-        self.holding = False
-        self.hold_time = 0.0
-        self._pairs = [_Pair(self.pairs[0]), _Pair(self.pairs[1])]
         self._last_power = 1
-        self.reset()
+        self._start(_Pair)
 
     # ---- configuration -----------------------------------------------------------------------
 
@@ -238,7 +223,7 @@ class CoordinatedStrokes(StrokeScheme):
         for pair in self._pairs:
             if pair.phase == PHASE_RECOVERY:
                 self._move_step(pair, dt)
-                if pair.time >= pair.duration - _TIME_EPS:
+                if pair.time >= pair.duration - TIME_EPS:
                     self._make_ready(pair)
         if not any(pair.phase == PHASE_POWER for pair in self._pairs):
             # Hand-over: the pair that did not stroke last goes first.
@@ -248,17 +233,13 @@ class CoordinatedStrokes(StrokeScheme):
                     self._start_power(index, velocity_command)
                     break
 
-    def hold(self, dt: float) -> None:
-        if not (math.isfinite(dt) and dt >= 0.0):
-            dt = 0.0
-        if not self.holding:
-            self.holding = True
-            self.hold_time = 0.0
-            for pair in self._pairs:
-                self._plan(pair, [self.nominal[leg - 1] for leg in pair.legs], hold=True)
-                pair.phase = PHASE_HOLD
-        else:
-            self.hold_time += dt
+    def _enter_hold(self) -> None:
+        """Every foot moves straight back to its nominal point (cubic profile)."""
+        for pair in self._pairs:
+            self._plan(pair, [self.nominal[leg - 1] for leg in pair.legs], hold=True)
+            pair.phase = PHASE_HOLD
+
+    def _hold_step(self, dt: float) -> None:
         for pair in self._pairs:
             self._move_step(pair, dt)
 
@@ -303,7 +284,7 @@ class CoordinatedStrokes(StrokeScheme):
             return
         pair.time += dt
         pair.segment += dt
-        if pair.segment >= self.t_pow_max - _TIME_EPS:
+        if pair.segment >= self.t_pow_max - TIME_EPS:
             self._latch(pair, velocity_command)
             self._replan_waiting(self._pairs[1 - self._pairs.index(pair)], velocity_command)
         boundary = False

@@ -32,14 +32,12 @@ clips it); a zero step changes nothing.
 """
 from __future__ import annotations
 
-import bisect
 import math
-from typing import List, Optional, Sequence, Tuple
+from typing import Optional, Sequence, Tuple
 
-from quadruped_common.config import ParameterError
-from quadruped_common.robot import LEGS
-from quadruped_control.control.strokes.base import (PHASE_HOLD, PHASE_POWER, PHASE_RECOVERY, IkFunction, StrokeScheme, Vec3,
-                                            VelocityCommand)
+from quadruped_control.control.strokes.base import (PHASE_HOLD, PHASE_POWER, PHASE_RECOVERY, TIME_EPS, IkFunction,
+                                                    PairState, StrokePath, StrokeScheme, Vec3, VelocityCommand,
+                                                    cubic_time_profile)
 from quadruped_control.model.kinematics import UnreachableError, joint_angles_floats
 from quadruped_control.model.params import RobotParams
 
@@ -49,93 +47,20 @@ __all__ = [
     "PHASE_RECOVERY",
     "IkFunction",
     "StrokeCycle",
-    "StrokePath",
     "VelocityCommand",
-    "cubic_time_profile",
 ]
 
 
-#: Slack when comparing phase times with durations (durations are sums of 0.01 s steps).
-_TIME_EPS = 1e-9
+class _Pair(PairState):
+    """Phase state of one leg pair of the paper's cycle."""
 
-
-def cubic_time_profile(u: float) -> float:
-    """s(u) = 3 u^2 - 2 u^3 for u clipped into [0, 1]: s(0) = 0, s(1) = 1, s'(0) = s'(1) = 0."""
-    if u <= 0.0:
-        return 0.0
-    if u >= 1.0:
-        return 1.0
-    return u * u * (3.0 - 2.0 * u)
-
-
-class StrokePath:
-    """The recorded power trajectory of one foot: points (body frame) with their IK solutions.
-
-    Point 0 is the stroke's start. :meth:`at_arc_length` interpolates linearly at a given arc length
-    from the start; consecutive duplicate points are not stored, so a path of zero length has one point.
-    """
-
-    __slots__ = ("points", "joints", "cumulative")
-
-    def __init__(self, point: Vec3, joints: Vec3) -> None:
-        self.points: List[Vec3] = [point]
-        self.joints: List[Vec3] = [joints]
-        self.cumulative: List[float] = [0.0]
-
-    def append(self, point: Vec3, joints: Vec3) -> None:
-        """Record the next point (ignored if it equals the last one)."""
-        lx, ly, lz = self.points[-1]
-        step = math.hypot(point[0] - lx, point[1] - ly, point[2] - lz)
-        if step == 0.0:
-            return
-        self.points.append(point)
-        self.joints.append(joints)
-        self.cumulative.append(self.cumulative[-1] + step)
-
-    @property
-    def length(self) -> float:
-        """Arc length of the path, m."""
-        return self.cumulative[-1]
-
-    @property
-    def start(self) -> Vec3:
-        return self.points[0]
-
-    @property
-    def end(self) -> Vec3:
-        return self.points[-1]
-
-    def at_arc_length(self, a: float) -> Tuple[Vec3, int]:
-        """Point at arc length ``a`` (clipped to [0, length]) and the index of the nearest recorded point."""
-        cumulative = self.cumulative
-        total = cumulative[-1]
-        if a <= 0.0 or total <= 0.0:
-            return self.points[0], 0
-        last = len(cumulative) - 1
-        if a >= total:
-            return self.points[last], last
-        j = bisect.bisect_right(cumulative, a) - 1  # cumulative[j] <= a < cumulative[j + 1]
-        seg = cumulative[j + 1] - cumulative[j]
-        w = (a - cumulative[j]) / seg
-        (x0, y0, z0), (x1, y1, z1) = self.points[j], self.points[j + 1]
-        nearest = j if w < 0.5 else j + 1
-        return (x0 + w * (x1 - x0), y0 + w * (y1 - y0), z0 + w * (z1 - z0)), nearest
-
-
-class _Pair:
-    """Phase state of one leg pair."""
-
-    __slots__ = ("legs", "phase", "time", "t_move", "t_total", "t_pow", "paths", "velocities")
+    __slots__ = ("t_move", "t_total", "t_pow")
 
     def __init__(self, legs: Tuple[int, int]) -> None:
-        self.legs = legs
-        self.phase = PHASE_RECOVERY
-        self.time = 0.0
+        super().__init__(legs, PHASE_RECOVERY)
         self.t_move = 0.0      # duration of the cubic retrace motion (recovery)
         self.t_total = 0.0     # duration of the recovery phase (>= t_move)
         self.t_pow = 0.0       # latched t_pow_max of the current power phase
-        self.paths: List[StrokePath] = []
-        self.velocities: List[Vec3] = [(0.0, 0.0, 0.0), (0.0, 0.0, 0.0)]
 
 
 class StrokeCycle(StrokeScheme):
@@ -151,22 +76,10 @@ class StrokeCycle(StrokeScheme):
 
     def __init__(self, robot: RobotParams, pairs: Sequence[Sequence[int]] = ((1, 3), (2, 4)),
                  t_rec: float = 1.5, t_pow_max: float = 0.5, ik: Optional[IkFunction] = None) -> None:
-        self.robot = robot
-        self.pairs = self._checked_pairs(pairs)
-        self.t_rec = 0.0
-        self.t_pow_max = 0.0
-        self.set_timing(t_rec, t_pow_max)
-        limits = robot.joint_limits
-        self._bounds = (limits.theta1, limits.theta2, limits.theta3)
+        super().__init__(robot, pairs, t_rec, t_pow_max)
         self._ik_raw = ik if ik is not None else self._default_ik
         self._ik_injected = ik is not None
-        self._set_nominal(robot)
-        self.positions: List[Vec3] = []
-        self.joints: List[Vec3] = []
-        self.holding = False
-        self.hold_time = 0.0
-        self._pairs = [_Pair(self.pairs[0]), _Pair(self.pairs[1])]
-        self.reset()
+        self._start(_Pair)
 
     # ---- configuration -----------------------------------------------------------------------
 
@@ -206,7 +119,7 @@ class StrokeCycle(StrokeScheme):
         ``fresh``: discard any retract in progress (the feet are at their start points)."""
         for index, pair in enumerate(self._pairs):
             incomplete = (not fresh and pair.phase == PHASE_RECOVERY
-                          and pair.time < pair.t_move - _TIME_EPS)
+                          and pair.time < pair.t_move - TIME_EPS)
             delay = 0.5 * self.t_rec if index == 0 else 0.0
             if incomplete:
                 # Keep retracing; the first pair additionally waits half a recovery from now.
@@ -245,19 +158,14 @@ class StrokeCycle(StrokeScheme):
             else:
                 self._recovery_step(pair, dt, velocity_command)
 
-    def hold(self, dt: float) -> None:
-        """Safe state: stop stroking and bring the feet back to their start (nominal) points; advance ``dt``."""
-        if not (math.isfinite(dt) and dt >= 0.0):
-            dt = 0.0
-        if not self.holding:
-            self.holding = True
-            self.hold_time = 0.0
-            for pair in self._pairs:
-                if pair.phase == PHASE_POWER:
-                    self._start_recovery(pair)
-                pair.t_total = math.inf
-        else:
-            self.hold_time += dt
+    def _enter_hold(self) -> None:
+        """A pair in power retraces its stroke at once; both then stay at the start (nominal) points."""
+        for pair in self._pairs:
+            if pair.phase == PHASE_POWER:
+                self._start_recovery(pair)
+            pair.t_total = math.inf
+
+    def _hold_step(self, dt: float) -> None:
         for pair in self._pairs:
             self._recovery_step(pair, dt, None)
 
@@ -304,7 +212,7 @@ class StrokeCycle(StrokeScheme):
             positions[leg - 1] = target
             joints[leg - 1] = solution
             pair.paths[slot].append(target, solution)
-        if boundary or pair.time >= pair.t_pow - _TIME_EPS:
+        if boundary or pair.time >= pair.t_pow - TIME_EPS:
             self._start_recovery(pair)
 
     def _recovery_step(self, pair: _Pair, dt: float, velocity_command: Optional[VelocityCommand]) -> None:
@@ -314,7 +222,7 @@ class StrokeCycle(StrokeScheme):
         else:
             s = 1.0
         positions, joints = self.positions, self.joints
-        done = velocity_command is not None and pair.time >= pair.t_total - _TIME_EPS
+        done = velocity_command is not None and pair.time >= pair.t_total - TIME_EPS
         for slot, leg in enumerate(pair.legs):
             path = pair.paths[slot]
             if done or s >= 1.0:

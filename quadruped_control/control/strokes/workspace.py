@@ -18,7 +18,6 @@ The grid costs about 70 000 IK evaluations (~0.6 s); results are cached per geom
 from __future__ import annotations
 
 import math
-from functools import lru_cache
 from typing import Dict, Tuple
 
 import numpy as np

@@ -5,6 +5,9 @@
   balanced by the rope and left out. The default of every study that reproduces the paper's simulation.
 - ``tank``: the same forces plus the test tank's rope, torso weight and buoyancy at separate centres,
   torso and paw added mass (:mod:`.tank`, parameters in ``config/tank.yaml``).
+
+Both take their forces from :mod:`quadruped_control.model.hydrodynamics` and share the rigid-body state,
+input checks and SO(3) Runge-Kutta helpers of :mod:`.rigid_body`.
 """
 from __future__ import annotations
 

@@ -7,7 +7,8 @@ Equations of motion (body axes, about the centre of mass, nu = (v^B, omega) with
 
 - ``tau_paper``: the paper's paw drag, body drag and paw buoyancy of eq. (trans), (rot)
   (:meth:`FloatingBaseModel._body_wrench <quadruped_control.sim.plants.paper.FloatingBaseModel._body_wrench>`,
-  the one implementation of those forces; paw buoyancy's force 4 B_net z_hat is added here).
+  the plants' shared assembly of the :mod:`quadruped_control.model.hydrodynamics` force laws; paw
+  buoyancy's force 4 B_net z_hat is added here).
 - M = M_RB + M_A + sum_i M_paw(r_i): rigid body diag(m I, I), the torso's ellipsoid added mass and the
   paws' point added masses rho V / 2 at the foot positions (:mod:`.added_mass`).
 - C(nu) nu = Kirchhoff terms of M_RB + M_A (rigid-body gyroscopic and added-mass Coriolis/centripetal,
@@ -22,7 +23,8 @@ Equations of motion (body axes, about the centre of mass, nu = (v^B, omega) with
 
 Each effect has a switch (:class:`TankParams`); with all four off the equations reduce to the paper's
 eq. (trans), (rot) (tested). Parameters: ``config/tank.yaml``.
-Integration: the model's generic RK4 on SO(3) (``_rk4`` with this class's ``_chart_derivative``).
+Integration: the model's generic RK4 on SO(3) (``_rk4`` with this class's ``_chart_derivative``, the
+chart helpers of :mod:`.rigid_body`).
 """
 from __future__ import annotations
 
@@ -33,11 +35,13 @@ from typing import Any, Mapping, Optional, Sequence, Tuple
 import numpy as np
 
 from quadruped_common.config import ParameterError, boolean, check_keys, load_config, number, vector
+from quadruped_control.model import hydrodynamics
+from quadruped_control.model.kinematics import leg_kinematics_flat
 from quadruped_control.model.params import RobotParams
 from quadruped_control.sim.plants.added_mass import ellipsoid_added_mass, point_mass_matrix, sphere_added_mass
-from quadruped_control.model.kinematics import leg_kinematics_flat
-from quadruped_control.sim.plants.paper import (FloatingBaseModel, Mat3, RigidBodyState, _chart_rate, _check_dt,
-                                                _exp_rotation, _joint_array, _matmul, _StepContext)
+from quadruped_control.sim.plants.paper import FloatingBaseModel
+from quadruped_control.sim.plants.rigid_body import (Mat3, RigidBodyState, StepContext, as_mat3, chart_point, check_dt,
+                                                     joint_array)
 
 __all__ = ["TankModel", "TankParams", "hydrostatic_wrench", "load_tank_params", "rope_force",
            "torso_ellipsoid"]
@@ -166,8 +170,8 @@ def hydrostatic_wrench(R: np.ndarray, weight: float, buoyancy: float,
     """Torso weight W at the centre of mass and buoyancy B at r_cb: (force world (B - W) z_hat,
     moment about the centre of mass r_cb x (B R^T z_hat), body frame)."""
     up_body = np.asarray(R, dtype=float)[2, :]
-    return np.array([0.0, 0.0, buoyancy - weight]), np.cross(np.asarray(center_of_buoyancy, dtype=float),
-                                                              buoyancy * up_body)
+    return (np.array([0.0, 0.0, buoyancy - weight]),
+            hydrodynamics.torso_buoyancy_torque_matrix(buoyancy, center_of_buoyancy) @ up_body)
 
 
 def torso_ellipsoid(params: RobotParams, scale: float = 1.0) -> Tuple[float, float, float]:
@@ -220,7 +224,7 @@ def _solve_mass(solver: Tuple[Tuple[float, ...], ...], g: Sequence[float]) -> Tu
             a2 * (g[2] - (B[6] * x3 + B[7] * x4 + B[8] * x5)), x3, x4, x5)
 
 
-class _TankContext(_StepContext):
+class _TankContext(StepContext):
     """A step's inputs plus the tank's per-step constants: the mass-matrix solver and the leg sums
     (sum r_i, sum c_i, sum r_i r_i^T, sum c_i r_i^T, sum r_i . c_i) of the paw added-mass terms."""
 
@@ -244,6 +248,12 @@ class TankModel(FloatingBaseModel):
         self.center_of_buoyancy = np.array(tank.center_of_buoyancy, dtype=float)
         self.torso_weight = (params.mass - 4.0 * params.paw_mass) * params.gravity
         self.torso_buoyancy = self.torso_weight - tank.net_weight
+        if tank.hydrostatics:
+            # The torso's buoyancy moment joins the paw buoyancy torque in each step's U R^T z_hat
+            # (StepContext): the plant's restoring matrix, B hat(r_cb).
+            self._restoring_matrix = hydrodynamics.torso_buoyancy_torque_matrix(self.torso_buoyancy,
+                                                                                 self.center_of_buoyancy)
+            self._restoring = as_mat3(self._restoring_matrix)
         rigid = np.zeros((6, 6))
         rigid[:3, :3] = self.mass * np.eye(3)
         rigid[3:, 3:] = self.inertia
@@ -312,12 +322,9 @@ class TankModel(FloatingBaseModel):
         fx, fy, fz, tx, ty, tz = self._body_wrench(context, b[0], b[1], b[2], R, w[0], w[1], w[2])
         up = (r6, r7, r8)  # R^T z_hat
         tank = self.tank
-        lift = self._paw_buoyancy_force  # world-up forces: paw buoyancy, then torso hydrostatics
+        lift = context.lift  # world-up forces: paw buoyancy, then torso hydrostatics (its moment is in U)
         if tank.hydrostatics:
             lift += self.torso_buoyancy - self.torso_weight
-            m = _cross(tank.center_of_buoyancy, up)
-            B = self.torso_buoyancy
-            tx, ty, tz = tx + B * m[0], ty + B * m[1], tz + B * m[2]
         fx, fy, fz = fx + lift * up[0], fy + lift * up[1], fz + lift * up[2]
         if tank.suspension:
             h = tank.hook
@@ -365,7 +372,7 @@ class TankModel(FloatingBaseModel):
     def _chart_derivative(self, context: "_TankContext", R0: Mat3,  # type: ignore[override]
                           y: Sequence[float]) -> Tuple[float, ...]:
         """d/dt of the chart state y = (p, v, xi, omega) under eq. (tank)."""
-        R = _matmul(R0, _exp_rotation(y[6], y[7], y[8]))
+        R, xi_rate = chart_point(R0, y[6], y[7], y[8], y[9], y[10], y[11])
         v, w = y[3:6], y[9:12]
         nu_dot = _solve_mass(context.mass_solver, self.generalized_forces(context, y[0:3], v, R, w))
         r0, r1, r2, r3, r4, r5, r6, r7, r8 = R
@@ -373,12 +380,12 @@ class TankModel(FloatingBaseModel):
         wb = _cross(w, b)
         ax, ay, az = nu_dot[0] + wb[0], nu_dot[1] + wb[1], nu_dot[2] + wb[2]
         return (tuple(v) + (r0 * ax + r1 * ay + r2 * az, r3 * ax + r4 * ay + r5 * az, r6 * ax + r7 * ay + r8 * az)
-                + _chart_rate(y[6], y[7], y[8], w[0], w[1], w[2]) + tuple(nu_dot[3:]))
+                + xi_rate + tuple(nu_dot[3:]))
 
     def _step_context(self, q: Any, q_dot: Any) -> "_TankContext":
         flat = leg_kinematics_flat(q.tolist() if isinstance(q, np.ndarray) else q,
                                     q_dot.tolist() if isinstance(q_dot, np.ndarray) else q_dot, self.params)
-        context = _TankContext.from_flat(flat, self.net_paw_buoyancy, self._restoring)
+        context = _TankContext(flat, self.net_paw_buoyancy, self._restoring)
         feet = np.array(flat).reshape(4, 6)
         r, c = feet[:, :3], feet[:, 3:]
         context.leg_sums = (tuple(r.sum(axis=0).tolist()), tuple(c.sum(axis=0).tolist()),
@@ -388,9 +395,9 @@ class TankModel(FloatingBaseModel):
         return context
 
     def step(self, state: RigidBodyState, q: Any, q_dot: Any, dt: float) -> RigidBodyState:
-        dt = _check_dt(dt)
+        dt = check_dt(dt)
         state = state.validate()
-        context = self._step_context(_joint_array(q, "q"), _joint_array(q_dot, "q_dot"))
+        context = self._step_context(joint_array(q, "q"), joint_array(q_dot, "q_dot"))
         return self._rk4(state, dt, (context, context, context))
 
     def step_trusted(self, state: RigidBodyState, q: Any, q_dot: Any, dt: float) -> RigidBodyState:

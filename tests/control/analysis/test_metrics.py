@@ -9,7 +9,7 @@ import pytest
 from hypothesis import given
 from hypothesis import strategies as st
 
-from quadruped_control.analysis import metrics
+from quadruped_common.so3 import wrap_angle
 from quadruped_control.analysis.metrics import (
     axis_errors,
     compute_metrics,
@@ -203,7 +203,7 @@ def test_yaw_wrap_around_target_near_180_degrees() -> None:
     # Yaw from 150 to -170 degrees: the short way is +40 degrees through +-180.
     t = _grid(90.0)
     path = math.radians(150.0) + math.radians(40.0) * (1.0 - np.exp(-np.maximum(t - DELAY, 0.0) / 3.0))
-    yaw = np.asarray(metrics.wrap_angle(path))
+    yaw = np.asarray(wrap_angle(path))
     rpy = np.column_stack((np.zeros(t.size), np.zeros(t.size), yaw))
     sp = np.radians([0.0, 0.0, -170.0])
     m = compute_metrics(t, rpy, sp, np.abs(path - math.radians(190.0)))

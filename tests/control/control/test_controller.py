@@ -425,3 +425,23 @@ def test_closed_loop_reduces_a_30_degree_roll_error():
 def test_estimate_body_torque_is_reexported():
     q_dot = np.zeros((4, 3))
     assert np.all(estimate_body_torque(NOMINAL_Q, q_dot, np.eye(3), np.zeros(3), PARAMS) == 0.0)
+
+
+def test_controller_output_arrays_match_the_stroke_state():
+    """The step's output arrays (one buffer, filled from the stroke's float state) hold the stroke's values
+    and do not overlap."""
+    controller = AttitudeController(PARAMS, load_controller_config(gain_set="simulation"))
+    controller.set_setpoint(rpy_to_rot(0.4, -0.2, 0.3))
+    for k in range(60):
+        out = controller.step(0.01 * k, np.eye(3), np.array([0.1, 0.0, -0.1]))
+    stroke = controller.stroke
+    np.testing.assert_array_equal(out.joint_targets, np.array(stroke.joints))
+    np.testing.assert_array_equal(out.state.foot_targets, np.array(stroke.positions))
+    np.testing.assert_array_equal(out.state.foot_velocity_commands, np.array(stroke.velocity_commands))
+    np.testing.assert_array_equal(out.state.integral, np.array(controller._integral))
+    # Fields do not overlap: writing one leaves the others as they were.
+    before = out.state.tau_sat.copy(), out.state.foot_targets.copy()
+    out.joint_targets[:] = 0.0
+    out.state.e_R[:] = 9.0
+    np.testing.assert_array_equal(out.state.tau_sat, before[0])
+    np.testing.assert_array_equal(out.state.foot_targets, before[1])

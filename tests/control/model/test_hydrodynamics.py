@@ -104,6 +104,30 @@ def test_leg_wrench_rejects_bad_input():
         hd.leg_wrench(np.zeros(3), np.zeros(3), np.eye(2), PARAMS)
 
 
+@settings(max_examples=60, deadline=None)
+@given(st.integers(0, 2 ** 32 - 1))
+def test_paw_drag_wrench_fast_path_equals_summed_leg_wrench(seed):
+    """The float fast path (body axes, all legs) against leg_wrench (world frame, per leg), with the foot
+    velocities of eq. (fb_jac): v_e,i^W = v_B^W + R (omega x r_i + c_i)."""
+    rng = np.random.default_rng(seed)
+    R = random_rotation(rng)
+    v = rng.uniform(-0.5, 0.5, 3)
+    omega = rng.uniform(-2.0, 2.0, 3)
+    feet = nominal_feet() + rng.normal(scale=0.02, size=(4, 3))
+    joint_velocities = rng.uniform(-0.5, 0.5, (4, 3))  # c_i = J_P,i^B q_dot_i
+    foot_velocities = v + (np.cross(omega, feet) + joint_velocities) @ R.T
+    forces, torques = hd.leg_wrench(foot_velocities, feet, R, PARAMS)
+    rows = np.hstack((feet, joint_velocities)).tolist()
+    fast = hd.paw_drag_wrench_f(rows, PARAMS.drag_constant, *(R.T @ v).tolist(), *omega.tolist())
+    np.testing.assert_allclose(fast[:3], R.T @ forces.sum(axis=0), rtol=1e-12, atol=1e-15)
+    np.testing.assert_allclose(fast[3:], torques.sum(axis=0), rtol=1e-12, atol=1e-15)
+
+
+def test_paw_drag_wrench_fast_path_zero_when_feet_still():
+    rows = np.hstack((nominal_feet(), np.zeros((4, 3)))).tolist()
+    assert hd.paw_drag_wrench_f(rows, PARAMS.drag_constant, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0) == (0.0,) * 6
+
+
 # --------------------------------------------------------------------------------------------------
 # Paw buoyancy, eq. (buoy_force), (buoy_torque)
 # --------------------------------------------------------------------------------------------------
@@ -134,6 +158,20 @@ def test_paw_buoyancy_torque_per_paw_when_tilted():
     # Heavy paws (negative net buoyancy) below the centre of mass pull a rolled body back upright.
     _, torque_roll = hd.paw_buoyancy(nominal_feet(), rpy_to_rot(0.3, 0.0, 0.0), PARAMS)
     assert PARAMS.paw_net_buoyancy < 0.0 and torque_roll[0] < 0.0
+
+
+@settings(max_examples=40, deadline=None)
+@given(st.integers(0, 2 ** 32 - 1))
+def test_paw_buoyancy_fast_path_equals_paw_buoyancy(seed):
+    """(F_z, U) of the float fast path: F_buoyancy^W = (0, 0, F_z) and tau_buoyancy^B = U R^T z_hat."""
+    rng = np.random.default_rng(seed)
+    feet = nominal_feet() + rng.normal(scale=0.02, size=(4, 3))
+    R = random_rotation(rng)
+    force, torque = hd.paw_buoyancy(feet, R, PARAMS)
+    rows = np.hstack((feet, rng.normal(size=(4, 3)))).tolist()  # the joint velocities play no part
+    lift, up_torque = hd.paw_buoyancy_f(rows, PARAMS.paw_net_buoyancy)
+    np.testing.assert_array_equal(force, [0.0, 0.0, lift])
+    np.testing.assert_allclose(np.reshape(up_torque, (3, 3)) @ R[2, :], torque, rtol=1e-12, atol=1e-16)
 
 
 def test_paw_buoyancy_rejects_single_vector():
@@ -188,6 +226,22 @@ def test_body_drag_is_dissipative_and_odd(v, w):
     force_neg, torque_neg = hd.body_drag(-v, -w, PARAMS)
     np.testing.assert_allclose(force_neg, -force, rtol=1e-15, atol=0.0)
     np.testing.assert_allclose(torque_neg, -torque, rtol=1e-15, atol=0.0)
+
+
+def test_body_drag_fast_path_is_the_coefficients_formula():
+    """body_drag_f, the one implementation (body_drag wraps it), against the element-wise formula of
+    BodyDragCoefficients' docstring."""
+    coefficients = hd.body_drag_coefficients(PARAMS)
+    rng = np.random.default_rng(6)
+    for _ in range(20):
+        v, w = rng.normal(size=3), rng.normal(scale=2.0, size=3)
+        fast = hd.body_drag_f(coefficients.flat, *v.tolist(), *w.tolist())
+        np.testing.assert_allclose(
+            fast[:3], -coefficients.quad_force * np.abs(v) * v - coefficients.visc_force * v, rtol=1e-14, atol=0)
+        np.testing.assert_allclose(
+            fast[3:], -coefficients.quad_torque * np.abs(w) * w - coefficients.visc_torque * w, rtol=1e-14, atol=0)
+        force, torque = hd.body_drag(v, w, PARAMS)
+        assert force.tolist() == list(fast[:3]) and torque.tolist() == list(fast[3:])
 
 
 def test_body_drag_zero_at_rest():

@@ -10,9 +10,10 @@ from hypothesis import strategies as st
 from quadruped_common.robot import LEGS, JointLimits
 from quadruped_common.so3 import exp_so3, hat, quat_to_rot
 from quadruped_control.model.kinematics import (UnreachableError, body_to_leg, clamp_to_limits, five_bar_fk,
-                                          five_bar_ik, five_bar_jacobian, floating_base_jacobian,
-                                          foot_jacobian, foot_position, joint_angles, joint_angles_full,
-                                          leg_fk, leg_ik_full, within_limits, wrap_into_range)
+                                                five_bar_ik, five_bar_jacobian, floating_base_jacobian,
+                                                foot_jacobian, foot_position, joint_angles, joint_angles_floats,
+                                                joint_angles_full, leg_fk, leg_ik_full, leg_kinematics,
+                                                leg_kinematics_flat, within_limits, wrap_into_range)
 from quadruped_control.model.params import load_robot_params
 
 PARAMS = load_robot_params()
@@ -423,3 +424,68 @@ def test_body_to_leg_inverts_ee_body():
         p = np.array([0.01, -0.04, -0.12])
         r = PARAMS.leg_origins[leg] + PARAMS.mirror[leg] @ p
         np.testing.assert_allclose(body_to_leg(r, leg, PARAMS), p, atol=1e-15)
+
+
+# --------------------------------------------------------------------------------------------------
+# Float fast paths against the readable functions
+# --------------------------------------------------------------------------------------------------
+
+Q0 = np.array([joint_angles(PARAMS.nominal_foot_body(leg), leg, PARAMS) for leg in LEGS])
+
+
+@settings(max_examples=60)
+@given(st.integers(0, 2 ** 32 - 1))
+def test_leg_kinematics_matches_foot_position_and_jacobian(seed) -> None:
+    rng = np.random.default_rng(seed)
+    q = Q0 + rng.uniform(-0.4, 0.4, (4, 3))
+    q_dot = rng.uniform(-5.0, 5.0, (4, 3))
+    rows = np.array(leg_kinematics(q.tolist(), q_dot.tolist(), PARAMS))
+    for row, leg in enumerate(LEGS):
+        np.testing.assert_allclose(rows[row, :3], foot_position(q[row], leg, PARAMS), rtol=0, atol=1e-14)
+        np.testing.assert_allclose(rows[row, 3:], foot_jacobian(q[row], leg, PARAMS) @ q_dot[row],
+                                   rtol=1e-12, atol=1e-13)
+    assert leg_kinematics_flat(q.tolist(), q_dot.tolist(), PARAMS) == tuple(rows.ravel().tolist())
+
+
+def test_leg_kinematics_raises_the_kinematics_error_for_irregular_input() -> None:
+    q = Q0.copy()
+    q[2, 0] = np.nan
+    with pytest.raises(UnreachableError):
+        leg_kinematics(q.tolist(), np.zeros((4, 3)).tolist(), PARAMS)
+    # Elbows coincide (a1 cos t1 = c + a1 cos t2, sin t1 = sin t2): the same error as five_bar_fk's.
+    elbow = math.acos(0.5 * GEOM.c / GEOM.a1)
+    q = Q0.copy()
+    q[1, :2] = (elbow, math.pi - elbow)
+    with pytest.raises(UnreachableError, match="elbows coincide") as info:
+        leg_kinematics_flat(q.tolist(), np.zeros((4, 3)).tolist(), PARAMS)
+    with pytest.raises(UnreachableError) as reference:
+        five_bar_fk(elbow, math.pi - elbow, GEOM)
+    assert str(info.value) == str(reference.value)
+    with pytest.raises(ValueError):
+        leg_kinematics(Q0[:3].tolist(), np.zeros((3, 3)).tolist(), PARAMS)
+
+
+@settings(max_examples=300)
+@given(st.sampled_from(LEGS), st.tuples(*[st.floats(-0.08, 0.08)] * 3))
+def test_joint_angles_floats_equals_reference_ik(leg, offset) -> None:
+    target = np.array(PARAMS.nominal_foot_body(leg)) + np.array(offset)
+    try:
+        expected = joint_angles_full(target, leg, PARAMS)[:3].tolist()
+    except UnreachableError as exc:
+        with pytest.raises(UnreachableError) as info:
+            joint_angles_floats(*target.tolist(), leg, PARAMS)
+        assert str(info.value) == str(exc)
+        return
+    assert list(joint_angles_floats(*target.tolist(), leg, PARAMS)) == expected  # bit for bit
+    assert joint_angles(target, leg, PARAMS).tolist() == expected
+
+
+@pytest.mark.parametrize("target", [(math.nan, 0.0, 0.0), (math.inf, 0.1, 0.1), (0.0, -math.inf, 0.0)])
+def test_joint_angles_floats_rejects_non_finite_targets(target) -> None:
+    with pytest.raises(UnreachableError):
+        joint_angles_floats(*target, 1, PARAMS)
+
+
+def test_joint_angles_floats_rejects_bad_leg() -> None:
+    with pytest.raises(ValueError):
+        joint_angles_floats(0.1, 0.1, -0.1, 5, PARAMS)

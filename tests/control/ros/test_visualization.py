@@ -7,10 +7,11 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from quadruped_common.robot import JOINT_NAMES, LEGS, joint_index
+from quadruped_common.so3 import wrap_angle
 from quadruped_control.model.params import FiveBar, load_robot_params
 from quadruped_control.ros.visualization import (LEG_COLOURS, PASSIVE_JOINT_NAMES, VISUAL_JOINT_NAMES, SphereMarker,
                                              Throttle, VisualizationError, foot_target_spheres, imu_orientation,
-                                             knee_angles, unit_quaternion, visual_joint_state, wrap_angle)
+                                             knee_angles, unit_quaternion, visual_joint_state)
 
 PARAMS = load_robot_params()
 GEOMETRY = PARAMS.five_bar
@@ -48,12 +49,6 @@ def test_joint_name_tables():
                                    "leg3_knee1", "leg3_knee2", "leg4_knee1", "leg4_knee2")
     assert VISUAL_JOINT_NAMES[:12] == JOINT_NAMES
     assert VISUAL_JOINT_NAMES[12:] == PASSIVE_JOINT_NAMES
-
-
-def test_wrap_angle():
-    assert wrap_angle(3 * math.pi) == pytest.approx(math.pi)
-    assert wrap_angle(-math.pi) == math.pi
-    assert wrap_angle(-0.5 * math.pi - 4 * math.pi) == pytest.approx(-0.5 * math.pi)
 
 
 @settings(max_examples=200, deadline=None)

@@ -5,7 +5,7 @@ import math
 
 import numpy as np
 import pytest
-from hypothesis import given
+from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from quadruped_common.config import ParameterError
@@ -15,6 +15,7 @@ from quadruped_control.sim.servo_model import (
     ServoParams,
     load_servo_params,
     make_servo_model,
+    rate_limited_lag_step,
 )
 
 W_MAX = 95.0 * 2.0 * math.pi / 60.0
@@ -140,3 +141,34 @@ def test_update_trusted_matches_update() -> None:
     for _ in range(30):
         command = rng.uniform(-1.0, 1.0, (4, 3))
         np.testing.assert_array_equal(checked.update(command, 0.01), trusted.update_trusted(command, 0.01))
+
+
+@settings(max_examples=30, deadline=None)
+@given(st.floats(-2.0, 2.0), st.floats(-2.0, 2.0), st.floats(1.0, 20.0), st.sampled_from([0.0, 0.005, 0.03, 0.2]),
+       st.sampled_from([0.001, 0.01, 0.05]))
+def test_exact_step_agrees_with_a_fine_integration_of_the_servo_ode(q, command, max_speed, tau, dt) -> None:
+    """rate_limited_lag_step against 20,000 RK4 sub-steps of dq/dt = clip((q_cmd - q) / T, -w_max, w_max)
+    (the rate limiter alone, T = 0, against its own definition)."""
+    exact = rate_limited_lag_step(q, command, max_speed, tau, dt)
+    if tau == 0.0:
+        assert exact == pytest.approx(q + max(-max_speed * dt, min(max_speed * dt, command - q)), abs=1e-12)
+        return
+
+    def rate(x: float) -> float:
+        return max(-max_speed, min(max_speed, (command - x) / tau))
+
+    x, n = q, 20000
+    h = dt / n
+    for _ in range(n):
+        k1 = rate(x)
+        k2 = rate(x + 0.5 * h * k1)
+        k3 = rate(x + 0.5 * h * k2)
+        k4 = rate(x + h * k3)
+        x += h / 6.0 * (k1 + 2.0 * k2 + 2.0 * k3 + k4)
+    assert exact == pytest.approx(x, abs=1e-7)  # RK4 meets the kink at |e| = w_max T once
+
+
+def test_exact_step_keeps_nan_and_a_joint_at_its_command() -> None:
+    assert math.isnan(rate_limited_lag_step(0.1, math.nan, 10.0, 0.03, 0.01))
+    assert math.isnan(rate_limited_lag_step(0.1, math.nan, 10.0, 0.0, 0.01))
+    assert rate_limited_lag_step(0.25, 0.25, 10.0, 0.03, 0.01) == 0.25

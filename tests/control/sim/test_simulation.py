@@ -10,8 +10,9 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from quadruped_common.so3 import exp_so3, geodesic_angle, rot_to_quat, rot_to_rpy, rpy_to_rot
+from quadruped_control.control.controller import AttitudeController
 from quadruped_control.control.controller_config import load_controller_config
-from quadruped_control.model.kinematics import UnreachableError
+from quadruped_control.model.kinematics import UnreachableError, joint_angles_full
 from quadruped_control.model.params import load_robot_params
 from quadruped_control.sim.plants.paper import DynamicsError, FloatingBaseModel, RigidBodyState, held_joint_input
 from quadruped_control.sim.servo_model import IdealServo, RateLimitedServo, ServoParams
@@ -72,6 +73,39 @@ def test_plant_step_matches_dynamics_with_held_midpoint_input() -> None:
         state = model.step(state, *held_joint_input(q_prev, q_next, 0.01), 0.01)
         q_prev = q_next
         np.testing.assert_allclose(got.to_vector(), state.to_vector(), rtol=1e-12, atol=1e-14)
+
+
+def _reference_plant_step(model: FloatingBaseModel, state: RigidBodyState, q0: np.ndarray, q1: np.ndarray,
+                          h: float) -> RigidBodyState:
+    q_hold, q_dot = held_joint_input(q0, q1, h)
+    context = model._context(model.leg_input(q_hold, q_dot))
+    return model._rk4(state, h, (context, context, context))
+
+
+@settings(max_examples=30)
+@given(st.integers(0, 2 ** 32 - 1), st.booleans(), st.booleans())
+def test_plant_float_hold_equals_array_reference(seed, rate_limited, clamp) -> None:
+    """PlantSimulator's float hold input (midpoint and finite difference on floats, held-input RK4)
+    against the array formulas of held_joint_input, LegInput and the generic RK4."""
+    rng = np.random.default_rng(seed)
+    servo = RateLimitedServo(ServoParams(8.0, 0.03)) if rate_limited else IdealServo()
+    plant = PlantSimulator(ROBOT, servo, initial_rotation=exp_so3(rng.uniform(-1.0, 1.0, 3)))
+    reference_servo = RateLimitedServo(ServoParams(8.0, 0.03)) if rate_limited else IdealServo()
+    reference_servo.reset(Q0)
+    state = plant.state
+    q_prev = Q0.copy()
+    low, high = plant._low, plant._high
+    for _ in range(5):
+        command = Q0 + rng.uniform(-0.1, 0.1, (4, 3))
+        if clamp:
+            command[1, 2] = high[1, 2] + 0.5
+        q_next = reference_servo.update(np.clip(command, low, high), 0.01)
+        state = _reference_plant_step(plant.model, state, q_prev, q_next, 0.01)
+        new = plant.step(command)
+        np.testing.assert_allclose(new.to_vector(), state.to_vector(), rtol=1e-13, atol=1e-15)
+        np.testing.assert_array_equal(plant.joint_positions, q_next)
+        q_prev = q_next
+    assert plant.clamped_joints == (5 if clamp else 0)
 
 
 def test_plant_with_rate_limited_servo_lags_the_command() -> None:
@@ -185,6 +219,63 @@ def test_closed_loop_records_consistent_arrays_and_turns_towards_setpoint() -> N
     assert result.geodesic[-1] < result.geodesic[0] - math.radians(5.0)
     assert result.info["servo_model"] == "ideal" and result.info["controller_holds"] == 0
     assert all(np.isfinite(v) for v in result.rotation.reshape(-1))
+
+
+def test_closed_loop_rejects_non_finite_targets(monkeypatch) -> None:
+    sim = ClosedLoopSimulation(ROBOT, CONFIG)
+    real_step = sim.controller.step
+
+    def bad_step(t, R, omega):
+        out = real_step(t, R, omega)
+        out.joint_targets[2, 1] = math.nan
+        return out
+
+    monkeypatch.setattr(sim.controller, "step", bad_step)
+    with pytest.raises(SimulationError):
+        sim.step()
+
+
+def test_closed_loop_counts_out_of_range_targets(monkeypatch) -> None:
+    sim = ClosedLoopSimulation(ROBOT, CONFIG)
+    real_step = sim.controller.step
+    high = sim.plant._high
+
+    def wide_step(t, R, omega):
+        out = real_step(t, R, omega)
+        out.joint_targets[0, 0] = high[0, 0] + 0.01
+        return out
+
+    monkeypatch.setattr(sim.controller, "step", wide_step)
+    sim.step()
+    assert sim.plant.clamped_joints == 1
+    assert sim.plant.joint_positions[0, 0] == high[0, 0]
+
+
+def test_closed_loop_equals_reference_components_bit_for_bit() -> None:
+    """The simulator (float IK, float hold input, held-input RK4, single-buffer outputs) reproduces a loop
+    built from the reference pieces: kinematics.joint_angles_full, held_joint_input, LegInput and _rk4."""
+    R_d = rpy_to_rot(*np.radians([45.0, 45.0, 45.0]))
+    sim = ClosedLoopSimulation(ROBOT, CONFIG, IdealServo(), np.eye(3), R_d)
+    result = sim.run(3.0)
+
+    controller = AttitudeController(ROBOT, CONFIG)
+    controller.set_setpoint(R_d)
+    stroke = controller.stroke
+    stroke._ik_raw = lambda point, leg: tuple(joint_angles_full(point, leg, ROBOT)[:3].tolist())
+    stroke._ik_injected = True
+    model = FloatingBaseModel(ROBOT)
+    state, q = RigidBodyState(), Q0.copy()
+    limits = ROBOT.joint_limits.as_array()
+    low, high = np.tile(limits[:, 0], (4, 1)), np.tile(limits[:, 1], (4, 1))
+    for k in range(result.t.size):
+        np.testing.assert_allclose(result.rotation[k], state.rotation, rtol=0, atol=1e-10)
+        np.testing.assert_allclose(result.omega[k], state.omega, rtol=0, atol=1e-10)
+        out = controller.step(k * sim.dt, state.rotation, state.omega)
+        np.testing.assert_array_equal(result.joint_targets[k], out.joint_targets.reshape(12))
+        q_end = np.clip(out.joint_targets, low, high)
+        context = model._context(model.leg_input(*held_joint_input(q, q_end, sim.dt)))
+        state = model._rk4(state, sim.dt, (context, context, context))
+        q = q_end
 
 
 def test_run_rejects_bad_duration_and_rotations() -> None:

@@ -9,8 +9,8 @@ from hypothesis import strategies as st
 
 from quadruped_common.config import ParameterError
 from quadruped_common.robot import LEGS
-from quadruped_control.control.strokes.paper import (PHASE_HOLD, PHASE_POWER, PHASE_RECOVERY, StrokeCycle, StrokePath,
-                                      cubic_time_profile)
+from quadruped_control.control.strokes.base import cubic_time_profile
+from quadruped_control.control.strokes.paper import PHASE_HOLD, PHASE_POWER, PHASE_RECOVERY, StrokeCycle
 from quadruped_control.model.kinematics import UnreachableError, joint_angles, within_limits
 from quadruped_control.model.params import load_robot_params
 
@@ -50,32 +50,6 @@ def first_index(log, pair, phase, start=0):
 # --------------------------------------------------------------------------------------------------
 # Building blocks
 # --------------------------------------------------------------------------------------------------
-
-def test_cubic_time_profile():
-    assert cubic_time_profile(0.0) == 0.0 and cubic_time_profile(1.0) == 1.0
-    assert cubic_time_profile(-0.5) == 0.0 and cubic_time_profile(2.0) == 1.0
-    assert cubic_time_profile(0.5) == 0.5
-    assert cubic_time_profile(0.25) == pytest.approx(3 * 0.0625 - 2 * 0.015625)
-    h = 1e-6  # zero slope at both ends, slope 1.5 in the middle
-    assert cubic_time_profile(h) / h < 1e-5
-    assert (1.0 - cubic_time_profile(1.0 - h)) / h < 1e-5
-    assert (cubic_time_profile(0.5 + h) - cubic_time_profile(0.5 - h)) / (2 * h) == pytest.approx(1.5)
-
-
-def test_stroke_path_arc_length_interpolation():
-    path = StrokePath((0.0, 0.0, 0.0), (1.0, 1.0, 1.0))
-    path.append((0.0, 0.0, 0.0), (9.0, 9.0, 9.0))   # duplicate: ignored
-    path.append((3.0, 0.0, 0.0), (2.0, 2.0, 2.0))
-    path.append((3.0, 4.0, 0.0), (3.0, 3.0, 3.0))
-    assert path.length == 7.0 and len(path.points) == 3
-    assert path.at_arc_length(-1.0) == ((0.0, 0.0, 0.0), 0)
-    assert path.at_arc_length(1.0) == ((1.0, 0.0, 0.0), 0)
-    assert path.at_arc_length(3.0) == ((3.0, 0.0, 0.0), 1)
-    assert path.at_arc_length(6.0) == ((3.0, 3.0, 0.0), 2)
-    assert path.at_arc_length(99.0) == ((3.0, 4.0, 0.0), 2)
-    single = StrokePath((1.0, 2.0, 3.0), (0.0, 0.0, 0.0))
-    assert single.length == 0.0 and single.at_arc_length(0.5) == ((1.0, 2.0, 3.0), 0)
-
 
 def test_unreachable_nominal_foot_is_a_configuration_error():
     bad = dataclasses.replace(PARAMS, nominal_foot_leg=np.array([0.0, -0.5, -0.5]))

@@ -13,7 +13,8 @@ from quadruped_control.model import hydrodynamics as hd
 from quadruped_control.model.kinematics import UnreachableError, foot_jacobian, foot_position, joint_angles
 from quadruped_control.model.params import load_robot_params
 from quadruped_control.sim.plants.paper import (DynamicsError, FloatingBaseModel, RigidBodyState, held_joint_input,
-                                        joint_velocity)
+                                                joint_velocity)
+from quadruped_control.sim.plants.rigid_body import as_mat3
 
 PARAMS = load_robot_params()
 #: Paws with zero net buoyancy: no conservative force, so kinetic energy alone can only decrease.
@@ -362,3 +363,100 @@ def test_restoring_parameters_validated():
         FloatingBaseModel(PARAMS, restoring_offset=(0.0, 0.0, 0.01), restoring_force=-1.0)
     with pytest.raises(ValueError, match="non-finite"):
         FloatingBaseModel(PARAMS, restoring_offset=(0.0, float("nan"), 0.01))
+
+
+# --------------------------------------------------------------------------------------------------
+# The integrator's fast path (stages on floats, held-input RK4) against the readable forms
+# --------------------------------------------------------------------------------------------------
+
+def reference_chart_rate(xi, omega):
+    """d xi/dt for R = R0 exp(hat(xi)), R^T dR/dt = hat(omega), from the right Jacobian of SO(3):
+    omega = J_r(xi) d xi/dt with J_r = I - (1 - cos t)/t^2 hat(xi) + (t - sin t)/t^3 hat(xi)^2, t = |xi|
+    (Taylor series of both coefficients below t = 1e-3)."""
+    t = float(np.linalg.norm(xi))
+    if t < 1e-3:
+        a, b = 0.5 - t * t / 24.0, 1.0 / 6.0 - t * t / 120.0
+    else:
+        a, b = (1.0 - math.cos(t)) / t ** 2, (t - math.sin(t)) / t ** 3
+    X = hat(xi)
+    return np.linalg.solve(np.eye(3) - a * X + b * X @ X, omega)
+
+
+@settings(max_examples=60)
+@given(st.integers(0, 2 ** 32 - 1), st.sampled_from(["zero", "small", "large"]))
+def test_stage_equals_reference_chart_derivative(seed, xi_kind):
+    """The integrator's stage (the chart derivative on floats) against the same derivative assembled
+    from the readable pieces: so3.exp_so3, the telemetry wrench (readable hydrodynamics functions and the
+    restoring torque), eq. (trans), (rot) solved with numpy, and the right Jacobian of SO(3)."""
+    rng = np.random.default_rng(seed)
+    model = FloatingBaseModel(PARAMS, restoring_offset=rng.uniform(-0.02, 0.02, 3))
+    q, q_dot = Q_NOMINAL + rng.uniform(-0.2, 0.2, (4, 3)), rng.uniform(-3.0, 3.0, (4, 3))
+    context = model._context_from_joints(q, q_dot)
+    R0 = exp_so3(rng.uniform(-2.0, 2.0, 3))
+    y = (rng.normal(size=12) * [1, 1, 1, 0.5, 0.5, 0.5, 1, 1, 1, 2, 2, 2]).tolist()
+    y[6:9] = {"zero": [0.0, 0.0, 0.0], "small": [1e-6, -2e-6, 0.0], "large": y[6:9]}[xi_kind]
+    v, xi, omega = np.array(y[3:6]), np.array(y[6:9]), np.array(y[9:12])
+    state = RigidBodyState(velocity=v, rotation=R0 @ exp_so3(xi), omega=omega)
+    wrench = model.wrench(state, q, q_dot)
+    inertia = PARAMS.inertia
+    reference = np.concatenate((wrench.total_force_world / PARAMS.mass, reference_chart_rate(xi, omega),
+                                np.linalg.solve(inertia, wrench.total_torque_body - np.cross(omega, inertia @ omega))))
+    fast = model._stage(context, as_mat3(R0), *y[3:12])
+    np.testing.assert_allclose(fast, reference, rtol=1e-12, atol=1e-13)
+    assert model._chart_derivative(context, as_mat3(R0), y) == tuple(y[3:6]) + fast
+
+
+def _random_state(rng: np.random.Generator) -> RigidBodyState:
+    return RigidBodyState(rng.normal(size=3), 0.3 * rng.normal(size=3), exp_so3(rng.uniform(-2.0, 2.0, 3)),
+                          rng.normal(size=3))
+
+
+@settings(max_examples=60)
+@given(st.integers(0, 2 ** 32 - 1), st.booleans())
+def test_rk4_held_equals_reference_rk4(seed, restoring):
+    rng = np.random.default_rng(seed)
+    model = FloatingBaseModel(PARAMS, restoring_offset=rng.uniform(-0.02, 0.02, 3) if restoring else None)
+    context = model._context_from_joints(Q_NOMINAL + rng.uniform(-0.2, 0.2, (4, 3)), rng.uniform(-3.0, 3.0, (4, 3)))
+    state = _random_state(rng)
+    dt = float(rng.choice([0.001, 0.01, 0.05]))
+    reference = model._rk4(state, dt, (context, context, context)).to_vector()
+    fast = model._rk4_held(state, dt, context)
+    np.testing.assert_allclose(fast.to_vector(), reference, rtol=1e-12, atol=1e-15)
+    assert fast.rotation.shape == (3, 3) and fast.position.shape == fast.omega.shape == (3,)
+
+
+def test_rk4_held_from_rest_keeps_state_and_state_fields_are_independent():
+    model = FloatingBaseModel(PARAMS)
+    context = model._context_from_joints(Q_NOMINAL, np.zeros((4, 3)))
+    state = model._rk4_held(RigidBodyState(), 0.01, context)
+    np.testing.assert_allclose(state.to_vector(),
+                               model._rk4(RigidBodyState(), 0.01, (context,) * 3).to_vector(), atol=1e-15)
+    before = state.to_vector()
+    state.position += 1.0  # the fields share one buffer but do not overlap
+    np.testing.assert_array_equal(state.to_vector()[3:], before[3:])
+
+
+def test_rk4_held_raises_dynamics_error_when_diverging():
+    model = FloatingBaseModel(PARAMS)
+    context = model._context_from_joints(Q_NOMINAL, np.zeros((4, 3)))
+    state = RigidBodyState(velocity=np.array([1e200, 0.0, 0.0]))
+    with pytest.raises(DynamicsError):
+        model._rk4_held(state, 0.01, context)
+
+
+def test_step_trusted_equals_step():
+    model = FloatingBaseModel(PARAMS)
+    state = RigidBodyState(rotation=exp_so3([0.3, -0.2, 0.5]), omega=np.array([0.2, 0.1, -0.3]))
+    q_dot = np.full((4, 3), 0.7)
+    a = model.step(state, Q_NOMINAL, q_dot, 0.01)
+    b = model.step_trusted(state, Q_NOMINAL, q_dot, 0.01)
+    np.testing.assert_array_equal(a.to_vector(), b.to_vector())
+
+
+def test_step_trusted_accepts_nested_lists():
+    model = FloatingBaseModel(PARAMS)
+    state = RigidBodyState(rotation=exp_so3([0.3, -0.2, 0.5]), omega=np.array([0.2, 0.1, -0.3]))
+    q_dot = np.full((4, 3), 0.7)
+    a = model.step(state, Q_NOMINAL, q_dot, 0.01)
+    b = model.step_trusted(state, Q_NOMINAL.tolist(), q_dot.tolist(), 0.01)
+    np.testing.assert_array_equal(a.to_vector(), b.to_vector())
