@@ -1,7 +1,7 @@
 """ROS glue of the PCA9685 servo output: /servo_command -> pulse widths on the chip.
 
 Subscribes
-  servo_command   quadruped_msgs/ServoCommand  12 pulse widths (us) by joint name
+  servo_command   underwater_quadruped/ServoCommand  12 pulse widths (us) by joint name
 Services
   ~enable         std_srvs/SetBool  outputs on / off (off = every channel full-off)
 Publishes
@@ -35,7 +35,7 @@ from quadruped_common.robot import JOINT_NAMES
 from quadruped_drivers.hardware_config import load_hardware_config
 from quadruped_drivers.node_support import open_bus, with_failsafe
 from quadruped_drivers.pwm_output import ServoPwmOutput
-from quadruped_msgs.msg import ServoCommand
+from underwater_quadruped.msg import ServoCommand
 
 
 class PwmNode:
@@ -44,7 +44,7 @@ class PwmNode:
                                       rospy.get_param("~failsafe", ""))
         backend = rospy.get_param("~backend", "real")
         bus = open_bus(backend, self.hardware.i2c_bus, rospy.get_param("~bus_socket", "/tmp/uq_sim_i2c.sock"))
-        self.lock = threading.Lock()  # one thread at a time owns the bus (DESIGN.md: PCA9685 library)
+        self.lock = threading.Lock()  # one thread at a time owns the bus (docs/hardware_libraries.md: PCA9685 library)
         period = 1.0 / float(rospy.get_param("~update_rate", 100.0))
         self.output = ServoPwmOutput(bus, self.hardware, update_period=period)
         self._start_output()

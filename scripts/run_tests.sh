@@ -29,9 +29,9 @@ run_step() {  # run_step NAME COMMAND...: output to the console and to $RESULTS/
   fi
 }
 
-echo "== catkin_lint -W2 (both packages, as the workspace sees them) =="
+echo "== catkin_lint -W2 (the package, as the workspace sees it) =="
 if command -v catkin_lint >/dev/null; then
-  run_step catkin_lint catkin_lint -W2 --strict "$UQ_WS/src/underwater_quadruped" "$UQ_WS/src/quadruped_msgs"
+  run_step catkin_lint catkin_lint -W2 --strict "$UQ_WS/src/underwater_quadruped"
 else
   echo "catkin_lint: SKIPPED: not installed (scripts/setup.sh installs Debian's catkin-lint; pip install catkin-lint)"
 fi

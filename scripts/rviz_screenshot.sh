@@ -52,7 +52,7 @@ from sensor_msgs.msg import Imu, JointState
 from quadruped_control.model.kinematics import joint_angles
 from quadruped_common.robot import JOINT_NAMES, LEGS
 from quadruped_control.model.params import load_robot_params
-from quadruped_msgs.msg import ControllerState
+from underwater_quadruped.msg import ControllerState
 
 
 def quaternion_rpy(roll, pitch, yaw):

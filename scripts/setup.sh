@@ -6,9 +6,9 @@
 #  2. A venv (.venv) from /usr/bin/python3 with --system-site-packages, so Debian's/Noetic's rospy stays
 #     visible, holding the pinned PyPI dependencies (requirements.txt, or requirements-jetson.txt).
 #  3. A catkin workspace OUTSIDE this tree (scripts/paths.sh: UQ_WS, default the sibling folder
-#     "<clone>_ws") whose src/ links to the two packages of this tree: underwater_quadruped (the root)
-#     and quadruped_msgs (quadruped_msgs/). Outside, so that rosrun / rospack / roscd see exactly one
-#     copy of the package. Sourcing its devel/setup.bash gives everything the launch files need.
+#     "<clone>_ws") whose src/ links to this tree, the one package underwater_quadruped (it also
+#     generates the messages of quadruped_msgs/msg). Outside, so that rosrun / rospack / roscd see
+#     exactly one copy of the package. Sourcing its devel/setup.bash gives everything the launch files need.
 #
 # Each step records a stamp (hash of its inputs) in .stamps/ and is skipped when nothing changed, so a
 # second run takes about a second.
@@ -77,8 +77,7 @@ fi
 # the venv's python (which is /usr/bin/python3 plus the pinned packages): the node relays in devel/ get
 # it as their interpreter, so nodes started by roslaunch see numpy, scipy and the Adafruit drivers.
 build_inputs=("$ROOT/CMakeLists.txt" "$ROOT/package.xml" "$ROOT/setup.py" "$ROOT"/quadruped_msgs/msg/*.msg
-              "$ROOT/quadruped_msgs/CMakeLists.txt" "$ROOT/quadruped_msgs/package.xml" "$ROOT"/cfg/*.cfg
-              "$ROOT"/env-hooks/*)
+              "$ROOT"/cfg/*.cfg "$ROOT"/env-hooks/*)
 build_key="$(hash_of "${build_inputs[@]}")-venv-python-$( (ls "$ROOT/nodes" "$ROOT/tests/rostest" 2>/dev/null || true) | sha256sum | cut -d' ' -f1)-$WS"
 # A workspace that earlier versions built inside the tree (.ws) makes rosrun see every node twice: gone.
 if [ -f "$ROOT/.ws/.catkin_workspace" ]; then
@@ -89,7 +88,8 @@ if [ ! -f "$WS/devel/setup.bash" ] || ! stamp_matches catkin "$build_key"; then
   log "building the catkin workspace in $WS"
   mkdir -p "$WS/src"
   ln -sfn "$ROOT" "$WS/src/underwater_quadruped"
-  ln -sfn "$ROOT/quadruped_msgs" "$WS/src/quadruped_msgs"
+  # Workspaces of earlier versions also linked quadruped_msgs/ as a package of its own: gone.
+  rm -f "$WS/src/quadruped_msgs"
   # Keep another workspace or a ROS_PACKAGE_PATH that contains this folder from crawling into it.
   touch "$WS/CATKIN_IGNORE" "$WS/rospack_nosubdirs"
   (

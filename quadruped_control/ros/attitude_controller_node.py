@@ -11,9 +11,9 @@ Subscribes
   attitude_setpoint_rpy_deg  geometry_msgs/Vector3Stamped  R_d as roll, pitch, yaw in DEGREES (unit in the name, REP-103)
                                                          (R = Rz(yaw) Ry(pitch) Rx(roll))
 Publishes
-  servo_command          quadruped_msgs/ServoCommand   12 pulse widths (us) + joint targets,
+  servo_command          underwater_quadruped/ServoCommand   12 pulse widths (us) + joint targets,
                                                              header.stamp = the IMU sample's stamp
-  controller_state       quadruped_msgs/ControllerState  telemetry of every step (stamp: step time)
+  controller_state       underwater_quadruped/ControllerState  telemetry of every step (stamp: step time)
   diagnostics            diagnostic_msgs/DiagnosticArray
 Services
   ~arm                   std_srvs/SetBool   legs move only when armed
@@ -57,8 +57,8 @@ from quadruped_control.model.params import load_robot_params
 from quadruped_drivers.calibration import load_servo_calibration
 from quadruped_drivers.hardware_config import load_hardware_config
 from quadruped_drivers.vn100.settings import load_vn100_settings
-from quadruped_msgs.msg import ControllerState, ServoCommand
 from underwater_quadruped.cfg import AttitudeControllerConfig
+from underwater_quadruped.msg import ControllerState, ServoCommand
 
 _PHASE_CODES = {"recovery": ControllerState.PHASE_RECOVERY, "power": ControllerState.PHASE_POWER,
                 "hold": ControllerState.PHASE_HOLD}

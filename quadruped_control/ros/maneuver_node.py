@@ -18,7 +18,7 @@ from typing import List, Optional
 import rospy
 from geometry_msgs.msg import Vector3Stamped
 
-from quadruped_msgs.msg import ControllerState
+from underwater_quadruped.msg import ControllerState
 
 
 class ManeuverNode:

@@ -25,7 +25,7 @@ Two clocks (``~lockstep``):
 
 Publishes (ground truth, for tests and reports; nothing in the control path subscribes to these)
   sim/pose          geometry_msgs/PoseStamped  odom (ENU, REP-105) <- base_link, true attitude
-  sim/servo_output  quadruped_msgs/ServoCommand  pulse widths the fake PCA9685 really produces and
+  sim/servo_output  underwater_quadruped/ServoCommand  pulse widths the fake PCA9685 really produces and
                                                        the joint angles they command
 Parameters
   ~robot_yaml ~hardware_yaml ~calibration_yaml ~simulation_yaml (package config/)
@@ -73,7 +73,7 @@ from quadruped_drivers.calibration import load_servo_calibration
 from quadruped_drivers.hardware_config import load_hardware_config
 from quadruped_drivers.i2c.fake_devices import build_fake_hardware
 from quadruped_drivers.vn100.fake import FakeVn100, PtyFakeVn100
-from quadruped_msgs.msg import ControllerState, ServoCommand
+from underwater_quadruped.msg import ControllerState, ServoCommand
 
 GRAVITY_UP = np.array([0.0, 0.0, 9.81])
 

@@ -37,7 +37,7 @@ from quadruped_common.node_startup import start_node
 from quadruped_control.model.params import load_robot_params
 from quadruped_control.ros.visualization import (Throttle, VisualizationError, foot_target_spheres,
                                              imu_orientation, unit_quaternion, visual_joint_state)
-from quadruped_msgs.msg import ControllerState
+from underwater_quadruped.msg import ControllerState
 
 #: Foot-target markers disappear this long after the controller stops publishing, s.
 MARKER_LIFETIME = 1.0

@@ -23,7 +23,7 @@ from std_srvs.srv import SetBool
 from quadruped_control.analysis.metrics import moving_average_centered
 from quadruped_drivers.hardware_config import load_hardware_config
 from geometry_msgs.msg import PoseStamped
-from quadruped_msgs.msg import ControllerState, ServoCommand
+from underwater_quadruped.msg import ControllerState, ServoCommand
 
 BAND = math.radians(6.0)
 

@@ -19,7 +19,7 @@ from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus
 from sensor_msgs.msg import Imu
 from std_srvs.srv import SetBool
 
-from quadruped_msgs.msg import ControllerState, ServoCommand
+from underwater_quadruped.msg import ControllerState, ServoCommand
 
 
 class ControllerSafetyTest(unittest.TestCase):

@@ -15,7 +15,7 @@ import rostest
 
 from quadruped_common.robot import JOINT_NAMES
 from quadruped_drivers.hardware_config import load_hardware_config
-from quadruped_msgs.msg import ServoCommand
+from underwater_quadruped.msg import ServoCommand
 
 TICK_US = 1e6 / 50.0 / 4096  # one PCA9685 count at 50 Hz: the resolution of a pulse width
 

@@ -15,19 +15,25 @@ from rosbags.rosbag1 import Writer  # noqa: E402
 from rosbags.typesys import Stores, get_types_from_msg, get_typestore  # noqa: E402
 
 MSG_DIR = os.path.join(REPO_ROOT, "quadruped_msgs", "msg")
-STATE_TYPE = "quadruped_msgs/msg/ControllerState"
+STATE_TYPE = "underwater_quadruped/msg/ControllerState"
 
 
-def typestore():
+#: the type name of bags recorded before the messages became the root package's (nested package
+#: quadruped_msgs): the report reads the definitions stored in the bag, so it reads those bags too
+OLD_STATE_TYPE = "quadruped_msgs/msg/ControllerState"
+
+
+def typestore(state_type=STATE_TYPE):
     store = get_typestore(Stores.ROS1_NOETIC)
     with open(os.path.join(MSG_DIR, "ControllerState.msg")) as f:
-        store.register(get_types_from_msg(f.read(), STATE_TYPE))
+        store.register(get_types_from_msg(f.read(), state_type))
     return store
 
 
-def write_bag(path, duration=60.0, armed=True, roll_final=math.radians(30.0), tau=3.0):
+def write_bag(path, duration=60.0, armed=True, roll_final=math.radians(30.0), tau=3.0, state_type=STATE_TYPE):
     """A first-order roll response to a 30 deg setpoint commanded at t = 5 s, IMU at 100 Hz."""
-    store = typestore()
+    STATE_TYPE = state_type  # noqa: N806 (the message type this bag records /controller_state as)
+    store = typestore(state_type)
     Header = store.types["std_msgs/msg/Header"]
     Time = store.types["builtin_interfaces/msg/Time"]
     Quaternion = store.types["geometry_msgs/msg/Quaternion"]
@@ -71,9 +77,10 @@ def write_bag(path, duration=60.0, armed=True, roll_final=math.radians(30.0), ta
                                                               DiagnosticArray.__msgtype__))
 
 
-def test_report_of_first_order_roll_step(tmp_path):
+@pytest.mark.parametrize("state_type", [STATE_TYPE, OLD_STATE_TYPE])
+def test_report_of_first_order_roll_step(tmp_path, state_type):
     bag = str(tmp_path / "run.bag")
-    write_bag(bag)
+    write_bag(bag, state_type=state_type)
     metrics = analyse(read_bags([bag]))
     assert metrics["setpoint_rpy_deg"][0] == pytest.approx(30.0, abs=1e-6)
     assert metrics["theta_init_deg"] == pytest.approx(30.0, abs=0.5)
