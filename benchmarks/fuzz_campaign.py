@@ -8,8 +8,8 @@
 
 Each part is a function in :data:`PARTS` returning (figures, failures); the script exits 1 if any part
 reports a failure. The code under test is the drivers' own (pure core, register-level fakes);
-the campaign logic lives in ``quadruped_drivers/vn100/fuzz.py`` and ``quadruped_drivers/i2c/fault_scenarios.py``
-so the tests (``tests/test_fault_campaigns.py``) run the same code at a CI-sized count.
+the campaign logic lives in ``quadruped_drivers/vn100/fuzz.py`` and ``quadruped_drivers/fault_scenarios.py``
+so the tests (``tests/drivers/test_fault_scenarios.py``) run the same code at a CI-sized count.
 """
 from __future__ import annotations
 
@@ -38,8 +38,8 @@ from quadruped_control.control.supervisor import ControlSupervisor  # noqa: E402
 from quadruped_control.model.params import load_robot_params  # noqa: E402
 from quadruped_control.sim.config_files import LOADERS  # noqa: E402
 from quadruped_drivers.calibration import load_servo_calibration  # noqa: E402
+from quadruped_drivers.fault_scenarios import PERIOD, failsafe_latency, faulty_cycles  # noqa: E402
 from quadruped_drivers.hardware_config import load_hardware_config  # noqa: E402
-from quadruped_drivers.i2c.fault_scenarios import PERIOD, failsafe_latency, faulty_cycles  # noqa: E402
 from quadruped_drivers.vn100 import fuzz  # noqa: E402
 
 Result = Tuple[Dict[str, object], List[str]]

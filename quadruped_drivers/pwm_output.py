@@ -6,7 +6,7 @@ last line of defence before the servos: every pulse is clamped into its channel'
 non-finite commands never reach the chip, and a silent controller trips a watchdog that applies each
 channel's failsafe (hold | neutral | off).
 
-Register-level rather than adafruit-circuitpython-pca9685 3.4 (``/work/shared/DESIGN.md``): its
+Register-level rather than adafruit-circuitpython-pca9685 3.4 (``docs/hardware_libraries.md``): its
 constructor's ``reset()`` writes MODE1 = 0, which wakes the oscillator with whatever prescale and LED
 registers survived a process restart and clears auto-increment; its ``deinit()`` does not stop the
 outputs; its register buffers are class-level (shared by all instances, not thread-safe); and it

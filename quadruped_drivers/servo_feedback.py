@@ -10,7 +10,7 @@ input at 860 SPS, address pointer left on the conversion register), so a cycle r
 conversion registers (one plain read transaction each), and the mux control register is written only
 when the channel changes (a cycle starts on the channel still selected from the previous one).
 
-Why not adafruit-circuitpython-ads1x15 3.0 / -tca9548a 0.7 (``/work/shared/DESIGN.md``):
+Why not adafruit-circuitpython-ads1x15 3.0 / -tca9548a 0.7 (``docs/hardware_libraries.md``):
 
 * ads1x15 3.0 in continuous mode ignores a change of the requested channel once it has read a pin
   and its "fast" read path reads without setting the pointer, so after a config access (mode switch,

@@ -36,6 +36,13 @@ else
   echo "catkin_lint: SKIPPED: not installed (scripts/setup.sh installs Debian's catkin-lint; pip install catkin-lint)"
 fi
 
+echo "== import-linter: the floors of the code base (.importlinter) =="
+if command -v lint-imports >/dev/null; then
+  run_step lint_imports lint-imports --no-cache --no-logo
+else
+  echo "lint-imports: SKIPPED: not installed (requirements.txt pins import-linter)"
+fi
+
 echo "== pure core under Python 3.8 with requirements-jetson.txt =="
 run_step python38 bash tests/python38.sh
 
@@ -124,6 +131,6 @@ print(tests - bad - skipped, bad)
 PYEOF
 )
 echo "rostest: $rostest_passed passed, $rostest_failed failed"
-echo "steps (catkin_lint, python38, install_space): $steps_passed passed, $steps_failed failed"
+echo "steps (catkin_lint, lint_imports, python38, install_space): $steps_passed passed, $steps_failed failed"
 echo "$((py_passed + rostest_passed + steps_passed)) passed, $((py_failed + rostest_failed + steps_failed)) failed"
 [ "$failures" -eq 0 ]

@@ -3,7 +3,6 @@ from __future__ import annotations
 
 import csv
 import json
-import math
 import os
 import subprocess
 import sys
@@ -67,19 +66,6 @@ def test_bad_arguments_exit_with_usage_error(tmp_path) -> None:
         simulate.main(["--gains", "magic"])
     with pytest.raises(SystemExit):
         simulate.main(["--rpy", "nan", "0", "0", "--out", str(tmp_path)])
-
-
-def test_paper_sim_study_short_runs_in_parallel_and_writes_study(tmp_path) -> None:
-    out = str(tmp_path / "study")
-    code = simulate.main(["--study", "paper-sim", "--duration", "2", "--out", out, "--quiet", "--jobs", "2"])
-    assert code == 2  # 2 s trials cannot satisfy the 30 s settling criterion: reported, not hidden
-    with open(os.path.join(out, "study.json")) as stream:
-        study = json.load(stream)
-    assert [t["setpoint_rpy_deg"] for t in study["trials"]] == [[15.0] * 3, [45.0] * 3, [75.0] * 3]
-    assert all(t["gains"] == "simulation" and t["info"]["servo_model"] == "ideal" for t in study["trials"])
-    assert study["all_settled"] is False
-    assert os.path.getsize(os.path.join(out, "paper_sim.png")) > 0
-    assert os.path.exists(os.path.join(out, "trial_45", "timeseries.csv"))
 
 
 def test_module_runs_as_a_script_without_ros(tmp_path) -> None:
@@ -168,24 +154,3 @@ def test_tank_plant_controller_off_and_com_columns(tmp_path) -> None:
     assert info["plant"] == "tank" and info["controller"] == "off"
     with pytest.raises(SystemExit):
         simulate.main(["--plant", "tank", "--restoring-offset", "0", "0", "0.01", "--out", out])
-
-
-def test_schemes_study_runs_both_schemes_and_writes_the_comparison(tmp_path) -> None:
-    """`--study schemes` on the paper-sim group only (3 cases x 2 schemes, simulation gains, ideal servos):
-    both schemes per case, the comparison table, figure and JSON; exit 0 or 2 (targets met or not)."""
-    out = str(tmp_path / "schemes")
-    code = simulate.main(["--study", "schemes", "--scheme-groups", "paper-sim", "--scheme-gains", "simulation",
-                          "--scheme-servos", "ideal", "--perturbed", "0", "--out", out, "--quiet", "--jobs", "2"])
-    assert code in (0, 2)
-    with open(os.path.join(out, "schemes.json")) as stream:
-        result = json.load(stream)
-    rows = result["rows"]
-    assert result["trials"] == len(rows) == 6
-    assert sorted({r["scheme"] for r in rows}) == ["coordinated", "paper"]
-    assert sorted({r["case"] for r in rows}) == ["sim 15", "sim 45", "sim 75"]
-    for row in rows:
-        assert 0.0 <= row["power_fraction"] <= 1.0 and math.isfinite(row["worst_last_30s"])
-    assert set(result["groups"]["all"]) >= {"paper", "coordinated"}
-    assert result["all_met"] == all(result["targets"].values()) and code == (0 if result["all_met"] else 2)
-    assert os.path.getsize(os.path.join(out, "schemes.png")) > 0
-    assert "| group |" in open(os.path.join(out, "schemes.md")).read()

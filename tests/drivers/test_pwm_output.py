@@ -310,7 +310,7 @@ def test_neutral_failsafe_never_moves_an_uncommanded_servo():
 
 @pytest.mark.parametrize("failsafe", ["neutral", "off", "hold"])
 def test_watchdog_fires_within_its_timeout_even_with_bus_errors(failsafe):
-    from quadruped_drivers.i2c.fault_scenarios import failsafe_latency
+    from quadruped_drivers.fault_scenarios import failsafe_latency
     latencies = [failsafe_latency(HW, failsafe, rate, seed) for rate in (0.0, 0.1, 0.3, 0.5) for seed in range(25)]
     assert max(latencies) <= HW.watchdog_timeout + 0.01 + 1e-9, max(latencies)
     without_errors = [failsafe_latency(HW, failsafe, 0.0, seed) for seed in range(10)]

@@ -8,7 +8,7 @@ import pytest
 
 from quadruped_common import config as common
 from quadruped_common.config import ParameterError, load_yaml, config_path
-from quadruped_common.robot import JOINT_NAMES, LEGS, joint_index
+from quadruped_common.robot import LEGS
 from quadruped_control.model.params import load_robot_params, robot_params_from_dict
 
 
@@ -52,14 +52,6 @@ def test_nominal_foot_is_mirrored_per_leg():
     p = load_robot_params()
     for leg in LEGS:
         np.testing.assert_allclose(p.nominal_foot_body(leg), p.leg_origins[leg] + p.mirror[leg] @ p.nominal_foot_leg)
-
-
-def test_joint_names_and_indices():
-    assert len(JOINT_NAMES) == 12
-    assert JOINT_NAMES[joint_index(3, 2)] == "leg3_motor2"
-    assert JOINT_NAMES[joint_index(1, 3)] == "leg1_hip"
-    with pytest.raises(ValueError):
-        joint_index(5, 1)
 
 
 @pytest.mark.parametrize("mutate, message", [

@@ -8,7 +8,7 @@ import os
 import numpy as np
 import pytest
 
-from quadruped_common.so3 import geodesic_angle, rot_to_rpy, rpy_to_rot
+from quadruped_common.so3 import geodesic_angle, rpy_to_rot
 from quadruped_control import simulate
 from quadruped_control.studies import paper_experiments as pe
 

@@ -275,7 +275,7 @@ def test_adafruit_drivers_run_unchanged_against_the_fakes():
 
 
 def test_adafruit_tca9548a_deselect_failure_leaves_the_bus_locked():
-    """The DESIGN.md defect our feedback driver avoids (see test_servo_feedback)."""
+    """The library defect our feedback driver avoids (docs/hardware_libraries.md) (see test_servo_feedback)."""
     import adafruit_tca9548a
     bus = FakeI2CBus()
     mux = bus.attach(0x71, FakeTca9548a())

@@ -2,8 +2,8 @@
 import pytest
 
 from quadruped_drivers.calibration import load_servo_calibration
+from quadruped_drivers.fault_scenarios import FAULTS, faulty_cycles
 from quadruped_drivers.hardware_config import load_hardware_config
-from quadruped_drivers.i2c.fault_scenarios import FAULTS, faulty_cycles
 from quadruped_drivers.vn100 import fuzz
 
 MUST_BE_ZERO_VN100 = ("crashes", "hangs", "nan_outputs", "implausible_published", "bad_offsets")

@@ -1,0 +1,34 @@
+"""quadruped_common.robot: leg numbering, joint names and order, mirror table, joint limits."""
+import math
+
+import pytest
+
+from quadruped_common.config import ParameterError
+from quadruped_common.robot import JOINT_NAMES, LEGS, MIRROR_DIAG, joint_index, joint_limits_from_dict, load_joint_limits
+
+
+def test_joint_names_and_indices():
+    assert len(JOINT_NAMES) == 12
+    assert JOINT_NAMES[joint_index(3, 2)] == "leg3_motor2"
+    assert JOINT_NAMES[joint_index(1, 3)] == "leg1_hip"
+    with pytest.raises(ValueError):
+        joint_index(5, 1)
+
+
+def test_every_leg_has_a_mirror_and_three_joints():
+    assert LEGS == (1, 2, 3, 4) and sorted(MIRROR_DIAG) == list(LEGS)
+    assert [JOINT_NAMES[joint_index(leg, 3)] for leg in LEGS] == ["leg%d_hip" % leg for leg in LEGS]
+
+
+def test_joint_limits_of_the_package_config_are_in_radians():
+    limits = load_joint_limits()
+    assert limits.as_array().shape == (3, 2)
+    assert limits.theta3 == pytest.approx((0.0, math.pi))  # config/robot.yaml: [0, 180] degrees
+
+
+@pytest.mark.parametrize("theta1, message", [([10.0, -10.0], "low < high"), ([-200.0, 200.0], "more than 360"),
+                                             ([0.0], "theta1")])
+def test_bad_joint_limits_name_the_key(theta1, message):
+    tree = {"joint_limits_deg": {"theta1": theta1, "theta2": [-130.0, 50.0], "theta3": [0.0, 180.0]}}
+    with pytest.raises(ParameterError, match=message):
+        joint_limits_from_dict(tree)
