@@ -32,7 +32,7 @@ class ImplausibleSample(ValueError):
     """A sample that cannot come from a working IMU (non-finite, non-unit quaternion, out of range).
 
     ``reason`` is a short, stable key for counters and diagnostics: ``non-finite``,
-    ``quaternion norm``, ``angular rate range``, ``acceleration range``.
+    ``quaternion norm``, ``angular rate range``, ``acceleration range``, ``angular acceleration``.
     """
 
     def __init__(self, reason: str, message: str) -> None:
@@ -40,21 +40,37 @@ class ImplausibleSample(ValueError):
         self.reason = reason
 
 
+#: Largest plausible angular acceleration of the body, rad/s^2, and the noise allowance on a rate change,
+#: rad/s (defaults of :class:`SensorLimits`; config/vn100.yaml says why).
+MAX_ANGULAR_ACCELERATION = 200.0
+RATE_CHANGE_MARGIN = 0.1
+
+
 @dataclass(frozen=True)
 class SensorLimits:
     """Plausibility bounds of one sample: ``|component| <= max_angular_rate`` (rad/s) and
-    ``<= max_acceleration`` (m/s^2), quaternion norm within ``unit_tolerance`` of 1."""
+    ``<= max_acceleration`` (m/s^2), quaternion norm within ``unit_tolerance`` of 1; and across samples
+    (:class:`RateChangeCheck`): the rate changes by at most ``max_angular_acceleration`` (rad/s^2) x the
+    time between samples + ``rate_change_margin`` (rad/s), unless ``rate_change_confirm`` consecutive
+    samples agree."""
 
     max_angular_rate: float = GYRO_RANGE_RAD_S
     max_acceleration: float = ACCEL_RANGE_M_S2
     unit_tolerance: float = UNIT_TOLERANCE
+    max_angular_acceleration: float = MAX_ANGULAR_ACCELERATION
+    rate_change_margin: float = RATE_CHANGE_MARGIN
+    rate_change_confirm: int = 3
 
     def __post_init__(self) -> None:
-        for name in ("max_angular_rate", "max_acceleration", "unit_tolerance"):
+        for name in ("max_angular_rate", "max_acceleration", "unit_tolerance", "max_angular_acceleration",
+                     "rate_change_margin"):
             value = getattr(self, name)
             if isinstance(value, bool) or not isinstance(value, (int, float)) or not (
                     math.isfinite(value) and value > 0):
                 raise ValueError("SensorLimits.%s must be a positive finite number, got %r" % (name, value))
+        confirm = self.rate_change_confirm
+        if isinstance(confirm, bool) or not isinstance(confirm, int) or confirm < 1:
+            raise ValueError("SensorLimits.rate_change_confirm must be an integer >= 1, got %r" % (confirm,))
 
 
 DEFAULT_LIMITS = SensorLimits()
@@ -96,3 +112,56 @@ def check_sample(quaternion_xyzw: ArrayLike, angular_rate: ArrayLike, accelerati
     if acceleration is None:
         return q, rate, None
     return q, rate, bounded_vector3(acceleration, "acceleration", limits.max_acceleration, "acceleration range")
+
+
+class RateChangeCheck:
+    """Physical-rate plausibility across samples: a rate inside the gyro's range can still be impossible.
+
+    The body's angular rate cannot change faster than ``limits.max_angular_acceleration``: a sample whose
+    rate differs from the last accepted one by more than max_angular_acceleration x (t - t_last) +
+    ``limits.rate_change_margin`` (largest component) raises :class:`ImplausibleSample` ("angular
+    acceleration"), e.g. a one-sample spike from a corrupted packet that passed the CRC. So that a real,
+    violent change (a knock against the tank wall) cannot lock the check out, ``limits.rate_change_confirm``
+    consecutive samples that agree with each other within the same bound are accepted (``confirmed``
+    counts those). Times are the samples' own stamps (s); a sample without a finite stamp, or older than
+    the last accepted one, is not judged (and does not move the reference). One instance per stream.
+    """
+
+    def __init__(self, limits: SensorLimits = DEFAULT_LIMITS) -> None:
+        self.limits = limits
+        self.confirmed = 0
+        self._rate: Optional[np.ndarray] = None
+        self._time = -math.inf
+        self._run = 0
+        self._run_rate = np.zeros(3)
+        self._run_time = -math.inf
+
+    def reset(self) -> None:
+        """Forget the stream (e.g. after a reconnect): the next sample is accepted as the reference."""
+        self._rate, self._time, self._run = None, -math.inf, 0
+
+    def _agrees(self, rate: np.ndarray, reference: np.ndarray, elapsed: float) -> bool:
+        allowed = self.limits.max_angular_acceleration * elapsed + self.limits.rate_change_margin
+        return float(np.max(np.abs(rate - reference))) <= allowed
+
+    def check(self, stamp: float, angular_rate: ArrayLike) -> None:
+        """Accept ``angular_rate`` (rad/s) taken at ``stamp`` (s), or raise ImplausibleSample."""
+        rate = np.asarray(angular_rate, dtype=float).reshape(3)
+        if not (math.isfinite(stamp) and stamp >= self._time):
+            return
+        if self._rate is None or self._agrees(rate, self._rate, stamp - self._time):
+            self._rate, self._time, self._run = rate, stamp, 0
+            return
+        if self._run > 0 and self._agrees(rate, self._run_rate, stamp - self._run_time):
+            self._run += 1
+        else:
+            self._run = 1
+        self._run_rate, self._run_time = rate, stamp
+        if self._run >= self.limits.rate_change_confirm:
+            self.confirmed += 1
+            self._rate, self._time, self._run = rate, stamp, 0
+            return
+        change = float(np.max(np.abs(rate - self._rate)))
+        raise ImplausibleSample("angular acceleration",
+                                "angular rate changed by %.4g rad/s in %.4g s (more than %.4g rad/s^2 allows)"
+                                % (change, stamp - self._time, self.limits.max_angular_acceleration))

@@ -13,7 +13,7 @@ from typing import Any, Dict, Mapping, Optional, Tuple
 
 import numpy as np
 
-from quadruped_common.config import ParameterError, load_config, lookup, vector
+from quadruped_common.config import ParameterError, load_config, lookup, number, vector
 
 LEGS: Tuple[int, ...] = (1, 2, 3, 4)
 """Leg numbers as in the paper."""
@@ -71,3 +71,15 @@ def joint_limits_from_dict(tree: Mapping[str, Any]) -> JointLimits:
 def load_joint_limits(path: Optional[str] = None) -> JointLimits:
     """The joint limits of ``robot.yaml`` (default: the package's ``config/robot.yaml``)."""
     return load_config(path, "robot.yaml", joint_limits_from_dict)
+
+
+def servo_no_load_speed_from_dict(tree: Mapping[str, Any]) -> float:
+    """``servo.no_load_speed_rpm`` of a parsed ``robot.yaml`` in rad/s: the fastest a servo can turn (the
+    simulated servos' rate limit, and the drivers' bound on how far a joint can move between readings)."""
+    rpm = number(lookup(tree, "servo.no_load_speed_rpm"), "servo.no_load_speed_rpm", 0.0, 10000.0, low_open=True)
+    return rpm * 2.0 * math.pi / 60.0
+
+
+def load_servo_no_load_speed(path: Optional[str] = None) -> float:
+    """The servos' no-load speed (rad/s) of ``robot.yaml`` (default: the package's ``config/robot.yaml``)."""
+    return load_config(path, "robot.yaml", servo_no_load_speed_from_dict)

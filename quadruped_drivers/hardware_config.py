@@ -71,6 +71,10 @@ class HardwareConfig:
     joints: Tuple[JointHardware, ...]
     #: Feedback outside the angles of a joint's pulse limits by more than this (deg) is not plausible.
     adc_plausible_margin_deg: float = 15.0
+    #: Feedback further from the joint's last good angle than no-load speed x elapsed time + this (deg)
+    #: is not plausible (a servo cannot move faster), unless ``adc_jump_confirm_readings`` readings agree.
+    adc_jump_margin_deg: float = 3.0
+    adc_jump_confirm_readings: int = 3
 
     @property
     def pwm_channels(self) -> np.ndarray:
@@ -227,6 +231,8 @@ def hardware_config_from_dict(tree: Mapping[str, Any]) -> HardwareConfig:
         failed_after=failed_after,
         joints=tuple(joints),
         adc_plausible_margin_deg=_float(tree, "adc.plausible_margin_deg", 0.0, 90.0),
+        adc_jump_margin_deg=_float(tree, "adc.jump_margin_deg", 0.0, 90.0),
+        adc_jump_confirm_readings=_int(tree, "adc.jump_confirm_readings", 1, 100),
     )
 
 

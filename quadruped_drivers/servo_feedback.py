@@ -83,8 +83,8 @@ class FeedbackReading:
     ``failed_after`` has passed since :meth:`ServoFeedbackArray.start`). ``age``: seconds since each
     joint's last good sample (inf if none). ``error_counts``: cumulative failed ADC transactions per
     joint; ``mux_errors``: cumulative failed or unverified mux switches. ``implausible``: joints whose
-    code was read this cycle but lies outside their plausible range (``volts`` holds it, ``angles``
-    is NaN, ``valid`` False).
+    code was read this cycle but lies outside their plausible range, or further from their last good
+    angle than the servo can move (``volts`` holds it, ``angles`` is NaN, ``valid`` False).
     """
 
     stamp: float
@@ -106,10 +106,19 @@ class ServoFeedbackArray:
     ``bus`` is any bus object (fake, bridged or real), ``calibration`` a
     :class:`~quadruped_drivers.calibration.ServoCalibration` (volts -> angle), ``clock`` the time source
     (inject one in tests). One thread owns the instance.
+
+    ``max_joint_speed`` (rad/s; the servos' no-load speed, ``quadruped_common.robot.load_servo_no_load_speed``)
+    turns on the physical-rate check: a reading further from the joint's last good angle than
+    ``max_joint_speed`` x the time since it + ``adc.jump_margin_deg`` is implausible (stale, counted in
+    ``jump_counts``, its ADC config checked next) until ``adc.jump_confirm_readings`` consecutive readings
+    agree with each other within the same bound; then the new angle is taken (``jumps_accepted``). None:
+    no rate check (a calibration sweep, tests that set voltages freely).
     """
 
     def __init__(self, bus: Any, hardware_config: HardwareConfig, calibration: Any,
-                 clock: Callable[[], float] = time.monotonic) -> None:
+                 clock: Callable[[], float] = time.monotonic, max_joint_speed: Optional[float] = None) -> None:
+        if max_joint_speed is not None and not (math.isfinite(max_joint_speed) and max_joint_speed > 0.0):
+            raise ValueError("max_joint_speed must be a positive number of rad/s, got %r" % (max_joint_speed,))
         self._bus = bus
         self._config = hardware_config
         self._calibration = calibration
@@ -130,6 +139,14 @@ class ServoFeedbackArray:
         self._error_counts = np.zeros(self._count, dtype=int)
         self._low, self._high = plausible_angle_range(hardware_config, calibration)
         self._implausible_counts = np.zeros(self._count, dtype=int)
+        self._max_speed = max_joint_speed
+        self._jump_margin = math.radians(hardware_config.adc_jump_margin_deg)
+        self._jump_counts = np.zeros(self._count, dtype=int)
+        self._jumps_accepted = np.zeros(self._count, dtype=int)
+        # The run of disagreeing readings of each joint: its latest angle and time, and its length.
+        self._jump_angle = np.full(self._count, np.nan)
+        self._jump_time = np.full(self._count, -np.inf)
+        self._jump_run = np.zeros(self._count, dtype=int)
         self._config_losses = np.zeros(self._count, dtype=int)
         self._next_check = 0  # the joint whose ADC config is read back next (rotating)
         self._suspects: Set[int] = set()  # joints to check first (implausible code last cycle)
@@ -155,6 +172,16 @@ class ServoFeedbackArray:
     def implausible_counts(self) -> np.ndarray:
         """Codes outside each joint's plausible range, cumulative (copy)."""
         return self._implausible_counts.copy()
+
+    @property
+    def jump_counts(self) -> np.ndarray:
+        """Readings further from the last good angle than the servo can move, cumulative (copy)."""
+        return self._jump_counts.copy()
+
+    @property
+    def jumps_accepted(self) -> np.ndarray:
+        """Jumps taken as the new angle after ``adc.jump_confirm_readings`` agreeing readings (copy)."""
+        return self._jumps_accepted.copy()
 
     @property
     def config_losses(self) -> np.ndarray:
@@ -316,6 +343,31 @@ class ServoFeedbackArray:
                 except OSError:
                     self._mark_error(index)
 
+    def _within_reach(self, angle: float, reference: float, since: float) -> bool:
+        return abs(angle - reference) <= self._max_speed * since + self._jump_margin  # type: ignore[operator]
+
+    def _check_rates(self, now: float, angles: np.ndarray, valid: np.ndarray) -> None:
+        """Physical-rate check (class docstring); clears ``valid`` and ``angles`` of implausible jumps."""
+        for index in np.flatnonzero(valid):
+            angle, last = float(angles[index]), float(self._last_angle[index])
+            if not math.isfinite(last) or self._within_reach(angle, last, now - self._last_good[index]):
+                self._jump_run[index] = 0
+                continue
+            if self._jump_run[index] > 0 and self._within_reach(angle, float(self._jump_angle[index]),
+                                                               now - self._jump_time[index]):
+                self._jump_run[index] += 1
+            else:
+                self._jump_run[index] = 1
+            self._jump_angle[index], self._jump_time[index] = angle, now
+            if self._jump_run[index] >= self._config.adc_jump_confirm_readings:
+                self._jump_run[index] = 0
+                self._jumps_accepted[index] += 1
+                continue
+            self._jump_counts[index] += 1
+            self._suspects.add(int(index))
+            valid[index] = False
+            angles[index] = np.nan
+
     def _assemble(self, codes: np.ndarray) -> FeedbackReading:
         now = self._clock()
         valid = np.isfinite(codes)
@@ -330,6 +382,8 @@ class ServoFeedbackArray:
             self._suspects.update(int(i) for i in np.flatnonzero(implausible))
             valid = valid & plausible
             angles[valid] = all_angles[valid]
+            if self._max_speed is not None:
+                self._check_rates(now, angles, valid)
         self._last_good[valid] = now
         self._last_angle[valid] = angles[valid]
         age = now - self._last_good

@@ -4,11 +4,13 @@ Publishes
   joint_states   sensor_msgs/JointState  names from the URDF (JOINT_NAMES), positions in rad (the paper's
                  joint angles; NaN for a joint whose ADC did not answer this cycle), velocities from a
                  low-pass filtered finite difference
-  diagnostics    stale / failed / implausible joints, per-joint I2C error, implausible-code and lost-config
-                 counters, mux errors and mux read-back mismatches, read time
+  diagnostics    stale / failed / implausible joints, per-joint I2C error, implausible-code, implausible-jump
+                 and lost-config counters, mux errors and mux read-back mismatches, read time
 Parameters
   ~backend (real | sim)  ~bus_socket  ~hardware_yaml  ~calibration_yaml  ~rate (100 Hz)
   ~velocity_time_constant (0.03 s)  ~frame_id ("")
+  ~robot_yaml (the servos' no-load speed)  ~joint_rate_check (true: a reading further from the last good
+  angle than the servo can move is stale; false for servos without that limit, e.g. simulated instant ones)
 
 Reading, mux handling and read-back, ADC config checks, plausibility, stale/failed bookkeeping and
 the volts-to-angle map are the driver's
@@ -27,7 +29,7 @@ from sensor_msgs.msg import JointState
 from quadruped_common.config import ParameterError
 from quadruped_common.monitoring import LowPassDifferentiator, RateMonitor, WindowStatistics
 from quadruped_common.node_startup import start_node
-from quadruped_common.robot import JOINT_NAMES
+from quadruped_common.robot import JOINT_NAMES, load_servo_no_load_speed
 from quadruped_drivers.calibration import load_servo_calibration
 from quadruped_drivers.hardware_config import load_hardware_config
 from quadruped_drivers.node_support import open_bus
@@ -40,7 +42,10 @@ class ServoFeedbackNode:
         calibration = load_servo_calibration(rospy.get_param("~calibration_yaml", "") or None)
         backend = rospy.get_param("~backend", "real")
         bus = open_bus(backend, hardware.i2c_bus, rospy.get_param("~bus_socket", "/tmp/uq_sim_i2c.sock"))
-        self.array = ServoFeedbackArray(bus, hardware, calibration)
+        max_speed = None
+        if bool(rospy.get_param("~joint_rate_check", True)):
+            max_speed = load_servo_no_load_speed(rospy.get_param("~robot_yaml", "") or None)
+        self.array = ServoFeedbackArray(bus, hardware, calibration, max_joint_speed=max_speed)
         self.frame_id = rospy.get_param("~frame_id", "")
         self.differentiator = LowPassDifferentiator(len(JOINT_NAMES),
                                                     float(rospy.get_param("~velocity_time_constant", 0.03)))
@@ -108,10 +113,13 @@ class ServoFeedbackNode:
         stat.add("mux errors", str(reading.mux_errors))
         stat.add("mux read-back mismatches", str(self.array.mux_mismatches))
         implausible = self.array.implausible_counts
+        jumps, accepted = self.array.jump_counts, self.array.jumps_accepted
         losses = self.array.config_losses
         for i, name in enumerate(JOINT_NAMES):
             stat.add("%s I2C errors" % name, str(int(reading.error_counts[i])))
             stat.add("%s implausible codes" % name, str(int(implausible[i])))
+            stat.add("%s implausible jumps" % name, str(int(jumps[i])))
+            stat.add("%s jumps accepted" % name, str(int(accepted[i])))
             stat.add("%s ADC config lost" % name, str(int(losses[i])))
         return stat
 

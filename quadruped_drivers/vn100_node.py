@@ -32,10 +32,9 @@ from sensor_msgs.msg import Imu
 
 from quadruped_common.monitoring import RateMonitor
 from quadruped_common.node_startup import start_node
-from quadruped_drivers.vn100.conversions import SensorLimits
 from quadruped_drivers.vn100.driver import Vn100Driver, serial_port_factory
 from quadruped_drivers.vn100.sample_gate import DROP_REASONS, TIME_ANOMALY, SampleGate
-from quadruped_drivers.vn100.settings import VN100_KEYS, load_vn100_settings
+from quadruped_drivers.vn100.settings import VN100_KEYS, load_vn100_settings, sensor_limits
 
 
 def _diagonal(values: Sequence[float]) -> List[float]:
@@ -51,9 +50,11 @@ class Vn100Node:
         # Every value checked against the vn100.yaml schema (quadruped_drivers/vn100/settings.py); a
         # ~param overrides the file's value of the same name (~rate overrides rate_hz).
         overrides = {name: rospy.get_param("~" + name) for name in VN100_KEYS if rospy.has_param("~" + name)}
+        names = {}
         if rospy.has_param("~rate"):
             overrides["rate_hz"] = rospy.get_param("~rate")
-        settings = load_vn100_settings(rospy.get_param("~config_yaml", "") or None, overrides)
+            names["rate_hz"] = "~rate"
+        settings = load_vn100_settings(rospy.get_param("~config_yaml", "") or None, overrides, names)
 
         def param(name: str):
             return settings[name]
@@ -70,10 +71,7 @@ class Vn100Node:
                                   reconnect_interval=float(param("reconnect_interval")),
                                   command_timeout=float(param("command_timeout")),
                                   stale_timeout=float(param("stale_timeout")))
-        self.gate = SampleGate(SensorLimits(max_angular_rate=float(param("max_angular_rate")),
-                                            max_acceleration=float(param("max_acceleration")),
-                                            unit_tolerance=float(param("quaternion_norm_tolerance"))),
-                               max_backdate=float(param("stale_timeout")))
+        self.gate = SampleGate(sensor_limits(settings), max_backdate=float(param("stale_timeout")))
         self.publisher = rospy.Publisher("imu/data", Imu, queue_size=10, tcp_nodelay=True)
         self.monitor = RateMonitor(2.0)
         self.published = 0
@@ -117,7 +115,7 @@ class Vn100Node:
             return
         arrival = rospy.Time.now()
         dropped = self.gate.dropped
-        for reading, age in self.gate.process(samples):
+        for reading, age in self.gate.process(samples, arrival.to_sec()):
             self._publish(reading, arrival - rospy.Duration.from_sec(age))
         if self.gate.dropped != dropped:
             rospy.logwarn_throttle(1.0, "vn100_node: sample dropped: %s" % self.gate.last_drop)

@@ -35,7 +35,7 @@ from typing import Callable, Dict, Optional, Sequence
 
 import numpy as np
 
-from quadruped_common.imu_plausibility import ImplausibleSample, SensorLimits, check_sample
+from quadruped_common.imu_plausibility import ImplausibleSample, RateChangeCheck, SensorLimits, check_sample
 from quadruped_common.monitoring import time_problem
 from quadruped_common.so3 import quat_to_rot
 from quadruped_control.control.controller import AttitudeController, ControllerOutput, estimate_body_torque
@@ -93,6 +93,7 @@ class ControlSupervisor:
         self.pulse_map = pulse_map
         self.max_imu_age = float(max_imu_age)
         self.imu_limits = imu_limits or SensorLimits()
+        self._rate_check = RateChangeCheck(self.imu_limits)
         self.max_implausible_run = max_implausible_run
         self.max_joint_age = float(max_joint_age)
         limits = controller.robot.joint_limits.as_array()  # rows theta1..3, columns low, high
@@ -132,12 +133,21 @@ class ControlSupervisor:
                 stamp: float, linear_acceleration: Optional[Sequence[float]] = None) -> Optional[str]:
         """Check an IMU sample's values and store it, or drop and count it; returns the reason for a drop.
 
+        The checks: the sensor's ranges (:func:`~quadruped_common.imu_plausibility.check_sample`) and the
+        physical rate, how fast the body's rate can change between stamps
+        (:class:`~quadruped_common.imu_plausibility.RateChangeCheck`).
+
         Freshness is checked at each tick instead (a stale sample is a property of time, not of the
         message).
         """
         self.imu_received += 1
         try:
-            check_sample(orientation_xyzw, angular_velocity, linear_acceleration, self.imu_limits)
+            stamp_value = float(stamp)
+        except (TypeError, ValueError, OverflowError):
+            stamp_value = math.nan  # never fresh (tick's time check); the rate change is not judged
+        try:
+            _, rate, _ = check_sample(orientation_xyzw, angular_velocity, linear_acceleration, self.imu_limits)
+            self._rate_check.check(stamp_value, rate)
         except (ImplausibleSample, ValueError, TypeError, OverflowError) as exc:
             reason = exc.reason if isinstance(exc, ImplausibleSample) else "malformed"
             problem = "implausible IMU sample (%s): %s" % (reason, exc)
@@ -147,10 +157,6 @@ class ControlSupervisor:
             self.last_imu_drop = problem
             return problem
         self.implausible_run = 0
-        try:
-            stamp_value = float(stamp)
-        except (TypeError, ValueError, OverflowError):
-            stamp_value = math.nan
         self._imu = ImuInput(np.array(orientation_xyzw, dtype=float),
                              np.array(angular_velocity, dtype=float), stamp_value)
         return None

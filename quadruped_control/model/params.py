@@ -18,7 +18,7 @@ from typing import Any, Dict, Mapping, Optional
 import numpy as np
 
 from quadruped_common.config import ParameterError, check_keys, load_config, lookup, number, vector
-from quadruped_common.robot import LEGS, MIRROR_DIAG, JointLimits, joint_limits_from_dict
+from quadruped_common.robot import LEGS, MIRROR_DIAG, JointLimits, joint_limits_from_dict, servo_no_load_speed_from_dict
 
 
 def _number(tree: Mapping[str, Any], dotted: str, low: float = -math.inf, high: float = math.inf,
@@ -142,8 +142,7 @@ def robot_params_from_dict(tree: Mapping[str, Any]) -> RobotParams:
         joint_limits=joint_limits_from_dict(tree),
         nominal_foot_leg=_vector(tree, "nominal_foot_leg", 3, -1.0, 1.0),
         servo_stall_torque=_number(tree, "servo.stall_torque", 0.0, 100.0, low_open=True),
-        servo_no_load_speed=_number(tree, "servo.no_load_speed_rpm", 0.0, 10000.0, low_open=True)
-        * 2.0 * math.pi / 60.0,
+        servo_no_load_speed=servo_no_load_speed_from_dict(tree),
         imu_mount_xyz=_imu_mount(tree, dims),
     )
 

@@ -45,7 +45,6 @@ from sensor_msgs.msg import Imu, JointState
 from std_srvs.srv import SetBool, SetBoolResponse
 
 from quadruped_common.config import ParameterError
-from quadruped_common.imu_plausibility import SensorLimits
 from quadruped_common.monitoring import STALE_IMU, HoldEpisodes, RateMonitor, WindowStatistics, hold_kind
 from quadruped_common.node_startup import start_node
 from quadruped_common.robot import JOINT_NAMES
@@ -56,7 +55,7 @@ from quadruped_control.control.supervisor import ControlSupervisor
 from quadruped_control.model.params import load_robot_params
 from quadruped_drivers.calibration import load_servo_calibration
 from quadruped_drivers.hardware_config import load_hardware_config
-from quadruped_drivers.vn100.settings import load_vn100_settings
+from quadruped_drivers.vn100.settings import load_vn100_settings, sensor_limits
 from underwater_quadruped.cfg import AttitudeControllerConfig
 from underwater_quadruped.msg import ControllerState, ServoCommand
 
@@ -102,8 +101,7 @@ class AttitudeControllerNode:
 
         # IMU plausibility: the sensor's ranges from vn100.yaml, the same values the driver checks.
         vn100 = load_vn100_settings(_optional_path("~vn100_yaml"))
-        imu_limits = SensorLimits(max_angular_rate=vn100["max_angular_rate"], max_acceleration=vn100["max_acceleration"],
-                                  unit_tolerance=vn100["quaternion_norm_tolerance"])
+        imu_limits = sensor_limits(vn100)
         self.config = self.config.replace(max_angular_rate=imu_limits.max_angular_rate)
         controller = AttitudeController(robot, self.config)
         roll, pitch, yaw = [math.radians(v) for v in rospy.get_param("~setpoint_rpy_deg", [0.0, 0.0, 0.0])]

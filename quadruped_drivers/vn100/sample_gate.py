@@ -9,6 +9,10 @@ A sample is dropped, and counted under its reason, when
   :class:`~quadruped_drivers.vn100.conversions.SensorLimits` (``non-finite``, ``quaternion norm``,
   ``angular rate range``, ``acceleration range``): a corrupted packet that passed the CRC by chance
   (1 in 65,536 corrupted packets) can carry any float32, e.g. 3.4e38 rad/s,
+* its angular rate differs from the last published one by more than the body can change it
+  (``angular acceleration``: :class:`~quadruped_common.imu_plausibility.RateChangeCheck`, judged on the
+  samples' dated arrival times when :meth:`SampleGate.process` is given the arrival time), e.g. a rate
+  spike inside the gyro's range,
 * anything else goes wrong while converting it (``internal error``; never raised: the reader thread
   and the good samples after it carry on).
 
@@ -22,13 +26,14 @@ from __future__ import annotations
 import math
 from typing import Dict, List, Optional, Sequence, Tuple
 
+from quadruped_common.imu_plausibility import RateChangeCheck
 from quadruped_drivers.vn100.conversions import (DEFAULT_LIMITS, ImplausibleSample, ImuReading, SensorLimits,
                                                  vn_to_ros)
 from quadruped_drivers.vn100.protocol import Vn100Sample
 
 #: Reasons a sample is dropped (counter keys), in diagnostics order.
 DROP_REASONS: Tuple[str, ...] = ("missing field", "non-finite", "quaternion norm", "angular rate range",
-                                 "acceleration range", "internal error")
+                                 "acceleration range", "angular acceleration", "internal error")
 #: Counter of samples whose sensor time could not date them (published with the arrival time).
 TIME_ANOMALY = "sensor time"
 
@@ -57,6 +62,7 @@ class SampleGate:
                 math.isfinite(max_backdate) and max_backdate >= 0):
             raise ValueError("max_backdate must be a finite number >= 0, got %r" % (max_backdate,))
         self.limits = limits
+        self.rate_check = RateChangeCheck(limits)
         self.max_backdate = float(max_backdate)
         self.counts: Dict[str, int] = {reason: 0 for reason in DROP_REASONS + (TIME_ANOMALY,)}
         self.accepted = 0
@@ -83,8 +89,11 @@ class SampleGate:
             self._drop("internal error", "%s: %s" % (type(exc).__name__, exc))
         return None
 
-    def process(self, samples: Sequence[Vn100Sample]) -> List[Tuple[ImuReading, float]]:
-        """(reading, seconds before arrival) for every publishable sample of one burst, in order."""
+    def process(self, samples: Sequence[Vn100Sample], arrival: Optional[float] = None) -> List[Tuple[ImuReading, float]]:
+        """(reading, seconds before arrival) for every publishable sample of one burst, in order.
+
+        ``arrival`` (s, the clock the node stamps with): with it, each sample's rate change is judged
+        against the previous published sample's at their dated times (``angular acceleration``)."""
         if not samples:
             return []
         last_ns = getattr(samples[-1], "time_startup_ns", None)
@@ -97,6 +106,12 @@ class SampleGate:
             if offset is None:
                 self.counts[TIME_ANOMALY] += 1
                 offset = 0.0
+            if arrival is not None:
+                try:
+                    self.rate_check.check(arrival - offset, reading.angular_velocity)
+                except ImplausibleSample as exc:
+                    self._drop(exc.reason, str(exc))
+                    continue
             out.append((reading, offset))
             self.accepted += 1
         return out

@@ -23,9 +23,10 @@ import math
 from typing import Any, Callable, Dict, Mapping, Optional
 
 from quadruped_common.config import ParameterError, integer, load_config, number, string, vector
+from quadruped_common.imu_plausibility import SensorLimits
 from quadruped_drivers.vn100.protocol import rate_divisor_for
 
-__all__ = ["SUPPORTED_BAUDS", "VN100_KEYS", "load_vn100_settings", "vn100_settings_from_dict"]
+__all__ = ["SUPPORTED_BAUDS", "VN100_KEYS", "load_vn100_settings", "sensor_limits", "vn100_settings_from_dict"]
 
 #: Baud rates of the VN-100's serial port (UM001, register 5).
 SUPPORTED_BAUDS = (9600, 19200, 38400, 57600, 115200, 128000, 230400, 460800, 921600)
@@ -80,14 +81,22 @@ VN100_KEYS: Dict[str, Callable[[Any, str], Any]] = {
     "max_angular_rate": _positive(2.0 * math.radians(2000.0)),
     "max_acceleration": _positive(2.0 * 16.0 * 9.80665),
     "quaternion_norm_tolerance": _positive(0.1),
+    "max_angular_acceleration": _positive(1e5),
+    "angular_rate_change_margin": _positive(10.0),
+    "rate_change_confirm_samples": lambda value, key: integer(value, key, 1, 100),
     "orientation_covariance_diagonal": _covariance,
     "angular_velocity_covariance_diagonal": _covariance,
     "linear_acceleration_covariance_diagonal": _covariance,
 }
 
 
-def vn100_settings_from_dict(tree: Mapping[str, Any], overrides: Optional[Mapping[str, Any]] = None) -> Dict[str, Any]:
-    """Checked settings from a parsed vn100.yaml, with ``overrides`` (e.g. ROS ``~params``) taking precedence."""
+def vn100_settings_from_dict(tree: Mapping[str, Any], overrides: Optional[Mapping[str, Any]] = None,
+                             override_names: Optional[Mapping[str, str]] = None) -> Dict[str, Any]:
+    """Checked settings from a parsed vn100.yaml, with ``overrides`` (e.g. ROS ``~params``) taking precedence.
+
+    An error in an overriding value names where it came from, not only the file's key: ``override_names``
+    maps a key to its source (default ``~<key>``), e.g. ``{"rate_hz": "~rate"}`` gives "parameter '~rate
+    (overrides rate_hz)'"."""
     merged = dict(tree)
     merged.update(overrides or {})
     unknown = sorted(set(merged) - set(VN100_KEYS))
@@ -97,10 +106,25 @@ def vn100_settings_from_dict(tree: Mapping[str, Any], overrides: Optional[Mappin
     for key, check in VN100_KEYS.items():
         if key not in merged:
             raise ParameterError("missing vn100 parameter '%s'" % key)
-        settings[key] = check(merged[key], key)
+        label = key
+        if overrides and key in overrides:
+            label = "%s (overrides %s)" % ((override_names or {}).get(key, "~" + key), key)
+        settings[key] = check(merged[key], label)
     return settings
 
 
-def load_vn100_settings(path: Optional[str] = None, overrides: Optional[Mapping[str, Any]] = None) -> Dict[str, Any]:
-    """Read and check ``config/vn100.yaml`` (or ``path``); ParameterError naming the file and the key."""
-    return load_config(path, "vn100.yaml", lambda tree: vn100_settings_from_dict(tree, overrides))
+def load_vn100_settings(path: Optional[str] = None, overrides: Optional[Mapping[str, Any]] = None,
+                        override_names: Optional[Mapping[str, str]] = None) -> Dict[str, Any]:
+    """Read and check ``config/vn100.yaml`` (or ``path``); ParameterError naming the file and the key (and
+    the node parameter, for an overriding value)."""
+    return load_config(path, "vn100.yaml", lambda tree: vn100_settings_from_dict(tree, overrides, override_names))
+
+
+def sensor_limits(settings: Mapping[str, Any]) -> SensorLimits:
+    """The plausibility limits of checked vn100.yaml settings: one set for the driver and the controller."""
+    return SensorLimits(max_angular_rate=float(settings["max_angular_rate"]),
+                        max_acceleration=float(settings["max_acceleration"]),
+                        unit_tolerance=float(settings["quaternion_norm_tolerance"]),
+                        max_angular_acceleration=float(settings["max_angular_acceleration"]),
+                        rate_change_margin=float(settings["angular_rate_change_margin"]),
+                        rate_change_confirm=int(settings["rate_change_confirm_samples"]))

@@ -8,7 +8,7 @@ from quadruped_common.tunables import TUNABLES, bounds
 from quadruped_control.control.controller_config import Gains, load_controller_config
 from quadruped_control.sim.config_files import LOADERS
 from quadruped_drivers.calibration import load_servo_calibration
-from quadruped_drivers.vn100.settings import vn100_settings_from_dict
+from quadruped_drivers.vn100.settings import load_vn100_settings, vn100_settings_from_dict
 
 @pytest.mark.parametrize("name", sorted(LOADERS))
 def test_every_shipped_file_loads(name):
@@ -96,6 +96,10 @@ def test_vn100_overrides_are_checked_too():
     assert vn100_settings_from_dict(_vn100_tree(), {"rate_hz": 100})["rate_hz"] == 100.0
     with pytest.raises(ParameterError, match="rate_hz"):
         vn100_settings_from_dict(_vn100_tree(), {"rate_hz": 123.0})
+    # a rate the sensor cannot divide to, from the node's ~rate: the error names the parameter and the file
+    with pytest.raises(ParameterError, match=r"vn100\.yaml: parameter '~rate \(overrides rate_hz\)'.*800 Hz") as info:
+        load_vn100_settings(None, {"rate_hz": 300.0}, {"rate_hz": "~rate"})
+    assert "Vn100Error" not in str(info.value) and "protocol" not in str(info.value)
     tree = _vn100_tree()
     del tree["frame_id"]
     with pytest.raises(ParameterError, match="missing vn100 parameter 'frame_id'"):

@@ -4,7 +4,8 @@ import math
 import pytest
 
 from quadruped_common.config import ParameterError
-from quadruped_common.robot import JOINT_NAMES, LEGS, MIRROR_DIAG, joint_index, joint_limits_from_dict, load_joint_limits
+from quadruped_common.robot import (JOINT_NAMES, LEGS, MIRROR_DIAG, joint_index, joint_limits_from_dict, load_joint_limits,
+                                    load_servo_no_load_speed, servo_no_load_speed_from_dict)
 
 
 def test_joint_names_and_indices():
@@ -32,3 +33,11 @@ def test_bad_joint_limits_name_the_key(theta1, message):
     tree = {"joint_limits_deg": {"theta1": theta1, "theta2": [-130.0, 50.0], "theta3": [0.0, 180.0]}}
     with pytest.raises(ParameterError, match=message):
         joint_limits_from_dict(tree)
+
+
+def test_servo_no_load_speed_is_read_once_for_model_and_drivers():
+    from quadruped_control.model.params import load_robot_params
+    assert load_servo_no_load_speed() == pytest.approx(95.0 * 2.0 * math.pi / 60.0)  # [paper] 95 rpm
+    assert load_robot_params().servo_no_load_speed == load_servo_no_load_speed()
+    with pytest.raises(ParameterError, match="servo.no_load_speed_rpm"):
+        servo_no_load_speed_from_dict({"servo": {"no_load_speed_rpm": 0.0}})

@@ -87,6 +87,8 @@ def test_hardware_config_values():
     (("adc", "full_scale_v"), 3.3, "not an ADS1115 range"),
     (("adc", "data_rate_sps"), 100, "not an ADS1115 rate"),
     (("adc", "failed_after_s"), 0.01, "must exceed"),
+    (("adc", "jump_confirm_readings"), 0, "adc.jump_confirm_readings"),
+    (("adc", "jump_margin_deg"), -1.0, "adc.jump_margin_deg"),
     (("pca9685", "frequency_hz"), "fifty", "must be a number"),
     (("i2c", "bus"), -1, "outside"),
 ])

@@ -1,4 +1,7 @@
-"""ServoFeedbackArray against the fake mux + ADS1115s: register traffic, volts/angles, faults, staleness."""
+"""ServoFeedbackArray against the fake mux + ADS1115s: register traffic, volts/angles, faults, staleness,
+physical-rate plausibility."""
+import math
+
 import numpy as np
 import pytest
 
@@ -18,13 +21,18 @@ class Clock:
         return self.t
 
 
-@pytest.fixture
-def rig():
+def build_rig(max_joint_speed=None):
+    """Configuration, calibration, fake hardware, clock and a feedback array on them."""
     hw = load_hardware_config()
     cal = load_servo_calibration()
     fake = build_fake_hardware(hw, require_lock=True)
     clock = Clock()
-    feedback = ServoFeedbackArray(fake.bus, hw, cal, clock=clock)
+    return hw, cal, fake, clock, ServoFeedbackArray(fake.bus, hw, cal, clock=clock, max_joint_speed=max_joint_speed)
+
+
+@pytest.fixture
+def rig():
+    hw, cal, fake, clock, feedback = build_rig()
     volts = np.linspace(0.5, 2.9, 12)
     fake.set_joint_voltages(volts)
     assert feedback.start() == []
@@ -285,3 +293,83 @@ def test_no_fault_sequence_reports_a_wrong_value_fresh(faults):
         clock.t += 0.01
         reading = feedback.read()
     assert reading.valid.all()
+
+
+# ---- physical-rate plausibility: a servo cannot move faster than its no-load speed ----------------
+
+NO_LOAD_SPEED = math.radians(95.0 * 6.0)  # 95 rpm in rad/s (config/robot.yaml)
+
+
+@pytest.fixture
+def rated():
+    """The rig with the rate check on, at the robot's no-load speed, starting from mid-range angles."""
+    hw, cal, fake, clock, feedback = build_rig(NO_LOAD_SPEED)
+    low, high = feedback.plausible_range
+    angles = 0.5 * (low + high)
+
+    def show(new_angles, dt=0.01):
+        clock.t += dt
+        fake.set_joint_voltages(cal.angles_to_volts(new_angles))
+        return feedback.read()
+
+    fake.set_joint_voltages(cal.angles_to_volts(angles))
+    assert feedback.start() == []
+    assert feedback.read().valid.all()
+    return hw, feedback, angles, show
+
+
+def test_a_jump_no_servo_can_make_is_stale_not_fresh(rated):
+    hw, feedback, angles, show = rated
+    jumped = angles.copy()
+    jumped[4] += math.radians(60.0)  # inside the joint's range, 10x what 95 rpm allows in 10 ms
+    reading = show(jumped)
+    assert not reading.valid[4] and np.isnan(reading.angles[4]) and 4 in reading.implausible
+    assert reading.valid[np.arange(12) != 4].all()
+    assert feedback.jump_counts[4] == 1 and feedback.jump_counts.sum() == 1
+    np.testing.assert_allclose(reading.held_angles[4], angles[4], atol=1e-3)  # the last good angle stands in
+
+
+def test_motion_at_the_servos_speed_stays_fresh(rated):
+    _, feedback, angles, show = rated
+    step = NO_LOAD_SPEED * 0.01 * 0.95
+    for k in range(1, 20):
+        reading = show(angles + k * step * np.where(np.arange(12) % 2 == 0, 1.0, -1.0))
+        assert reading.valid.all(), k
+    assert feedback.jump_counts.sum() == 0
+
+
+def test_a_single_spike_is_dropped_and_the_next_good_reading_is_fresh(rated):
+    _, feedback, angles, show = rated
+    spiked = angles.copy()
+    spiked[0] -= math.radians(45.0)
+    assert not show(spiked).valid[0]
+    reading = show(angles)
+    assert reading.valid.all() and feedback.jumps_accepted.sum() == 0
+
+
+def test_agreeing_readings_at_a_new_angle_are_accepted(rated):
+    hw, feedback, angles, show = rated
+    moved = angles.copy()
+    moved[7] += math.radians(40.0)  # e.g. turned by hand while the servo was unpowered
+    confirm = hw.adc_jump_confirm_readings
+    for _ in range(confirm - 1):
+        assert not show(moved).valid[7]
+    reading = show(moved)
+    assert reading.valid[7] and reading.angles[7] == pytest.approx(moved[7], abs=1e-3)
+    assert feedback.jumps_accepted[7] == 1 and feedback.jump_counts[7] == confirm - 1
+    assert show(moved).valid.all()
+
+
+def test_a_long_gap_allows_the_travel_the_servo_could_make(rated):
+    _, feedback, angles, show = rated
+    moved = angles + math.radians(30.0) * np.where(np.arange(12) < 6, 1.0, -1.0)
+    reading = show(moved, dt=0.2)  # 30 deg in 0.2 s: within 95 rpm (114 deg)
+    assert reading.valid.all() and feedback.jump_counts.sum() == 0
+
+
+def test_the_rate_check_needs_a_positive_speed():
+    hw = load_hardware_config()
+    fake = build_fake_hardware(hw)
+    for bad in (0.0, -1.0, math.nan, math.inf):
+        with pytest.raises(ValueError, match="max_joint_speed"):
+            ServoFeedbackArray(fake.bus, hw, load_servo_calibration(), max_joint_speed=bad)

@@ -60,8 +60,15 @@ def test_bad_gains_are_rejected(name, value):
         Gains(**values)
 
 
-def test_zero_gains_are_allowed():
-    assert Gains(0.0, 0.0, 0.0, 0.0).k_p == 0.0
+def test_zero_integral_derivative_and_anti_windup_gains_are_allowed():
+    assert Gains(0.1, 0.0, 0.0, 0.0).k_i == 0.0
+
+
+@pytest.mark.parametrize("name", ["k_p", "tau_max"])
+def test_a_configuration_that_disables_the_controller_is_refused(name):
+    """K_p = 0 (no proportional action) or tau_max = 0 (no torque at all) would run armed and do nothing."""
+    with pytest.raises(ParameterError, match=name):
+        Gains(0.0, 0.0, 0.0, 0.0) if name == "k_p" else ControllerConfig(GAINS, tau_max=0.0)
 
 
 @pytest.mark.parametrize("pairs", [
@@ -157,6 +164,9 @@ def test_gain_set_may_override_timing(tmp_path):
     (lambda t: t.update(normalize_force_direction="no"), "normalize_force_direction"),
     (lambda t: t["gain_sets"]["simulation"].update(k_p=-5.0), "k_p"),
     (lambda t: t["gain_sets"]["simulation"].update(t_rec=0.6), "2 t_pow_max"),
+    (lambda t: t.update(tau_max=0.0), "tau_max"),
+    (lambda t: t["gain_sets"]["experiment"].update(tau_max=0), "gain_sets.experiment.tau_max"),
+    (lambda t: t["gain_sets"]["simulation"].update(k_p=0.0), "k_p"),
 ])
 def test_bad_files_name_the_problem(tmp_path, mutate, match):
     tree = _tree()

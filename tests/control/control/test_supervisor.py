@@ -155,3 +155,12 @@ def test_tilted_good_sample_is_used():
     assert output.problem == ""
     assert output.output.state.geodesic_error == pytest.approx(
         np.arccos((np.trace(rpy_to_rot(0.3, -0.2, 1.0)) - 1) / 2), abs=1e-9)
+
+
+def test_an_imu_rate_spike_inside_the_range_is_dropped_and_counted(supervisor):
+    """The controller checks the physical rate too (a corrupted /imu/data from anywhere)."""
+    assert supervisor.set_imu(LEVEL, (0.0, 0.0, 0.0), 1.0) is None
+    problem = supervisor.set_imu(LEVEL, (0.0, 0.0, 15.0), 1.005)
+    assert problem is not None and "angular acceleration" in problem
+    assert supervisor.imu_drop_reasons == {"angular acceleration": 1}
+    assert supervisor.set_imu(LEVEL, (0.0, 0.0, 0.05), 1.01) is None

@@ -136,3 +136,15 @@ def test_colliding_packet_with_huge_stamp_does_not_stop_the_stream():
     out = gate.process(parser.feed(stream))
     assert len(out) == 3 and gate.counts["angular rate range"] == 1
     assert all(0.0 <= offset <= 0.1 for _, offset in out)
+
+
+def test_a_rate_spike_inside_the_range_is_dropped_when_samples_are_dated():
+    """Physical rate: 12 rad/s for one 5 ms sample is inside the gyro's range but no body can do it."""
+    gate = SampleGate(LIMITS)
+    burst = [good(0), good(5_000_000, rate=(0.1, 12.0, 0.0)), good(10_000_000)]
+    out = gate.process(burst, arrival=100.0)
+    assert len(out) == 2 and gate.counts["angular acceleration"] == 1
+    assert "angular acceleration" in gate.last_drop
+    assert [offset for _, offset in out] == pytest.approx([0.01, 0.0])
+    # without an arrival time (no dating) the stream is not judged across samples
+    assert len(SampleGate(LIMITS).process(burst)) == 3
