@@ -21,6 +21,19 @@ Equations of motion (body axes, about the centre of mass, nu = (v^B, omega) with
   the paper's paw buoyancy) down at the centre of mass and torso buoyancy B = W - net_weight up at the
   centre of buoyancy r_cb: force (B - W) z_hat, moment r_cb x (B R^T z_hat).
 
+Candidate effects of the identification against Table 1, each zero (today's model) unless
+``config/tank.yaml`` sets it:
+
+- ``tau_appendage`` (:func:`appendage_damping_torque`): rotational damping of what the inertia box
+  leaves out (leg links, motor housings, the enclosure's corners sweeping through the water as the body
+  turns), per body axis -(c_lin + c_quad |omega|) omega: the linear (skin friction, laminar) plus
+  quadratic (form drag, strip theory of appendages at radius r: 1/2 rho C_D A r^3 |omega| omega) damping
+  of Fossen, "Handbook of Marine Craft Hydrodynamics and Motion Control" (2011), section 6.4.
+- ``tau_torsion`` (:func:`rope_torsion_torque`): the rope and its floating block resist twisting: a
+  torque about the rope's (vertical) axis -(k_t theta + c_t omega_z^W), theta the body's twist about the
+  world vertical since :meth:`TankModel.attach` (the twist of the swing-twist decomposition of
+  R R_0^T), omega_z^W the vertical component of the angular velocity. Acts only with the suspension on.
+
 Each effect has a switch (:class:`TankParams`); with all four off the equations reduce to the paper's
 eq. (trans), (rot) (tested). Parameters: ``config/tank.yaml``.
 Integration: the model's generic RK4 on SO(3) (``_rk4`` with this class's ``_chart_derivative``, the
@@ -43,8 +56,8 @@ from quadruped_control.sim.plants.paper import FloatingBaseModel
 from quadruped_control.sim.plants.rigid_body import (Mat3, RigidBodyState, StepContext, as_mat3, chart_point, check_dt,
                                                      joint_array)
 
-__all__ = ["TankModel", "TankParams", "hydrostatic_wrench", "load_tank_params", "rope_force",
-           "torso_ellipsoid"]
+__all__ = ["TankModel", "TankParams", "appendage_damping_torque", "hydrostatic_wrench", "load_tank_params",
+           "rope_force", "rope_torsion_torque", "rope_twist", "torso_ellipsoid"]
 
 Vec3 = Tuple[float, float, float]
 
@@ -71,13 +84,20 @@ class TankParams:
     paw_drag_scale: float = 1.0
     #: servo speed relative to robot.yaml's no-load speed (loaded servos in water are slower)
     servo_speed_scale: float = 1.0
+    #: rotational damping of appendages per body axis: linear (N m s/rad), quadratic (N m s^2/rad^2)
+    appendage_damping_linear: Vec3 = (0.0, 0.0, 0.0)
+    appendage_damping_quadratic: Vec3 = (0.0, 0.0, 0.0)
+    #: rope torsion about the vertical: stiffness (N m/rad) and damping (N m s/rad)
+    rope_torsion_stiffness: float = 0.0
+    rope_torsion_damping: float = 0.0
 
     def __post_init__(self) -> None:
         for name in ("rope_length", "rope_stiffness"):
             value = getattr(self, name)
             if not (math.isfinite(value) and value > 0.0):
                 raise ParameterError("tank %s must be positive and finite, got %r" % (name, value))
-        for name in ("rope_damping", "added_mass_scale", "paw_added_mass_scale", "paw_drag_scale"):
+        for name in ("rope_damping", "added_mass_scale", "paw_added_mass_scale", "paw_drag_scale",
+                     "rope_torsion_stiffness", "rope_torsion_damping"):
             value = getattr(self, name)
             if not (math.isfinite(value) and value >= 0.0):
                 raise ParameterError("tank %s must be finite and >= 0, got %r" % (name, value))
@@ -89,6 +109,10 @@ class TankParams:
             value = getattr(self, name)
             if len(value) != 3 or not all(math.isfinite(float(v)) for v in value):
                 raise ParameterError("tank %s must be 3 finite numbers (m, body frame), got %r" % (name, value))
+        for name in ("appendage_damping_linear", "appendage_damping_quadratic"):
+            value = getattr(self, name)
+            if len(value) != 3 or not all(math.isfinite(float(v)) and float(v) >= 0.0 for v in value):
+                raise ParameterError("tank %s must be 3 finite numbers >= 0 (body axes), got %r" % (name, value))
 
     def with_values(self, **values: Any) -> "TankParams":
         """A copy with some fields replaced (identification, tests)."""
@@ -106,17 +130,24 @@ def tank_params_from_dict(data: Mapping[str, Any]) -> TankParams:
     """Validate a parsed tank.yaml tree (strict types, no unknown keys, physically possible ranges,
     wider than the identification's plausible bounds) into :class:`TankParams`; ParameterError naming
     the key otherwise."""
-    check_keys(data, "", ("effects", "suspension", "hydrostatics", "added_mass", "paw_drag", "servos"),
+    check_keys(data, "", ("effects", "suspension", "hydrostatics", "added_mass", "paw_drag", "servos",
+                          "appendage_damping"),
                required=("suspension", "hydrostatics", "added_mass"))
     effects = check_keys(_optional_section(data, "effects"), "effects",
                          ("suspension", "hydrostatics", "torso_added_mass", "paw_added_mass", "drag"))
-    rope = check_keys(data["suspension"], "suspension", ("hook", "length", "stiffness", "damping"),
+    rope = check_keys(data["suspension"], "suspension",
+                      ("hook", "length", "stiffness", "damping", "torsion_stiffness", "torsion_damping"),
                       required=("hook", "length", "stiffness", "damping"))
     hydro = check_keys(data["hydrostatics"], "hydrostatics", ("net_weight", "center_of_buoyancy"),
                        required=("net_weight", "center_of_buoyancy"))
     added = check_keys(data["added_mass"], "added_mass", ("scale", "paw_scale"), required=("scale", "paw_scale"))
     paw_drag = check_keys(_optional_section(data, "paw_drag"), "paw_drag", ("scale",))
     servos = check_keys(_optional_section(data, "servos"), "servos", ("speed_scale",))
+    appendage = check_keys(_optional_section(data, "appendage_damping"), "appendage_damping", ("linear", "quadratic"))
+
+    def axes(section: Mapping[str, Any], key: str, high: float) -> Vec3:
+        return tuple(vector(section.get(key, [0.0, 0.0, 0.0]), "appendage_damping." + key, 3,
+                            0.0, high))  # type: ignore[return-value]
 
     def switch(name: str) -> bool:
         return boolean(effects.get(name, True), "effects." + name)
@@ -135,7 +166,11 @@ def tank_params_from_dict(data: Mapping[str, Any]) -> TankParams:
         added_mass_scale=number(added["scale"], "added_mass.scale", 0.0, 10.0),
         paw_added_mass_scale=number(added["paw_scale"], "added_mass.paw_scale", 0.0, 10.0),
         paw_drag_scale=number(paw_drag.get("scale", 1.0), "paw_drag.scale", 0.0, 10.0),
-        servo_speed_scale=number(servos.get("speed_scale", 1.0), "servos.speed_scale", 0.0, 10.0, low_open=True))
+        servo_speed_scale=number(servos.get("speed_scale", 1.0), "servos.speed_scale", 0.0, 10.0, low_open=True),
+        appendage_damping_linear=axes(appendage, "linear", 100.0),
+        appendage_damping_quadratic=axes(appendage, "quadratic", 100.0),
+        rope_torsion_stiffness=number(rope.get("torsion_stiffness", 0.0), "suspension.torsion_stiffness", 0.0, 1e4),
+        rope_torsion_damping=number(rope.get("torsion_damping", 0.0), "suspension.torsion_damping", 0.0, 1e4))
 
 
 def load_tank_params(path: Optional[str] = None, tree: Optional[Mapping[str, Any]] = None) -> TankParams:
@@ -172,6 +207,34 @@ def hydrostatic_wrench(R: np.ndarray, weight: float, buoyancy: float,
     up_body = np.asarray(R, dtype=float)[2, :]
     return (np.array([0.0, 0.0, buoyancy - weight]),
             hydrodynamics.torso_buoyancy_torque_matrix(buoyancy, center_of_buoyancy) @ up_body)
+
+
+def appendage_damping_torque(omega: Sequence[float], linear: Sequence[float],
+                             quadratic: Sequence[float]) -> Vec3:
+    """tau_appendage = -(c_lin + c_quad |omega|) omega per body axis (N m): linear plus quadratic
+    rotational damping of the legs, housings and corners the inertia box leaves out (module docstring)."""
+    return tuple(-(c + k * abs(w)) * w for w, c, k in zip(omega, linear, quadratic))  # type: ignore[return-value]
+
+
+def rope_twist(R: Sequence[float], R0: Sequence[float]) -> float:
+    """Twist (rad, [-pi, pi]) of the rotation Q = R R0^T about the world vertical: the angle of the twist
+    part of its swing-twist decomposition, 2 atan2(q_z, q_w) = 2 atan2(Q_10 - Q_01, 1 + tr Q).
+    ``R``, ``R0``: row-major 3x3 (9 floats)."""
+    q10 = R[3] * R0[0] + R[4] * R0[1] + R[5] * R0[2]
+    q01 = R[0] * R0[3] + R[1] * R0[4] + R[2] * R0[5]
+    trace = sum(R[3 * i] * R0[3 * i] + R[3 * i + 1] * R0[3 * i + 1] + R[3 * i + 2] * R0[3 * i + 2] for i in range(3))
+    return 2.0 * math.atan2(q10 - q01, 1.0 + trace)
+
+
+def rope_torsion_torque(R: Sequence[float], R0: Sequence[float], omega: Sequence[float], stiffness: float,
+                        damping: float) -> Vec3:
+    """Body-axes torque (N m) of a rope twisted by :func:`rope_twist` from its untwisted attitude ``R0``:
+    T = -(k_t theta + c_t omega_z^W) about the world vertical, i.e. T R^T z_hat in body axes (module
+    docstring). ``R``, ``R0`` row-major; ``omega`` body axes."""
+    up = (R[6], R[7], R[8])  # R^T z_hat
+    omega_z_world = up[0] * omega[0] + up[1] * omega[1] + up[2] * omega[2]
+    torque = -(stiffness * rope_twist(R, R0) + damping * omega_z_world)
+    return (torque * up[0], torque * up[1], torque * up[2])
 
 
 def torso_ellipsoid(params: RobotParams, scale: float = 1.0) -> Tuple[float, float, float]:
@@ -269,6 +332,9 @@ class TankModel(FloatingBaseModel):
                                if tank.paw_added_mass else 0.0)
         self.anchor = np.zeros(3)
         self._anchor: Vec3 = (0.0, 0.0, 0.0)
+        self.untwisted = np.eye(3)
+        self._untwisted = tuple(self.untwisted.ravel().tolist())
+        self._appendage_damping = any(tank.appendage_damping_linear) or any(tank.appendage_damping_quadratic)
         self._body_m = tuple(self.body_mass_matrix.ravel().tolist())
 
     # ---- set-up ------------------------------------------------------------------------------
@@ -284,6 +350,9 @@ class TankModel(FloatingBaseModel):
         stretch = self.static_rope_tension() / self.tank.rope_stiffness
         self.anchor = hook + np.array([0.0, 0.0, self.tank.rope_length + stretch])
         self._anchor = tuple(self.anchor.tolist())  # type: ignore[assignment]
+        # The rope hangs untwisted in this attitude (rope torsion measures the twist from it).
+        self.untwisted = np.array(state.rotation, dtype=float)
+        self._untwisted = tuple(self.untwisted.ravel().tolist())
 
     def mass_matrix(self, foot_positions: Sequence[Sequence[float]]) -> np.ndarray:
         """M = M_RB + M_A + sum_i M_paw(r_i) (6x6, body axes about the centre of mass)."""
@@ -339,6 +408,12 @@ class TankModel(FloatingBaseModel):
                   r2 * F[0] + r5 * F[1] + r8 * F[2])
             m = _cross(h, Fb)
             fx, fy, fz, tx, ty, tz = fx + Fb[0], fy + Fb[1], fz + Fb[2], tx + m[0], ty + m[1], tz + m[2]
+            if tank.rope_torsion_stiffness > 0.0 or tank.rope_torsion_damping > 0.0:
+                m = rope_torsion_torque(R, self._untwisted, w, tank.rope_torsion_stiffness, tank.rope_torsion_damping)
+                tx, ty, tz = tx + m[0], ty + m[1], tz + m[2]
+        if self._appendage_damping:
+            m = appendage_damping_torque(w, tank.appendage_damping_linear, tank.appendage_damping_quadratic)
+            tx, ty, tz = tx + m[0], ty + m[1], tz + m[2]
         # Kirchhoff terms of M_RB + M_A: [omega x p; v x p + omega x h], [p; h] = M nu.
         ph = _mat6_vec(self._body_m, b + tuple(w))
         a, c1, c2 = _cross(w, ph[:3]), _cross(b, ph[:3]), _cross(w, ph[3:])
@@ -422,4 +497,6 @@ class TankModel(FloatingBaseModel):
             stretch = float(np.linalg.norm(self.anchor - (p + R @ self.hook))) - self.tank.rope_length
             if stretch > 0.0:
                 energy += 0.5 * self.tank.rope_stiffness * stretch * stretch
+            twist = rope_twist(R.ravel().tolist(), self._untwisted)
+            energy += 0.5 * self.tank.rope_torsion_stiffness * twist * twist
         return energy

@@ -334,3 +334,84 @@ def test_empty_optional_tank_section_means_defaults_but_a_wrong_type_is_refused(
     path.write_text(text.replace("  speed_scale: 1.0", "", 1).replace("servos:", "servos: 3", 1))
     with pytest.raises(ParameterError, match="'servos' must be a mapping"):
         load_tank_params(str(path))
+
+
+# ---- candidate effects of the identification (neutral by default) ----------------------------------
+
+BARE = TankParams(suspension=False, hydrostatics=False, torso_added_mass=False, paw_added_mass=False, drag=False)
+
+
+def _spin(model: TankModel, state: RigidBodyState, seconds: float) -> list:
+    q = nominal_joint_angles(ROBOT)
+    states = [state]
+    for _ in range(int(round(seconds / DT))):
+        states.append(model.step(states[-1], q, np.zeros((4, 3)), DT))
+    return states
+
+
+def test_candidate_effects_are_off_unless_configured() -> None:
+    for params in (TankParams(), TANK):
+        assert params.appendage_damping_linear == params.appendage_damping_quadratic == (0.0, 0.0, 0.0)
+        assert params.rope_torsion_stiffness == params.rope_torsion_damping == 0.0
+
+
+@pytest.mark.parametrize("linear, quadratic", [(0.02, 0.0), (0.0, 0.05), (0.0, 0.0)])
+def test_appendage_damping_slows_a_spin_as_its_law_says(linear: float, quadratic: float) -> None:
+    """A free body spinning about z (no other force): I w' = -(c + k |w|) w, whose solutions are
+    w0 exp(-c t / I) (linear) and w0 / (1 + k w0 t / I) (quadratic); no damping keeps the spin."""
+    model = TankModel(ROBOT, BARE.with_values(appendage_damping_linear=(0.0, 0.0, linear),
+                                              appendage_damping_quadratic=(0.0, 0.0, quadratic)))
+    w0, seconds, inertia = 2.0, 3.0, ROBOT.inertia[2, 2]
+    end = _spin(model, RigidBodyState(omega=np.array([0.0, 0.0, w0])), seconds)[-1]
+    expected = w0 * math.exp(-linear * seconds / inertia) / (1.0 + quadratic * w0 * seconds / inertia)
+    assert end.omega[2] == pytest.approx(expected, rel=1e-6)
+    assert np.allclose(end.omega[:2], 0.0, atol=1e-12)
+
+
+def test_rope_twist_is_the_rotation_about_the_vertical() -> None:
+    from quadruped_control.sim.plants.tank import rope_twist
+    flat = lambda R: np.asarray(R).ravel().tolist()  # noqa: E731
+    for yaw in (-2.5, -0.3, 0.0, 0.7, 3.0):
+        for tilt in (0.0, 0.4, -1.2):
+            assert rope_twist(flat(rpy_to_rot(tilt, 0.0, yaw)), flat(np.eye(3))) == pytest.approx(yaw, abs=1e-12)
+    R0 = rpy_to_rot(0.2, -0.1, 1.0)
+    assert rope_twist(flat(rpy_to_rot(0.0, 0.0, 0.5) @ R0), flat(R0)) == pytest.approx(0.5, abs=1e-12)
+
+
+def test_rope_torsion_turns_the_robot_back_with_its_period_and_keeps_the_energy() -> None:
+    """Small twist, nothing else acting: theta'' = -(k_t / I_zz) theta, period 2 pi sqrt(I_zz / k_t);
+    without torsion damping the energy (1/2 I w^2 + 1/2 k_t theta^2) stays."""
+    k_t = 0.05
+    model = TankModel(ROBOT, BARE.with_values(suspension=True, rope_torsion_stiffness=k_t))
+    model.attach(RigidBodyState())
+    start = RigidBodyState(rotation=rpy_to_rot(0.0, 0.0, math.radians(10.0)))
+    period = 2.0 * math.pi * math.sqrt(ROBOT.inertia[2, 2] / k_t)
+    states = _spin(model, start, 0.75 * period)
+    yaw = np.array([math.atan2(s.rotation[1, 0], s.rotation[0, 0]) for s in states])
+    crossing = np.flatnonzero(np.diff(np.sign(yaw)) != 0)[0]
+    t_cross = DT * (crossing + yaw[crossing] / (yaw[crossing] - yaw[crossing + 1]))
+    assert t_cross == pytest.approx(0.25 * period, rel=2e-3)
+    assert np.min(yaw) == pytest.approx(-math.radians(10.0), rel=1e-3)  # half a period later: the other side
+    q = nominal_joint_angles(ROBOT)
+    energy = [model.kinetic_energy(s, q) + model.potential_energy(s, q) for s in states]
+    assert np.ptp(energy) < 1e-7 * 0.5 * k_t * math.radians(10.0) ** 2  # of the twist's energy
+    damped = TankModel(ROBOT, BARE.with_values(suspension=True, rope_torsion_stiffness=k_t, rope_torsion_damping=0.02))
+    damped.attach(RigidBodyState())
+    assert abs(math.atan2(*_spin(damped, start, 2.0 * period)[-1].rotation[[1, 0], 0])) < math.radians(5.0)
+
+
+@pytest.mark.parametrize("section, key, value", [("appendage_damping", "linear", [0.0, -0.1, 0.0]),
+                                                 ("suspension", "torsion_stiffness", -1.0)])
+def test_candidate_effect_keys_are_checked(tmp_path, section, key, value) -> None:
+    import yaml
+    with open(config_path("tank.yaml")) as stream:
+        tree = yaml.safe_load(stream)
+    tree.setdefault(section, {})[key] = value
+    path = tmp_path / "tank.yaml"
+    path.write_text(yaml.safe_dump(tree))
+    with pytest.raises(ParameterError, match="%s.%s" % (section, key)):
+        load_tank_params(str(path))
+    tree[section][key] = [0.0, 0.1, 0.2] if section == "appendage_damping" else 0.3
+    path.write_text(yaml.safe_dump(tree))
+    params = load_tank_params(str(path))
+    assert params.appendage_damping_linear == (0.0, 0.1, 0.2) or params.rope_torsion_stiffness == 0.3
