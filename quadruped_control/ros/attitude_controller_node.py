@@ -22,7 +22,9 @@ Parameters
                          (package config/; vn100.yaml gives the IMU's plausible ranges)
   ~loop_rate (100 Hz)    ~imu_rate (200 Hz: the loop steps on every imu_rate/loop_rate-th sample, so
                           the command leaves right after the sample that caused it)
-  ~imu_max_age (0.05 s)  ~arm_on_start (false)   ~setpoint_rpy_deg ([0, 0, 0])
+  ~imu_max_age (0.05 s)  ~arm_on_start (false: applies to the first start only)   ~setpoint_rpy_deg ([0, 0, 0])
+  ~starts                the node's starts since the launch file set it to 0: a respawned node (start > 1)
+                         comes back disarmed whatever ~arm_on_start says
   ~stroke_scheme (stroke.scheme of controller.yaml: paper | coordinated)
   dynamic_reconfigure (AttitudeController.cfg): k_p k_i k_d k_aw tau_max t_rec t_pow_max stroke_scheme
                          (a scheme switch is smooth: the feet return to the nominal pose first)
@@ -106,10 +108,18 @@ class AttitudeControllerNode:
         controller = AttitudeController(robot, self.config)
         roll, pitch, yaw = [math.radians(v) for v in rospy.get_param("~setpoint_rpy_deg", [0.0, 0.0, 0.0])]
         controller.set_setpoint(rpy_to_rot(roll, pitch, yaw))
+        # A respawned controller (roslaunch respawns it after a crash or a kill) never moves the legs
+        # without a new arm command: ~arm_on_start applies to the first start only. The parameter server
+        # outlives the process, so a start that finds ~starts already set is a restart.
+        self.starts = int(rospy.get_param("~starts", 0)) + 1
+        rospy.set_param("~starts", self.starts)
+        arm_on_start = bool(rospy.get_param("~arm_on_start", False)) and self.starts == 1
+        if self.starts > 1:
+            rospy.logwarn("attitude controller: restart %d: disarmed until %s is called",
+                          self.starts - 1, rospy.resolve_name("~arm"))
         self.supervisor = ControlSupervisor(controller, make_pulse_map(calibration, hardware),
                                             max_imu_age=float(rospy.get_param("~imu_max_age", 0.05)),
-                                            armed=bool(rospy.get_param("~arm_on_start", False)),
-                                            imu_limits=imu_limits)
+                                            armed=arm_on_start, imu_limits=imu_limits)
         self.reported_imu_drops = 0
         self.lock = threading.Lock()
         self.imu_count = 0
@@ -348,6 +358,7 @@ class AttitudeControllerNode:
         else:
             stat.summary(DiagnosticStatus.OK, "armed, stroking" if self.supervisor.armed else "disarmed")
         stat.add("armed", str(self.supervisor.armed))
+        stat.add("restarts", str(self.starts - 1))
         stat.add("hold reason", self.last_problem)
         stat.add("loop rate [Hz]", "%.2f" % rate)
         stat.add("period jitter p50 [ms]", "%.3f" % jitter["p50"])
