@@ -11,7 +11,14 @@ bags on any laptop). Uses:
 * ``/diagnostics``: the last value of every node's figures (rates, jitter, latency, error counters).
 
 The trial analysed starts at the last change of the setpoint (the maneuver), or at the first armed
-controller step. Writes ``DIR/metrics.json`` (the paper's metrics, eq. in section "Experiments", via
+controller step.
+
+What the record is missing is part of the report. A bag still named ``*.bag.active`` was left open by a
+recorder that was killed (or lost power): it has no index, so a copy of it is reindexed (ROS's
+``rosbag`` API, the same as ``rosbag reindex``; the original is not touched) and read; the chunk the
+recorder had not flushed yet is lost. The report lists each file's span, which files were reindexed, and
+the missing spans: a gap of more than :data:`MAX_RECORD_GAP` between the parts of a split recording or
+inside the /imu/data stream, and the end of a recording that stopped with a killed recorder. Writes ``DIR/metrics.json`` (the paper's metrics, eq. in section "Experiments", via
 :func:`quadruped_control.analysis.metrics.compute_metrics`, plus health figures), ``DIR/attitude.png`` and
 ``DIR/report.md``; returns the metrics dict.
 """
@@ -47,6 +54,45 @@ class BagReportError(RuntimeError):
     """The bag lacks what the report needs (named in the message)."""
 
 
+#: Longer than this (s) without a message between the parts of a recording, or between /imu/data
+#: samples (200 Hz), is a missing span of the record.
+MAX_RECORD_GAP = 0.5
+
+
+@dataclass
+class BagFile:
+    """One file of a recording: its span of message times (s), message count, and whether it was a
+    ``.bag.active`` left by a killed recorder (read from a reindexed copy)."""
+
+    path: str
+    start: float
+    end: float
+    messages: int
+    reindexed: bool = False
+
+
+def reindexed_copy(path: str, folder: str) -> str:
+    """A readable copy of the unindexed bag ``path`` (``*.bag.active``) in ``folder``, reindexed like
+    ``rosbag reindex``; BagReportError if ROS's rosbag Python API is not installed or the file is no bag."""
+    import shutil
+
+    try:
+        import rosbag
+    except ImportError:
+        raise BagReportError("%s was left open by its recorder and needs reindexing: install ROS's rosbag "
+                             "(python3-rosbag) or run 'rosbag reindex' on a copy first" % path) from None
+    name = os.path.basename(path)
+    copy = os.path.join(folder, name[:-len(".active")] if name.endswith(".active") else name)
+    shutil.copyfile(path, copy)
+    try:
+        with rosbag.Bag(copy, "a", allow_unindexed=True) as bag:
+            for _ in bag.reindex():
+                pass
+    except Exception as exc:  # noqa: BLE001 - rosbag raises ROSBagException, ValueError, struct.error ...
+        raise BagReportError("cannot reindex %s: %s" % (path, exc)) from None
+    return copy
+
+
 @dataclass
 class BagData:
     imu_t: List[float] = field(default_factory=list)
@@ -60,6 +106,7 @@ class BagData:
     truth_t: List[float] = field(default_factory=list)
     truth_q: List[Sequence[float]] = field(default_factory=list)
     diagnostics: Dict[str, Dict[str, str]] = field(default_factory=dict)
+    files: List[BagFile] = field(default_factory=list)
 
 
 def _stamp(msg) -> float:
@@ -67,18 +114,52 @@ def _stamp(msg) -> float:
 
 
 def read_bags(paths: Sequence[str]) -> BagData:
-    """Collect the report's topics from one or more (split) bags."""
+    """Collect the report's topics from one or more (split) bags; ``*.bag.active`` files are read from
+    reindexed copies (module docstring)."""
+    import tempfile
     from pathlib import Path
 
     from rosbags.highlevel import AnyReader, AnyReaderError
-    from rosbags.rosbag1 import ReaderError
+    from rosbags.rosbag1 import Reader, ReaderError
 
     data = BagData()
-    try:
-        _read_into(data, AnyReader([Path(p) for p in paths]))
-    except (AnyReaderError, ReaderError) as exc:
-        raise BagReportError("cannot read %s: %s" % (", ".join(paths), exc)) from None
+    with tempfile.TemporaryDirectory(prefix="bag_report_") as folder:
+        readable = []
+        for path in paths:
+            copy = reindexed_copy(path, folder) if path.endswith(".active") else path
+            try:
+                with Reader(Path(copy)) as reader:
+                    data.files.append(BagFile(path, reader.start_time * 1e-9, reader.end_time * 1e-9,
+                                              reader.message_count, copy != path))
+            except ReaderError as exc:
+                raise BagReportError("cannot read %s: %s" % (path, exc)) from None
+            readable.append(copy)
+        try:
+            _read_into(data, AnyReader([Path(p) for p in readable]))
+        except (AnyReaderError, ReaderError) as exc:
+            raise BagReportError("cannot read %s: %s" % (", ".join(paths), exc)) from None
     return data
+
+
+def missing_spans(data: BagData, max_gap: float = MAX_RECORD_GAP) -> List[Dict[str, object]]:
+    """What the record is missing: gaps of more than ``max_gap`` s between the parts of the recording or
+    in the /imu/data stream, and the end of a recording whose recorder was killed. Each entry:
+    ``{"from": t0, "to": t1 or None (until the end of the run), "why": text}``, message times in s."""
+    spans: List[Dict[str, object]] = []
+    files = sorted(data.files, key=lambda f: f.start)
+    for before, after in zip(files, files[1:]):
+        if after.start - before.end > max_gap:
+            spans.append({"from": before.end, "to": after.start,
+                          "why": "between %s and %s" % (os.path.basename(before.path), os.path.basename(after.path))})
+    imu = np.unique(np.array(data.imu_t, dtype=float))
+    if imu.size > 1:
+        for k in np.flatnonzero(np.diff(imu) > max_gap):
+            spans.append({"from": float(imu[k]), "to": float(imu[k + 1]), "why": "no /imu/data"})
+    if files and files[-1].reindexed:
+        spans.append({"from": files[-1].end, "to": None,
+                      "why": "recorder killed: %s ends here (its unflushed last chunk is lost)"
+                             % os.path.basename(files[-1].path)})
+    return sorted(spans, key=lambda s: float(s["from"]))  # type: ignore[arg-type]
 
 
 def _read_into(data: BagData, reader) -> None:
@@ -229,6 +310,9 @@ def analyse(data: BagData) -> Dict:
         metrics["imu_vs_truth_deg"] = {"p50": math.degrees(float(np.percentile(errors, 50))),
                                        "max": math.degrees(float(np.max(errors)))}
     metrics["health"] = health(data)
+    metrics["record"] = {"files": [{"path": f.path, "start": f.start, "end": f.end, "messages": f.messages,
+                                    "reindexed": f.reindexed} for f in data.files],
+                         "missing_spans": missing_spans(data)}
     metrics["_series"] = (t, rpy, geodesic)
     return metrics
 
@@ -265,6 +349,18 @@ def write_report(metrics: Dict, out_dir: str, title: str = "Simulated maneuver")
     if "imu_vs_truth_deg" in metrics:
         lines += ["", "Measured (VN-100 path) vs simulated attitude: p50 %.3f deg, max %.3f deg."
                   % (metrics["imu_vs_truth_deg"]["p50"], metrics["imu_vs_truth_deg"]["max"])]
+    record = metrics.get("record")
+    if record:
+        start = metrics["trial_start_unix"]
+        lines += ["", "## Record", ""]
+        for f in record["files"]:
+            lines.append("- %s: %.1f s to %.1f s of the trial, %d messages%s" % (
+                os.path.basename(f["path"]), f["start"] - start, f["end"] - start, f["messages"],
+                " (left open by a killed recorder: read from a reindexed copy)" if f["reindexed"] else ""))
+        spans = record["missing_spans"]
+        lines.append("- missing: none" if not spans else "- missing: " + "; ".join(
+            "%.2f s to %s (%s)" % (s["from"] - start, "the end" if s["to"] is None else "%.2f s" % (s["to"] - start),
+                                   s["why"]) for s in spans))
     lines += ["", "## Stack health (last diagnostics in the bag)", ""]
     for name, values in metrics["health"].items():
         lines.append("- **%s**: %s" % (name, ", ".join("%s %s" % kv for kv in values.items())))

@@ -1,13 +1,15 @@
 """Tests of the bag report on a synthetic ROS 1 bag written with rosbags (no ROS needed)."""
 import json
 import math
+import sys
 import os
 
 import numpy as np
 import pytest
 
 from quadruped_common.so3 import rot_to_quat, rpy_to_rot
-from quadruped_control.analysis.bag_report import BagReportError, analyse, main, read_bags
+from quadruped_control.analysis.bag_report import (BagReportError, analyse, main, missing_spans, read_bags,
+                                                  write_report)
 from tests.repo import REPO_ROOT
 
 rosbags = pytest.importorskip("rosbags")
@@ -30,8 +32,10 @@ def typestore(state_type=STATE_TYPE):
     return store
 
 
-def write_bag(path, duration=60.0, armed=True, roll_final=math.radians(30.0), tau=3.0, state_type=STATE_TYPE):
-    """A first-order roll response to a 30 deg setpoint commanded at t = 5 s, IMU at 100 Hz."""
+def write_bag(path, duration=60.0, armed=True, roll_final=math.radians(30.0), tau=3.0, state_type=STATE_TYPE,
+              start=0.0, skip=None):
+    """``start``: first sample at t = start (s of the run); ``skip``: (t0, t1), no message in between."""
+    # A first-order roll response to a 30 deg setpoint commanded at t = 5 s, IMU at 100 Hz.
     STATE_TYPE = state_type  # noqa: N806 (the message type this bag records /controller_state as)
     store = typestore(state_type)
     Header = store.types["std_msgs/msg/Header"]
@@ -51,8 +55,10 @@ def write_bag(path, duration=60.0, armed=True, roll_final=math.radians(30.0), ta
         imu_c = writer.add_connection("/imu/data", Imu.__msgtype__, typestore=store)
         state_c = writer.add_connection("/controller_state", STATE_TYPE, typestore=store)
         diag_c = writer.add_connection("/diagnostics", DiagnosticArray.__msgtype__, typestore=store)
-        for k in range(int(duration * 100)):
+        for k in range(int(round(start * 100)), int(round((start + duration) * 100))):
             t = k * 0.01
+            if skip is not None and skip[0] <= t < skip[1]:
+                continue
             stamp = t0 + t
             header = Header(seq=k, stamp=Time(sec=int(stamp), nanosec=int(round((stamp % 1) * 1e9))), frame_id="")
             roll = 0.0 if t < 5.0 else roll_final * (1.0 - math.exp(-(t - 5.0) / tau))
@@ -146,3 +152,71 @@ def test_bag_reader_keeps_the_hold_reasons(tmp_path):
     write_bag(bag, duration=2.0, armed=False)
     data = read_bags([bag])
     assert len(data.state_hold_reason) == len(data.state_holding) == 200
+
+
+# ---- what the record is missing: killed recorders, split parts, stream gaps -----------------------
+
+def left_open_by_a_killed_recorder(path, out):
+    """``out``: the ``.bag.active`` file a recorder killed while writing ``path`` leaves behind. The
+    recorder (ROS's rosbag, as `rosbag record` writes) writes the file header with no index at open,
+    each chunk when it fills and the index only at close: so the file as it stands before close, without
+    the chunk still being filled. Returns the number of messages written."""
+    import shutil
+
+    import rosbag
+    recording = out + ".recording"
+    with rosbag.Bag(path) as source:
+        bag = rosbag.Bag(recording, "w", chunk_threshold=64 * 1024)
+        count = 0
+        for topic, raw, t in source.read_messages(raw=True):
+            bag.write(topic, raw, t, raw=True)
+            count += 1
+        shutil.copyfile(recording, out)  # the recorder dies here: no close, no index, last chunk unwritten
+        bag.close()
+    return count
+
+
+def test_a_bag_left_open_by_a_killed_recorder_is_reindexed_and_the_missing_spans_named(tmp_path):
+    pytest.importorskip("rosbag")  # ROS's API reindexes (as `rosbag reindex`)
+    first, second = str(tmp_path / "uq_0.bag"), str(tmp_path / "second.bag")
+    write_bag(first, duration=30.0)
+    write_bag(second, start=40.0, duration=20.0)  # 30 s .. 40 s: the recorder was down
+    active = str(tmp_path / "uq_1.bag.active")
+    written = left_open_by_a_killed_recorder(second, active)
+    with pytest.raises(BagReportError):  # rosbags alone cannot read it ...
+        read_bags([str(tmp_path / "uq_1.bag.active") + "-not-there"])
+    data = read_bags([first, active])  # ... the report reindexes a copy
+    assert [f.reindexed for f in data.files] == [False, True]
+    assert open(active, "rb").read()[:13] == b"#ROSBAG V2.0\n" and os.path.exists(active)  # original kept
+    assert 0 < data.files[1].messages < written and data.files[1].end < 1000.0 + 59.99  # the last chunk is lost
+    spans = missing_spans(data)
+    whys = {s["why"].split(":")[0]: s for s in spans}
+    assert sorted(whys) == ["between uq_0.bag and uq_1.bag.active", "no /imu/data", "recorder killed"]
+    for why in ("between uq_0.bag and uq_1.bag.active", "no /imu/data"):
+        assert whys[why]["from"] == pytest.approx(1029.99, abs=0.02) and whys[why]["to"] == pytest.approx(1040.0, abs=0.02)
+    assert spans[-1]["why"].startswith("recorder killed") and spans[-1]["to"] is None
+    metrics = analyse(data)
+    assert metrics["record"]["missing_spans"] == spans
+    report = open(write_report(metrics, str(tmp_path / "out"))).read()
+    assert "## Record" in report and "killed recorder" in report and "recorder killed" in report
+
+
+def test_without_ros_an_open_bag_is_a_clear_error(tmp_path, monkeypatch):
+    bag = str(tmp_path / "run.bag")
+    write_bag(bag, duration=5.0)
+    active = str(tmp_path / "run.bag.active")
+    with open(bag, "rb") as source, open(active, "wb") as copy:  # any unindexed file: never reaches rosbags
+        copy.write(source.read(5000))
+    monkeypatch.setitem(sys.modules, "rosbag", None)  # as on a laptop without ROS
+    with pytest.raises(BagReportError, match="rosbag reindex"):
+        read_bags([active])
+
+
+def test_a_gap_in_the_imu_stream_is_a_missing_span(tmp_path):
+    bag = str(tmp_path / "run.bag")
+    write_bag(bag, duration=30.0, skip=(12.0, 14.0))
+    spans = missing_spans(read_bags([bag]))
+    assert len(spans) == 1 and spans[0]["why"] == "no /imu/data"
+    assert (spans[0]["from"], spans[0]["to"]) == (pytest.approx(1011.99, abs=1e-6), pytest.approx(1014.0, abs=1e-6))
+    assert missing_spans(read_bags([str(tmp_path / "run.bag")]), max_gap=5.0) == []
+
