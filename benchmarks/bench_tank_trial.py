@@ -16,7 +16,7 @@ import time
 
 sys.path.insert(0, os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
 
-from quadruped_control import simulate  # noqa: E402
+from quadruped_control.studies import trial  # noqa: E402
 
 
 def main() -> None:
@@ -27,11 +27,11 @@ def main() -> None:
     for plant in ("tank", "paper"):
         wall, cpu = [], []
         for _ in range(args.repeats):
-            spec = simulate.TrialSpec(label="bench", setpoint_rpy_deg=(45.0, 0.0, 0.0), duration=args.duration,
+            spec = trial.TrialSpec(label="bench", setpoint_rpy_deg=(45.0, 0.0, 0.0), duration=args.duration,
                                       gains="experiment", servo_model="rate-limited", plant=plant, quiet=True,
                                       keep_trace=False)
             w0, c0 = time.perf_counter(), time.process_time()
-            simulate.run_trial(spec)
+            trial.run_trial(spec)
             wall.append(args.duration / (time.perf_counter() - w0))
             cpu.append(args.duration / (time.process_time() - c0))
         print("%s plant, %g s trial x %d: real-time factor wall min/median/max %.0f / %.0f / %.0f, "

@@ -45,7 +45,11 @@ class ServoFeedbackNode:
         max_speed = None
         if bool(rospy.get_param("~joint_rate_check", True)):
             max_speed = load_servo_no_load_speed(rospy.get_param("~robot_yaml", "") or None)
-        self.array = ServoFeedbackArray(bus, hardware, calibration, max_joint_speed=max_speed)
+        # The array's ages (stale, failed) and the joint-rate check run on the clock the servos move on:
+        # simulated time in lock-step (it may run faster or slower than the wall), the monotonic clock
+        # otherwise (wall time can jump).
+        clock = rospy.get_time if rospy.get_param("/use_sim_time", False) else time.monotonic
+        self.array = ServoFeedbackArray(bus, hardware, calibration, clock=clock, max_joint_speed=max_speed)
         self.frame_id = rospy.get_param("~frame_id", "")
         self.differentiator = LowPassDifferentiator(len(JOINT_NAMES),
                                                     float(rospy.get_param("~velocity_time_constant", 0.03)))

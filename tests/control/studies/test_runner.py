@@ -10,6 +10,7 @@ import numpy as np
 import pytest
 
 from quadruped_control import simulate
+from quadruped_control.studies import trial
 from quadruped_control.studies import StudyError, run_trials, spec_key, trial_path
 
 
@@ -79,13 +80,13 @@ def test_process_pool_gives_the_same_results_as_inline(tmp_path) -> None:
 
 def test_small_simulation_study_on_a_dask_local_cluster(tmp_path) -> None:
     distributed = pytest.importorskip("distributed")
-    specs = [simulate.TrialSpec(label="%g deg" % a, setpoint_rpy_deg=(a, 0.0, 0.0), duration=1.0, quiet=True,
+    specs = [trial.TrialSpec(label="%g deg" % a, setpoint_rpy_deg=(a, 0.0, 0.0), duration=1.0, quiet=True,
                                 keep_trace=False) for a in (10.0, 20.0)]
     with distributed.LocalCluster(n_workers=1, threads_per_worker=2, processes=False,
                                   dashboard_address=None) as cluster, distributed.Client(cluster) as client:
-        on_dask = run_trials(simulate.run_trial, specs, str(tmp_path / "dask"), executor=client.get_executor(),
+        on_dask = run_trials(trial.run_trial, specs, str(tmp_path / "dask"), executor=client.get_executor(),
                              progress=False)
-    inline = run_trials(simulate.run_trial, specs, str(tmp_path / "inline"), progress=False)
+    inline = run_trials(trial.run_trial, specs, str(tmp_path / "inline"), progress=False)
     for a, b in zip(on_dask, inline):
         assert a["metrics"] == b["metrics"]
 
