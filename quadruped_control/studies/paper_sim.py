@@ -15,8 +15,8 @@ import time
 from typing import Any, Dict, List, Optional
 
 from quadruped_common.config import config_path
-from quadruped_control.studies.trial import (GAIN_ALIASES, TrialSpec, format_metrics_table, load_simulation_tree,
-                                             run_many, without_trace)
+from quadruped_control.sim.simulation import load_simulation_tree
+from quadruped_control.studies.trial import GAIN_ALIASES, TrialSpec, format_metrics_table, run_many, without_trace
 
 
 def paper_sim_specs(args: argparse.Namespace, tree: Dict[str, Any], out: Optional[str],

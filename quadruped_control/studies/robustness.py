@@ -18,8 +18,9 @@ import numpy as np
 
 from quadruped_common.config import config_path
 from quadruped_control.model.params import load_robot_params
+from quadruped_control.sim.simulation import load_simulation_tree
 from quadruped_control.studies.paper_sim import paper_sim_specs
-from quadruped_control.studies.trial import TrialSpec, format_value, load_simulation_tree, run_many
+from quadruped_control.studies.trial import TrialSpec, format_value, run_many
 
 
 def main_study(args: argparse.Namespace) -> int:

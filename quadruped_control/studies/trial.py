@@ -22,14 +22,13 @@ from quadruped_control.control.controller_config import load_controller_config
 from quadruped_control.model.params import load_robot_params
 from quadruped_control.sim.plants import load_tank_params, make_plant
 from quadruped_control.sim.servo_model import load_servo_params, make_servo_model
-from quadruped_control.sim.simulation import (ClosedLoopSimulation, SimulationResult, load_simulation_settings,
-                                              load_simulation_tree)
+from quadruped_control.sim.simulation import ClosedLoopSimulation, SimulationResult, load_simulation_settings
 from quadruped_control.studies.runner import run_trials
 
 #: --gains spellings -> gain set of config/controller.yaml
 GAIN_ALIASES = {"sim": "simulation", "simulation": "simulation", "experiment": "experiment", "exp": "experiment"}
 
-__all__ = ["GAIN_ALIASES", "TrialSpec", "format_metrics_table", "format_value", "load_simulation_tree", "run_many",
+__all__ = ["GAIN_ALIASES", "TrialSpec", "format_metrics_table", "format_value", "run_many",
            "run_trial", "stroke_metrics", "without_trace", "write_trial"]
 
 

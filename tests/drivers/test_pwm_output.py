@@ -219,7 +219,6 @@ def test_whole_stack_through_the_socket_bridge():
 
 
 # --- issue 10: faults the chip and the bus can make --------------------------------------------------------------
-import random  # noqa: E402
 
 from hypothesis import settings  # noqa: E402
 
