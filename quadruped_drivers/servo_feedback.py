@@ -343,16 +343,19 @@ class ServoFeedbackArray:
                 except OSError:
                     self._mark_error(index)
 
-    def _within_reach(self, angle: float, reference: float, since: float) -> bool:
-        return abs(angle - reference) <= self._max_speed * since + self._jump_margin  # type: ignore[operator]
+    def _within_reach(self, angle: Any, reference: Any, since: Any) -> Any:
+        """|angle - reference| within what the servo can turn in ``since`` s (floats or arrays alike)."""
+        return np.abs(angle - reference) <= self._max_speed * since + self._jump_margin  # type: ignore[operator]
 
     def _check_rates(self, now: float, angles: np.ndarray, valid: np.ndarray) -> None:
         """Physical-rate check (class docstring); clears ``valid`` and ``angles`` of implausible jumps."""
-        for index in np.flatnonzero(valid):
-            angle, last = float(angles[index]), float(self._last_angle[index])
-            if not math.isfinite(last) or self._within_reach(angle, last, now - self._last_good[index]):
-                self._jump_run[index] = 0
-                continue
+        # Every joint at once; only the few readings out of reach go through the run bookkeeping.
+        with np.errstate(invalid="ignore"):  # no last good angle yet: NaN, counts as within reach
+            beyond = valid & ~self._within_reach(angles, self._last_angle, now - self._last_good)
+        beyond &= np.isfinite(self._last_angle)
+        self._jump_run[valid & ~beyond] = 0
+        for index in np.flatnonzero(beyond):
+            angle = float(angles[index])
             if self._jump_run[index] > 0 and self._within_reach(angle, float(self._jump_angle[index]),
                                                                now - self._jump_time[index]):
                 self._jump_run[index] += 1

@@ -120,22 +120,17 @@ def read_bags(paths: Sequence[str]) -> BagData:
     from pathlib import Path
 
     from rosbags.highlevel import AnyReader, AnyReaderError
-    from rosbags.rosbag1 import Reader, ReaderError
+    from rosbags.rosbag1 import ReaderError
 
     data = BagData()
     with tempfile.TemporaryDirectory(prefix="bag_report_") as folder:
-        readable = []
-        for path in paths:
-            copy = reindexed_copy(path, folder) if path.endswith(".active") else path
-            try:
-                with Reader(Path(copy)) as reader:
-                    data.files.append(BagFile(path, reader.start_time * 1e-9, reader.end_time * 1e-9,
-                                              reader.message_count, copy != path))
-            except ReaderError as exc:
-                raise BagReportError("cannot read %s: %s" % (path, exc)) from None
-            readable.append(copy)
+        readable = [reindexed_copy(path, folder) if path.endswith(".active") else path for path in paths]
         try:
-            _read_into(data, AnyReader([Path(p) for p in readable]))
+            with AnyReader([Path(p) for p in readable]) as reader:
+                for path, copy, part in zip(paths, readable, reader.readers):
+                    data.files.append(BagFile(path, part.start_time * 1e-9, part.end_time * 1e-9,
+                                              part.message_count, copy != path))
+                _read_into(data, reader)
         except (AnyReaderError, ReaderError) as exc:
             raise BagReportError("cannot read %s: %s" % (", ".join(paths), exc)) from None
     return data
@@ -163,30 +158,30 @@ def missing_spans(data: BagData, max_gap: float = MAX_RECORD_GAP) -> List[Dict[s
 
 
 def _read_into(data: BagData, reader) -> None:
-    with reader:
-        wanted = [c for c in reader.connections if c.topic in (
-            "/imu/data", "/controller_state", "/sim/pose", "/diagnostics")]
-        for connection, _timestamp, raw in reader.messages(connections=wanted):
-            msg = reader.deserialize(raw, connection.msgtype)
-            if connection.topic == "/imu/data":
-                o = msg.orientation
-                data.imu_t.append(_stamp(msg))
-                data.imu_q.append((o.x, o.y, o.z, o.w))
-            elif connection.topic == "/controller_state":
-                s = msg.setpoint
-                data.state_t.append(_stamp(msg))
-                data.state_setpoint.append((s.x, s.y, s.z, s.w))
-                data.state_geodesic.append(msg.geodesic_error)
-                data.state_armed.append(bool(msg.armed))
-                data.state_holding.append(bool(msg.holding))
-                data.state_hold_reason.append(str(msg.hold_reason))
-            elif connection.topic == "/sim/pose":
-                o = msg.pose.orientation
-                data.truth_t.append(_stamp(msg))
-                data.truth_q.append((o.x, o.y, o.z, o.w))
-            else:
-                for status in msg.status:
-                    data.diagnostics[status.name] = {kv.key: kv.value for kv in status.values}
+    """The report's messages from an open AnyReader."""
+    wanted = [c for c in reader.connections if c.topic in (
+        "/imu/data", "/controller_state", "/sim/pose", "/diagnostics")]
+    for connection, _timestamp, raw in reader.messages(connections=wanted):
+        msg = reader.deserialize(raw, connection.msgtype)
+        if connection.topic == "/imu/data":
+            o = msg.orientation
+            data.imu_t.append(_stamp(msg))
+            data.imu_q.append((o.x, o.y, o.z, o.w))
+        elif connection.topic == "/controller_state":
+            s = msg.setpoint
+            data.state_t.append(_stamp(msg))
+            data.state_setpoint.append((s.x, s.y, s.z, s.w))
+            data.state_geodesic.append(msg.geodesic_error)
+            data.state_armed.append(bool(msg.armed))
+            data.state_holding.append(bool(msg.holding))
+            data.state_hold_reason.append(str(msg.hold_reason))
+        elif connection.topic == "/sim/pose":
+            o = msg.pose.orientation
+            data.truth_t.append(_stamp(msg))
+            data.truth_q.append((o.x, o.y, o.z, o.w))
+        else:
+            for status in msg.status:
+                data.diagnostics[status.name] = {kv.key: kv.value for kv in status.values}
 
 
 def _rotations(quaternions: Sequence[Sequence[float]]) -> np.ndarray:

@@ -3,7 +3,8 @@
 - Paw drag and its transmission to the body, eq. (drag), (virtual_work), (force_leg), (torque_leg):
   :func:`paw_drag_force`, :func:`leg_wrench`; fast path :func:`paw_drag_wrench_f`.
 - Net paw buoyancy and its torque on the body, eq. (buoy_force), (buoy_torque): :func:`paw_buoyancy`;
-  fast path :func:`paw_buoyancy_f`.
+  fast path :func:`paw_buoyancy_f`. Beyond the paper, the torso's buoyancy moment about an offset
+  centre of buoyancy: :func:`torso_buoyancy_torque_matrix`.
 - MuJoCo's inertia-box body drag, eq. (inertia_box), (quad), (visc): :func:`inertia_box`,
   :func:`body_drag` (force and torque both in the body frame; eq. (drag_total) rotates the force to
   the world frame, which :mod:`quadruped_control.sim.plants.paper` does), computed by
@@ -193,10 +194,6 @@ def paw_buoyancy_f(feet: Sequence[FootRow], net_paw_buoyancy: float) -> Tuple[fl
     return len(feet) * net_paw_buoyancy, (0.0, -sz, sy, sz, 0.0, -sx, -sy, sx, 0.0)
 
 
-# --------------------------------------------------------------------------------------------------
-# Inertia-box body drag, eq. (inertia_box), (quad), (visc)
-# --------------------------------------------------------------------------------------------------
-
 def torso_buoyancy_torque_matrix(buoyancy: float, center_of_buoyancy: ArrayLike) -> np.ndarray:
     """U_cb = B hat(r_cb): the torso buoyancy B (N) acting at the centre of buoyancy r_cb^B (m, body frame,
     relative to the centre of mass) gives the moment r_cb x (R^T [0, 0, B]) = U_cb (R^T z_hat) about the
@@ -208,6 +205,10 @@ def torso_buoyancy_torque_matrix(buoyancy: float, center_of_buoyancy: ArrayLike)
     """
     return float(buoyancy) * hat(_finite_vectors(center_of_buoyancy, "center_of_buoyancy").reshape(3))
 
+
+# --------------------------------------------------------------------------------------------------
+# Inertia-box body drag, eq. (inertia_box), (quad), (visc)
+# --------------------------------------------------------------------------------------------------
 
 def inertia_box(params: RobotParams) -> Tuple[float, float, float]:
     """Half-lengths (r_x, r_y, r_z) in m of the box with the body's mass and inertia, eq. (inertia_box).
