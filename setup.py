@@ -5,6 +5,7 @@ from setuptools import setup
 setup(**generate_distutils_setup(
     packages=[
         "quadruped_common",
+        "quadruped_common.ros",
         "quadruped_control",
         "quadruped_control.analysis",
         "quadruped_control.control",

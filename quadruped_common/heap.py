@@ -10,7 +10,7 @@ stale-IMU limit, and it comes at an arbitrary point of a cycle.
 ``gc.freeze()`` (Python >= 3.7) moves every object tracked so far into a permanent generation that no
 collection visits. Done once after start-up, a full collection walks only what the node has allocated
 since, which in a steady loop is little. Collection itself stays on: reference cycles made while
-running are still freed. :func:`quadruped_common.node_startup.start_node` wraps every node's start-up
+running are still freed. :func:`quadruped_common.ros.node_startup.start_node` wraps every node's start-up
 in :func:`frozen_startup_heap`.
 """
 from __future__ import annotations

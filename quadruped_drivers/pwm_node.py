@@ -30,8 +30,8 @@ from diagnostic_updater import DiagnosticStatusWrapper, Updater
 from std_srvs.srv import SetBool, SetBoolResponse
 
 from quadruped_common.monitoring import RateMonitor, WindowStatistics
-from quadruped_common.node_startup import start_node
 from quadruped_common.robot import JOINT_NAMES
+from quadruped_common.ros.node_startup import start_node
 from quadruped_drivers.hardware_config import load_hardware_config
 from quadruped_drivers.node_support import open_bus, with_failsafe
 from quadruped_drivers.pwm_output import ServoPwmOutput

@@ -31,7 +31,7 @@ from diagnostic_updater import DiagnosticStatusWrapper, Updater
 from sensor_msgs.msg import Imu
 
 from quadruped_common.monitoring import RateMonitor
-from quadruped_common.node_startup import start_node
+from quadruped_common.ros.node_startup import start_node
 from quadruped_drivers.vn100.driver import Vn100Driver, serial_port_factory
 from quadruped_drivers.vn100.sample_gate import DROP_REASONS, TIME_ANOMALY, SampleGate
 from quadruped_drivers.vn100.settings import VN100_KEYS, load_vn100_settings, sensor_limits

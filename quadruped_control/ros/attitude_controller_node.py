@@ -48,8 +48,8 @@ from std_srvs.srv import SetBool, SetBoolResponse
 
 from quadruped_common.config import ParameterError
 from quadruped_common.monitoring import STALE_IMU, HoldEpisodes, RateMonitor, WindowStatistics, hold_kind
-from quadruped_common.node_startup import start_node
 from quadruped_common.robot import JOINT_NAMES
+from quadruped_common.ros.node_startup import start_node
 from quadruped_common.so3 import quat_to_rot, rot_to_quat, rpy_to_rot
 from quadruped_control.control.controller import AttitudeController
 from quadruped_control.control.controller_config import TUNABLE_BOUNDS, apply_tunables, load_controller_config

@@ -58,7 +58,7 @@ from geometry_msgs.msg import PoseStamped
 from rosgraph_msgs.msg import Clock
 from std_srvs.srv import SetBool, SetBoolResponse
 
-from quadruped_common.node_startup import start_node
+from quadruped_common.ros.node_startup import start_node
 from quadruped_control.sim.lockstep import AnswerTracker, SimClock
 
 from quadruped_common.config import ParameterError

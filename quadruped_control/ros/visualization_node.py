@@ -33,7 +33,7 @@ from visualization_msgs.msg import Marker, MarkerArray
 
 from quadruped_common.config import config_path
 from quadruped_common.monitoring import RateMonitor
-from quadruped_common.node_startup import start_node
+from quadruped_common.ros.node_startup import start_node
 from quadruped_control.model.params import load_robot_params
 from quadruped_control.ros.visualization import (Throttle, VisualizationError, foot_target_spheres,
                                              imu_orientation, unit_quaternion, visual_joint_state)

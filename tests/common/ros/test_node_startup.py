@@ -1,4 +1,4 @@
-"""quadruped_common.node_startup: the XML-RPC serving thread ends on shutdown (ros/ros_comm#2238)."""
+"""quadruped_common.ros.node_startup: the XML-RPC serving thread ends on shutdown (ros/ros_comm#2238)."""
 import os
 import time
 
@@ -7,7 +7,7 @@ import pytest
 xmlrpc = pytest.importorskip("rosgraph.xmlrpc")
 pytest.importorskip("rospy")
 
-from quadruped_common.node_startup import stop_xmlrpc_server  # noqa: E402
+from quadruped_common.ros.node_startup import stop_xmlrpc_server  # noqa: E402
 
 
 def _threads() -> int:
