@@ -45,7 +45,7 @@ from quadruped_control.model.params import load_robot_params
 from quadruped_control.sim.plants import PLANTS
 from quadruped_control.sim.simulation import SimulationError, load_simulation_settings
 from quadruped_control.studies import StudyError, identify, paper_experiments, paper_sim, robustness, schemes
-from quadruped_control.studies.trial import GAIN_ALIASES, TrialSpec, format_metrics_table, run_trial
+from quadruped_control.studies.trial import AUTO_BATCH_MIN, GAIN_ALIASES, TrialSpec, format_metrics_table, run_trial
 
 #: --study NAME -> its module (each has ``main_study(args) -> exit status``)
 STUDIES = {"paper-sim": paper_sim, "robustness": robustness, "schemes": schemes,
@@ -111,6 +111,13 @@ def build_parser() -> argparse.ArgumentParser:
     parser.add_argument("--dask-scheduler", default=None, metavar="ADDRESS",
                         help="run a study's trials on an existing Dask cluster (e.g. tcp://host:8786) "
                              "instead of local processes")
+    parser.add_argument("--engine", choices=("auto", "trial", "batch"), default="auto",
+                        help="studies: 'trial' runs each trial on its own, 'batch' runs them together on the "
+                             "batched simulator, 'auto' (default) batches a study of at least %d trials the "
+                             "batch can run" % AUTO_BATCH_MIN)
+    parser.add_argument("--batch-size", type=int, default=1500, metavar="N",
+                        help="batched engine: at most N trials per batch (default %(default)s; the record costs about "
+                             "0.2 MB per trial and simulated minute)")
     parser.add_argument("--no-resume", dest="resume", action="store_false",
                         help="run every trial of a study again instead of reusing DIR/trials/*.json")
     parser.add_argument("--out", default="simulation_output", help="output directory (default %(default)s)")

@@ -35,6 +35,8 @@ from typing import Optional, Sequence, Tuple, Union
 
 import numpy as np
 
+from quadruped_common.so3 import cross_rows
+
 from quadruped_control.model.hydrodynamics import paw_drag_wrench_f
 from quadruped_control.model.kinematics import leg_kinematics
 from quadruped_control.model.params import RobotParams
@@ -50,6 +52,7 @@ __all__ = [
     "estimate_body_torque",
     "foot_speed",
     "foot_velocity_command",
+    "foot_velocity_commands_batch",
     "force_direction",
     "leg_torques",
 ]
@@ -126,6 +129,27 @@ def foot_velocity_command_f(tau: Vec3, r: Vec3, omega: Vec3, drag_constant: floa
     return (-fx * speed - (wy * rz - wz * ry),
             -fy * speed - (wz * rx - wx * rz),
             -fz * speed - (wx * ry - wy * rx))
+
+
+def foot_velocity_commands_batch(tau: np.ndarray, r: np.ndarray, omega: np.ndarray, drag_constant: float,
+                                 normalize: np.ndarray) -> np.ndarray:
+    """eq. (foot_vel) vectorised: :func:`foot_velocity_command_f` for leg torques ``tau`` (..., 3), foot
+    positions ``r`` (..., 3), body rates ``omega`` (..., 3) and ``normalize`` flags (...) that broadcast
+    together; returns v^cmd (..., 3). The same formulas and degenerate cases (zero torque, zero arm, foot
+    on the torque axis: no stroke), for the batched simulator (:mod:`quadruped_control.control.batch`);
+    the tests compare the two."""
+    nt = np.sqrt(np.sum(tau * tau, axis=-1))
+    nr = np.sqrt(np.sum(r * r, axis=-1))
+    usable = (nt >= MIN_TORQUE) & (nr >= MIN_ARM)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        f = cross_rows(tau / np.where(usable, nt, 1.0)[..., None], r / np.where(usable, nr, 1.0)[..., None])
+        sin_angle = np.sqrt(np.sum(f * f, axis=-1))
+        usable &= sin_angle >= MIN_SIN
+        f = np.where(np.asarray(normalize)[..., None], f / np.where(usable, sin_angle, 1.0)[..., None], f)
+        speed = np.sqrt(nt / (drag_constant * np.where(usable, nr, 1.0)))
+    f = np.where(usable[..., None], f, 0.0)
+    speed = np.where(usable, speed, 0.0)
+    return -f * speed[..., None] - cross_rows(omega, r)
 
 
 # --------------------------------------------------------------------------------------------------

@@ -51,6 +51,7 @@ __all__ = [
     "paw_buoyancy",
     "paw_buoyancy_f",
     "paw_drag_force",
+    "paw_drag_force_unchecked",
     "paw_drag_wrench_f",
     "torso_buoyancy_torque_matrix",
 ]
@@ -91,9 +92,14 @@ def paw_drag_force(v_foot_world: ArrayLike, params: RobotParams) -> np.ndarray:
 
     ``v_foot_world``: foot velocity v_e,i^W in m/s, shape (3,) or (N, 3). Returns N, same shape.
     """
-    v = _finite_vectors(v_foot_world, "foot velocity")
+    return paw_drag_force_unchecked(_finite_vectors(v_foot_world, "foot velocity"), params.drag_constant)
+
+
+def paw_drag_force_unchecked(v: np.ndarray, drag_constant: float) -> np.ndarray:
+    """eq. (drag) for foot velocities ``v`` of any shape (..., 3), without the finiteness check of
+    :func:`paw_drag_force` (the batched plant, where one diverging trial must not stop the others)."""
     speed = np.sqrt(np.sum(v * v, axis=-1, keepdims=True))
-    return -params.drag_constant * speed * v
+    return -drag_constant * speed * v
 
 
 def leg_wrench(v_foot_world: ArrayLike, r_foot_body: ArrayLike, R: ArrayLike,
@@ -256,16 +262,17 @@ def body_drag_f(coefficients: Sequence[float], bx: float, by: float, bz: float, 
     the one implementation, behind :func:`body_drag` and the integrator's stages.
 
     ``coefficients``: :attr:`BodyDragCoefficients.flat` (q_x, q_y, q_z, p_x, p_y, p_z, c_f, c_g);
-    (bx, by, bz) = v_B^B, (wx, wy, wz) = omega_B^B. No input checks.
+    (bx, by, bz) = v_B^B, (wx, wy, wz) = omega_B^B, floats or arrays of the same shape. No input checks.
     """
     qf0, qf1, qf2, qg0, qg1, qg2, cf, cg = coefficients
-    # |x| inline (the value of abs(), without the call)
-    return (-(qf0 * (bx if bx >= 0.0 else -bx) + cf) * bx,
-            -(qf1 * (by if by >= 0.0 else -by) + cf) * by,
-            -(qf2 * (bz if bz >= 0.0 else -bz) + cf) * bz,
-            -(qg0 * (wx if wx >= 0.0 else -wx) + cg) * wx,
-            -(qg1 * (wy if wy >= 0.0 else -wy) + cg) * wy,
-            -(qg2 * (wz if wz >= 0.0 else -wz) + cg) * wz)
+    # Plain arithmetic and abs(): the same code runs on floats (the plants' stages) and on arrays of
+    # one value per trial (the batched plant, :mod:`quadruped_control.sim.plants.paper_batch`).
+    return (-(qf0 * abs(bx) + cf) * bx,
+            -(qf1 * abs(by) + cf) * by,
+            -(qf2 * abs(bz) + cf) * bz,
+            -(qg0 * abs(wx) + cg) * wx,
+            -(qg1 * abs(wy) + cg) * wy,
+            -(qg2 * abs(wz) + cg) * wz)
 
 
 def body_drag_coefficients(params: RobotParams) -> BodyDragCoefficients:

@@ -48,7 +48,7 @@ Decisions (see also the docstrings):
 from __future__ import annotations
 
 import math
-from typing import Optional, Sequence, Tuple, Union
+from typing import Any, Optional, Sequence, Tuple, Union
 
 import numpy as np
 
@@ -135,6 +135,16 @@ def _closure_error(theta1: float, theta2: float, disc: float, g: float, a1: floa
                             % (math.degrees(theta1), math.degrees(theta2)))
 
 
+def _closure_terms(c1: Any, s1: Any, c2: Any, s2: Any, c21: Any, a1: float, a3: float, c: float) -> Tuple[Any, ...]:
+    """E, F, G of eq. (fk_EFG) and the discriminant E^2 + F^2 - G^2, from the cosines and sines of theta1,
+    theta2 and cos(theta2 - theta1); valid for the symmetric mechanism a1 = a2, a3 = a4 (enforced by
+    params). Plain arithmetic: floats here, arrays in :mod:`quadruped_control.model.kinematics_batch`."""
+    e = 2.0 * a3 * (c + a1 * (c2 - c1))
+    f = 2.0 * a1 * a3 * (s2 - s1)
+    g = c * c + 2.0 * a1 * a1 + 2.0 * c * a1 * c2 - 2.0 * c * a1 * c1 - 2.0 * a1 * a1 * c21
+    return e, f, g, e * e + f * f - g * g
+
+
 def _five_bar_closure(theta1: float, theta2: float, a1: float, a2: float, a3: float, a4: float,
                       c: float) -> Tuple[float, float, float, float]:
     """The one implementation of the five-bar forward kinematics, eq. (fk_EFG), (fk_phi), (fk_planar), on
@@ -148,11 +158,7 @@ def _five_bar_closure(theta1: float, theta2: float, a1: float, a2: float, a3: fl
     """
     c1, s1 = math.cos(theta1), math.sin(theta1)
     c2, s2 = math.cos(theta2), math.sin(theta2)
-    # eq. (fk_EFG), valid for the symmetric mechanism a1 = a2, a3 = a4 (enforced by params).
-    e = 2.0 * a3 * (c + a1 * (c2 - c1))
-    f = 2.0 * a1 * a3 * (s2 - s1)
-    g = c * c + 2.0 * a1 * a1 + 2.0 * c * a1 * c2 - 2.0 * c * a1 * c1 - 2.0 * a1 * a1 * math.cos(theta2 - theta1)
-    disc = e * e + f * f - g * g
+    e, f, g, disc = _closure_terms(c1, s1, c2, s2, math.cos(theta2 - theta1), a1, a3, c)
     # The relative tolerance only matters at the edge of the workspace; NaN fails every comparison.
     if not ((disc >= 0.0 or disc >= -_ROUND_TOL * _closure_scale(a1, a3, c)) and g >= 1e-24):
         raise _closure_error(theta1, theta2, disc, g, a1, a3, a4, c)

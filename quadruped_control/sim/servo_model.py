@@ -41,6 +41,7 @@ __all__ = [
     "ServoParams",
     "load_servo_params",
     "rate_limited_lag_step",
+    "rate_limited_lag_step_batch",
     "make_servo_model",
 ]
 
@@ -173,6 +174,25 @@ def rate_limited_lag_step(q: float, command: float, max_speed: float, time_const
     if error < 0.0:
         return command + new_magnitude
     return command
+
+
+def rate_limited_lag_step_batch(q: np.ndarray, command: np.ndarray, max_speed: np.ndarray,
+                                time_constant: np.ndarray, dt: float) -> np.ndarray:
+    """:func:`rate_limited_lag_step` on arrays (any shape; ``max_speed`` and ``time_constant`` broadcast
+    against it, e.g. one per trial with shape (N, 1, 1) for (N, 4, 3) joints): the same exact solution,
+    for the batched simulator. The tests compare the two."""
+    error = command - q
+    magnitude = np.abs(error)
+    with np.errstate(divide="ignore", invalid="ignore", over="ignore"):
+        pure = time_constant <= 1e-9 * dt
+        step = max_speed * dt
+        limited = q + np.sign(error) * np.minimum(magnitude, step)
+        knee = max_speed * time_constant
+        t_saturated = np.where(magnitude > knee, (magnitude - knee) / max_speed, 0.0)
+        decayed = np.minimum(magnitude, knee) * np.exp(-(dt - t_saturated) / np.where(pure, 1.0, time_constant))
+        new_magnitude = np.where(t_saturated >= dt, magnitude - step, decayed)
+        lag = command - np.sign(error) * new_magnitude
+    return np.where(pure, limited, lag)
 
 
 def servo_params_from_dict(tree: Mapping[str, Any], robot_yaml: Optional[str] = None) -> ServoParams:

@@ -7,6 +7,10 @@ pickles), a list of *specs* (picklable, e.g. frozen dataclasses) and an *output 
     results = run_trials(run_trial, specs, "out/my_study", jobs=2)                 # local processes
     results = run_trials(run_trial, specs, "out/my_study", dask_scheduler="tcp://host:8786")  # Dask
 
+A batched trial function ``fn(specs) -> [result, ...]`` (the batched simulator runs many trials at once)
+goes through :func:`run_trial_batches` instead: the trials are cut into chunks, one task each, with the
+same per-trial files, resume and progress bar (:func:`run_trials` is that with chunks of one).
+
 ``results[i]`` belongs to ``specs[i]``. Each finished trial is written at once to
 ``<out>/trials/<key>.json`` (the key is the spec's label and a hash of all its fields, see
 :func:`spec_key`); a rerun with the same folder and the same specs loads those files instead of running
@@ -34,9 +38,11 @@ from typing import Any, Callable, Dict, Iterator, List, Optional, Sequence
 
 import numpy as np
 
-__all__ = ["StudyError", "run_trials", "spec_key", "trial_path"]
+__all__ = ["StudyError", "run_trial_batches", "run_trials", "spec_key", "trial_path"]
 
 TrialFn = Callable[[Any], Dict[str, Any]]
+#: ``fn(specs) -> [result, ...]``: many trials at once (the batched simulator), one result per spec, in order.
+BatchFn = Callable[[List[Any]], List[Dict[str, Any]]]
 
 
 class StudyError(RuntimeError):
@@ -123,8 +129,41 @@ def run_trials(fn: TrialFn, specs: Sequence[Any], out_dir: Optional[str], jobs: 
     overwrites its file). A trial that raises stops the study with :class:`StudyError` after the running
     trials are cancelled; the finished ones stay on disk for the next run.
     """
-    if jobs < 1:
-        raise ValueError("jobs must be at least 1, got %r" % (jobs,))
+    return run_trial_batches(_EachTrial(fn), specs, out_dir, batch_size=1, jobs=jobs, dask_scheduler=dask_scheduler,
+                             executor=executor, resume=resume, progress=progress, desc=desc)
+
+
+class _EachTrial:
+    """A trial function as a batched one (one spec per call): :func:`run_trials` is
+    :func:`run_trial_batches` with batches of one. A class, not a closure, so that it pickles."""
+
+    def __init__(self, fn: TrialFn) -> None:
+        self.fn = fn
+
+    def __call__(self, specs: List[Any]) -> List[Dict[str, Any]]:
+        return [self.fn(spec) for spec in specs]
+
+
+def _chunks(todo: Sequence[int], batch_size: int, workers: int) -> List[List[int]]:
+    """``todo`` in consecutive chunks of at most ``batch_size``, and at least ``workers`` chunks when
+    there are that many trials (so every worker gets one), as even as possible."""
+    if not todo:
+        return []
+    count = max(-(-len(todo) // batch_size), min(workers, len(todo)))
+    size = -(-len(todo) // count)
+    return [list(todo[i:i + size]) for i in range(0, len(todo), size)]
+
+
+def run_trial_batches(fn: BatchFn, specs: Sequence[Any], out_dir: Optional[str], batch_size: int = 1500,
+                      jobs: int = 1, dask_scheduler: Optional[str] = None, executor: Optional[Executor] = None,
+                      resume: bool = True, progress: bool = True, desc: str = "") -> List[Dict[str, Any]]:
+    """:func:`run_trials` for a batched trial function ``fn(specs) -> results``: the trials still to run
+    are cut into chunks of at most ``batch_size`` (and at least one per worker), each chunk is one task
+    on the executor, and every trial of a finished chunk is written to its own file at once. Resume,
+    result files, errors and the progress bar (counted in trials) are those of :func:`run_trials`, so a
+    study may switch between the two and keep its finished trials."""
+    if jobs < 1 or batch_size < 1:
+        raise ValueError("jobs and batch_size must be at least 1, got %r and %r" % (jobs, batch_size))
     paths: List[Optional[str]] = [None] * len(specs)
     results: List[Optional[Dict[str, Any]]] = [None] * len(specs)
     if out_dir is not None:
@@ -136,6 +175,8 @@ def run_trials(fn: TrialFn, specs: Sequence[Any], out_dir: Optional[str], jobs: 
             for i, path in enumerate(paths):
                 results[i] = _load(path)  # type: ignore[arg-type]
     todo = [i for i, r in enumerate(results) if r is None]
+    workers = 1 if (executor is None and dask_scheduler is None and jobs == 1) else max(jobs, 2)
+    chunks = _chunks(todo, batch_size, workers)
 
     def finish(i: int, result: Dict[str, Any]) -> None:
         if paths[i] is not None:
@@ -144,27 +185,37 @@ def run_trials(fn: TrialFn, specs: Sequence[Any], out_dir: Optional[str], jobs: 
         else:
             results[i] = json.loads(json.dumps(_jsonable(result), allow_nan=True))
 
+    def finish_chunk(chunk: List[int], chunk_results: List[Dict[str, Any]]) -> None:
+        if len(chunk_results) != len(chunk):
+            raise StudyError("a batch of %d trials returned %d results" % (len(chunk), len(chunk_results)))
+        for i, result in zip(chunk, chunk_results):
+            finish(i, result)
+
+    def failed(chunk: List[int]) -> str:
+        first, last = (getattr(specs[i], "label", i) for i in (chunk[0], chunk[-1]))
+        return "trial %r failed" % (first,) if len(chunk) == 1 else "batch %r .. %r failed" % (first, last)
+
     with _progress(len(specs), len(specs) - len(todo), desc, progress) as bar:
-        with _executor(jobs, dask_scheduler, len(todo)) as pool:
+        with _executor(jobs, dask_scheduler, len(chunks)) as pool:
             pool = executor if executor is not None else pool
             if pool is None:
-                for i in todo:
+                for chunk in chunks:
                     try:
-                        finish(i, fn(specs[i]))
+                        finish_chunk(chunk, fn([specs[i] for i in chunk]))
                     except Exception as exc:
-                        raise StudyError("trial %r failed: %s" % (getattr(specs[i], "label", i), exc)) from exc
-                    bar.update(1)
+                        raise StudyError("%s: %s" % (failed(chunk), exc)) from exc
+                    bar.update(len(chunk))
             else:
-                futures: Dict[Future, int] = {pool.submit(fn, specs[i]): i for i in todo}
+                futures: Dict[Future, List[int]] = {pool.submit(fn, [specs[i] for i in chunk]): chunk
+                                                    for chunk in chunks}
                 try:
                     for future in as_completed(futures):
-                        i = futures[future]
+                        chunk = futures[future]
                         try:
-                            finish(i, future.result())
+                            finish_chunk(chunk, future.result())
                         except Exception as exc:
-                            raise StudyError("trial %r failed: %s"
-                                             % (getattr(specs[i], "label", i), exc)) from exc
-                        bar.update(1)
+                            raise StudyError("%s: %s" % (failed(chunk), exc)) from exc
+                        bar.update(len(chunk))
                 finally:
                     for future in futures:
                         future.cancel()

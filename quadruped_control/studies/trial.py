@@ -23,13 +23,19 @@ from quadruped_control.model.params import load_robot_params
 from quadruped_control.sim.plants import load_tank_params, make_plant
 from quadruped_control.sim.servo_model import load_servo_params, make_servo_model
 from quadruped_control.sim.simulation import ClosedLoopSimulation, SimulationResult, load_simulation_settings
-from quadruped_control.studies.runner import run_trials
+from quadruped_control.studies.runner import run_trial_batches, run_trials
 
 #: --gains spellings -> gain set of config/controller.yaml
+#: ``--engine auto`` runs a study batched from this many trials (all of which the batch can run): below
+#: about a hundred trials numpy's per-call overhead makes the per-trial engine faster
+#: (``benchmarks/bench_batch.py``: 15 trials batched run at 0.6x the per-trial engine's speed).
+AUTO_BATCH_MIN = 100
+
 GAIN_ALIASES = {"sim": "simulation", "simulation": "simulation", "experiment": "experiment", "exp": "experiment"}
 
-__all__ = ["GAIN_ALIASES", "TrialSpec", "format_metrics_table", "format_value", "run_many",
-           "run_trial", "stroke_metrics", "without_trace", "write_trial"]
+__all__ = ["AUTO_BATCH_MIN", "GAIN_ALIASES", "TrialSetup", "TrialSpec", "batch_unsupported", "format_metrics_table", "format_value",
+           "run_batch", "run_many", "run_trial", "stroke_metrics", "trial_setup", "use_batch_engine", "without_trace",
+           "write_trial"]
 
 
 @dataclasses.dataclass(frozen=True)
@@ -85,9 +91,19 @@ def _progress_printer(label: str, quiet: bool):
     return report
 
 
-def run_trial(spec: TrialSpec) -> Dict[str, Any]:
-    """Run one trial; writes its files if ``spec.out_dir``; returns a summary with metrics and the
-    traces needed for figures (t, rpy, setpoint, geodesic as lists)."""
+@dataclasses.dataclass
+class TrialSetup:
+    """What :func:`run_trial` and :func:`run_batch` build from a spec: robot, controller configuration,
+    servo parameters (speed scaled as the spec's robot and tank say) and the plant model (None: the paper's)."""
+
+    robot: Any
+    config: Any
+    servo_params: Any
+    model: Any
+
+
+def trial_setup(spec: TrialSpec) -> TrialSetup:
+    """The robot, controller configuration, servo parameters and plant of ``spec`` (files and overrides)."""
     robot = load_robot_params(spec.robot_yaml)
     if spec.robot_overrides:
         robot = dataclasses.replace(robot, **{k: (np.array(v, dtype=float) if isinstance(v, tuple) else v)
@@ -114,7 +130,15 @@ def run_trial(spec: TrialSpec) -> Dict[str, Any]:
             tank = tank.with_values(**{k: (tuple(v) if isinstance(v, list) else v) for k, v in spec.tank_overrides})
         model = make_plant(spec.plant, robot, tank)
         servo_params = dataclasses.replace(servo_params, max_speed=servo_params.max_speed * tank.servo_speed_scale)
-    servo = make_servo_model(spec.servo_model, servo_params)
+    return TrialSetup(robot=robot, config=config, servo_params=servo_params, model=model)
+
+
+def run_trial(spec: TrialSpec) -> Dict[str, Any]:
+    """Run one trial; writes its files if ``spec.out_dir``; returns a summary with metrics and the
+    traces needed for figures (t, rpy, setpoint, geodesic as lists)."""
+    setup = trial_setup(spec)
+    robot, config, model = setup.robot, setup.config, setup.model
+    servo = make_servo_model(spec.servo_model, setup.servo_params)
     if spec.controller not in ("on", "off"):
         raise ValueError("controller must be 'on' or 'off', got %r" % (spec.controller,))
     sim = ClosedLoopSimulation(
@@ -126,30 +150,112 @@ def run_trial(spec: TrialSpec) -> Dict[str, Any]:
         model=model, controller_enabled=spec.controller == "on")
     result = sim.run(spec.duration, progress=_progress_printer(spec.label, spec.quiet))
     metrics = result.metrics()
-    summary: Dict[str, Any] = {
-        "label": spec.label,
-        "setpoint_rpy_deg": list(spec.setpoint_rpy_deg),
-        "initial_rpy_deg": list(spec.initial_rpy_deg),
-        "gains": GAIN_ALIASES.get(spec.gains, spec.gains),
-        "scheme": config.stroke_scheme,
-        "plant": spec.plant,
-        "robot_yaml": spec.robot_yaml or config_path("robot.yaml"),
-        "nominal_foot_leg": [float(v) for v in robot.nominal_foot_leg],
-        "metrics": metrics,
-        "info": result.info,
-        "wall_time": result.wall_time,
-        "real_time_factor": result.real_time_factor,
-    }
+    summary = _summary(spec, setup, metrics, result.info, result.wall_time, result.real_time_factor)
     if spec.scheme_metrics:
         summary["scheme_metrics"] = stroke_metrics(result, robot)
     if spec.out_dir:
         write_trial(result, metrics, spec.out_dir, title=spec.label)
         summary["out_dir"] = spec.out_dir
     if spec.keep_trace:
-        k = max(1, int(spec.trace_stride))
-        summary["trace"] = {"t": result.t[::k], "rpy": result.rpy[::k], "setpoint": result.setpoint_rpy,
-                            "geodesic": result.geodesic[::k]}
+        summary["trace"] = _trace(spec, result.t, result.rpy, result.setpoint_rpy, result.geodesic)
     return summary
+
+
+def _summary(spec: TrialSpec, setup: TrialSetup, metrics: Dict[str, Any], info: Dict[str, Any], wall_time: float,
+             real_time_factor: float) -> Dict[str, Any]:
+    """The summary of one trial that both engines return."""
+    return {
+        "label": spec.label,
+        "setpoint_rpy_deg": list(spec.setpoint_rpy_deg),
+        "initial_rpy_deg": list(spec.initial_rpy_deg),
+        "gains": GAIN_ALIASES.get(spec.gains, spec.gains),
+        "scheme": setup.config.stroke_scheme,
+        "plant": spec.plant,
+        "robot_yaml": spec.robot_yaml or config_path("robot.yaml"),
+        "nominal_foot_leg": [float(v) for v in setup.robot.nominal_foot_leg],
+        "metrics": metrics,
+        "info": info,
+        "engine": info.get("engine", "trial"),
+        "wall_time": wall_time,
+        "real_time_factor": real_time_factor,
+    }
+
+
+def _trace(spec: TrialSpec, t: np.ndarray, rpy: np.ndarray, setpoint_rpy: np.ndarray,
+           geodesic: np.ndarray) -> Dict[str, Any]:
+    """Every ``trace_stride``-th sample of the attitude traces (figures)."""
+    k = max(1, int(spec.trace_stride))
+    return {"t": t[::k], "rpy": rpy[::k], "setpoint": setpoint_rpy, "geodesic": geodesic[::k]}
+
+
+def batch_unsupported(spec: TrialSpec) -> Optional[str]:
+    """Why the batched engine (:mod:`quadruped_control.sim.batch`) cannot run ``spec``, or None if it can."""
+    if spec.plant not in ("paper", "tank"):
+        return "plant %r" % spec.plant
+    if spec.attitude_noise_deg or spec.gyro_noise:
+        return "IMU noise"
+    if spec.controller != "on":
+        return "controller off"
+    if spec.scheme not in (None, "paper"):
+        return "stroke scheme %r" % spec.scheme
+    if spec.out_dir or spec.scheme_metrics:
+        return "per-trial files or stroke metrics"
+    return None
+
+
+def _batch_group(spec: TrialSpec) -> Tuple[Any, ...]:
+    """Specs with the same key share a robot, a period, a duration and a plant: one batch."""
+    return (spec.robot_yaml, spec.robot_overrides, spec.controller_yaml, spec.simulation_yaml, spec.duration,
+            spec.plant)
+
+
+def run_batch(specs: Sequence[TrialSpec]) -> List[Dict[str, Any]]:
+    """Run ``specs`` on the batched engine, one batch per group of specs that share a robot, files and
+    duration; returns the summaries :func:`run_trial` would (``engine`` 'batch', ``info`` with what the
+    batch knows, the group's aggregate ``real_time_factor``). ValueError names a spec the batch cannot
+    run (:func:`batch_unsupported`). A trial whose plant failed (where :func:`run_trial` raises) or whose
+    measurement the robot's controller would refuse (where the per-trial controller holds, which the
+    batch does not model) raises :class:`~quadruped_control.sim.simulation.SimulationError`: the batch
+    never returns a trial that differs from the per-trial engine's."""
+    from quadruped_control.sim.batch import BatchSimulation, BatchTrial
+    from quadruped_control.sim.simulation import SimulationError
+
+    for spec in specs:
+        reason = batch_unsupported(spec)
+        if reason is not None:
+            raise ValueError("trial %r cannot run batched: %s" % (spec.label, reason))
+    summaries: List[Optional[Dict[str, Any]]] = [None] * len(specs)
+    groups: Dict[Tuple[Any, ...], List[int]] = {}
+    for i, spec in enumerate(specs):
+        groups.setdefault(_batch_group(spec), []).append(i)
+    for indices in groups.values():
+        setups = [trial_setup(specs[i]) for i in indices]
+        trials = [BatchTrial(config=setup.config, setpoint=rpy_to_rot(*np.radians(specs[i].setpoint_rpy_deg)),
+                             initial=rpy_to_rot(*np.radians(specs[i].initial_rpy_deg)),
+                             servo_model=specs[i].servo_model, servo_params=setup.servo_params,
+                             restoring_offset=specs[i].restoring_offset,
+                             tank=setup.model.tank if setup.model is not None else None)
+                  for i, setup in zip(indices, setups)]
+        robot = setups[0].robot
+        result = BatchSimulation(robot, trials).run(specs[indices[0]].duration)
+        for row, (i, setup) in enumerate(zip(indices, setups)):
+            spec = specs[i]
+            if not result.trusted(row):
+                raise SimulationError("trial %r: %s" % (spec.label, "plant step failed" if result.failed[row]
+                                                        else "the controller would refuse a measurement"))
+            metrics = result.metrics(row)
+            config = setup.config
+            info = {"dt": config.dt, "duration": spec.duration, "servo_model": spec.servo_model,
+                    "plant": spec.plant, "engine": "batch", "batch_size": len(indices),
+                    "gains": dataclasses.asdict(config.gains), "tau_max": config.tau_max,
+                    "t_rec": config.t_rec, "t_pow_max": config.t_pow_max,
+                    "ik_fallbacks": int(result.ik_fallbacks[row])}
+            summary = _summary(spec, setup, metrics, info, result.wall_time, result.real_time_factor)
+            if spec.keep_trace:
+                summary["trace"] = _trace(spec, result.t, result.rpy[row], result.setpoint_rpy[row],
+                                          result.geodesic[row])
+            summaries[i] = summary
+    return summaries  # type: ignore[return-value]
 
 
 def stroke_metrics(result: SimulationResult, robot: Any, every: int = 5) -> Dict[str, float]:
@@ -215,8 +321,30 @@ def format_metrics_table(metrics: Dict[str, Any], label: str = "") -> str:
     return "\n".join(lines)
 
 
+def use_batch_engine(specs: Sequence[TrialSpec], engine: str) -> bool:
+    """Whether a study's ``specs`` run on the batched engine: ``engine`` 'batch' (ParameterError naming a
+    spec it cannot run), 'trial' (never) or 'auto' (when the batch can run every spec and there are at
+    least :data:`AUTO_BATCH_MIN` of them)."""
+    if engine == "trial":
+        return False
+    reasons = [(spec.label, batch_unsupported(spec)) for spec in specs]
+    refused = [(label, reason) for label, reason in reasons if reason is not None]
+    if engine == "batch":
+        if refused:
+            raise ParameterError("--engine batch cannot run trial %r: %s" % refused[0])
+        return True
+    if engine != "auto":
+        raise ParameterError("engine must be 'auto', 'trial' or 'batch', got %r" % (engine,))
+    return not refused and len(specs) >= AUTO_BATCH_MIN
+
+
 def run_many(specs: Sequence[TrialSpec], args: argparse.Namespace, desc: str) -> List[Dict[str, Any]]:
-    """A study's trials through the study runner (executor, progress bar, resume from ``args.out``)."""
+    """A study's trials through the study runner (executor, progress bar, resume from ``args.out``), on
+    the batched engine when ``args.engine`` asks for it (:func:`use_batch_engine`)."""
+    if use_batch_engine(specs, getattr(args, "engine", "trial")):
+        return run_trial_batches(run_batch, list(specs), args.out, batch_size=getattr(args, "batch_size", 1500),
+                                 jobs=args.jobs, dask_scheduler=args.dask_scheduler, resume=args.resume,
+                                 progress=not args.quiet, desc=desc + " (batched)")
     return run_trials(run_trial, specs, args.out, jobs=args.jobs, dask_scheduler=args.dask_scheduler,
                       resume=args.resume, progress=not args.quiet, desc=desc)
 

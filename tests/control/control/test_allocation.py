@@ -10,6 +10,7 @@ from quadruped_common.robot import LEGS
 from quadruped_common.so3 import exp_so3, rpy_to_rot
 from quadruped_control.control.allocation import (allocate, estimate_body_torque, foot_speed, foot_velocity_command,
                                           force_direction, leg_torques)
+from quadruped_control.control import allocation
 from quadruped_control.model import hydrodynamics as hd
 from quadruped_control.model.kinematics import joint_angles
 from quadruped_control.model.params import load_robot_params
@@ -187,3 +188,18 @@ def test_estimate_body_torque_matches_the_dynamics_model():
         estimate_body_torque(q[:3], q_dot[:3], R, omega, PARAMS)
     with pytest.raises(ValueError, match="finite"):
         estimate_body_torque(q, q_dot * math.nan, R, omega, PARAMS)
+
+
+def test_allocation_batch_matches_float_path_including_degenerate_cases():
+    rng = np.random.default_rng(5)
+    tau = rng.normal(0.0, 1.0, (300, 3))
+    r = rng.normal(0.0, 0.2, (300, 3))
+    tau[:10] = 0.0                      # no torque: no stroke
+    r[10:20] = 0.0                      # no arm
+    r[20:30] = 0.3 * tau[20:30]         # foot on the torque axis
+    omega = rng.normal(0.0, 0.5, (300, 3))
+    normalize = rng.random(300) < 0.5
+    out = allocation.foot_velocity_commands_batch(tau, r, omega, 3.3, normalize)
+    for i in range(300):
+        expected = allocation.foot_velocity_command_f(tuple(tau[i]), tuple(r[i]), tuple(omega[i]), 3.3, bool(normalize[i]))
+        np.testing.assert_allclose(out[i], expected, rtol=1e-12, atol=1e-15)

@@ -9,6 +9,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from quadruped_common.config import ParameterError
+from quadruped_control.sim import servo_model
 from quadruped_control.sim.servo_model import (
     IdealServo,
     RateLimitedServo,
@@ -172,3 +173,15 @@ def test_exact_step_keeps_nan_and_a_joint_at_its_command() -> None:
     assert math.isnan(rate_limited_lag_step(0.1, math.nan, 10.0, 0.03, 0.01))
     assert math.isnan(rate_limited_lag_step(0.1, math.nan, 10.0, 0.0, 0.01))
     assert rate_limited_lag_step(0.25, 0.25, 10.0, 0.03, 0.01) == 0.25
+
+
+def test_rate_limited_servo_batch_matches_the_exact_float_step():
+    rng = np.random.default_rng(6)
+    q = rng.uniform(-1.0, 1.0, 500)
+    command = q + rng.normal(0.0, 0.2, 500)
+    command[:20] = q[:20]               # no error
+    speed = rng.uniform(1.0, 12.0, 500)
+    lag = rng.choice([0.0, 1e-13, 0.01, 0.03], 500)  # pure rate limiter included
+    out = servo_model.rate_limited_lag_step_batch(q, command, speed, lag, 0.01)
+    expected = [servo_model.rate_limited_lag_step(a, b, c, d, 0.01) for a, b, c, d in zip(q, command, speed, lag)]
+    np.testing.assert_allclose(out, expected, rtol=0, atol=1e-15)

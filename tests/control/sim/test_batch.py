@@ -1,0 +1,134 @@
+"""The batched engine (:mod:`quadruped_control.sim.batch`, with the batched controller of
+:mod:`quadruped_control.control.batch` and plant of :mod:`quadruped_control.sim.plants.paper_batch`)
+against the per-trial engine, trial by trial."""
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+from quadruped_common.so3 import rpy_to_rot
+from quadruped_control.control.controller_config import load_controller_config
+from quadruped_control.model.params import load_robot_params
+from quadruped_control.sim.batch import BatchSimulation, BatchTrial
+from quadruped_control.sim.servo_model import load_servo_params, make_servo_model
+from quadruped_control.sim.simulation import ClosedLoopSimulation
+
+
+@pytest.fixture(scope="module")
+def robot():
+    return load_robot_params()
+
+
+def _cases():
+    cases = []
+    for gains in ("simulation", "experiment"):
+        for rpy in ((45.0, 0.0, 0.0), (15.0, 15.0, 15.0), (0.0, 0.0, 75.0), (30.0, -20.0, 60.0)):
+            for servo in ("ideal", "rate-limited"):
+                cases.append((gains, rpy, servo))
+    return cases
+
+
+def test_batch_states_agree_with_the_per_trial_engine_to_1e_9_over_10_s(robot):
+    """Every state (p, v, R, omega, servo angles) of 16 mixed trials (both gain sets, both servo models,
+    roll/yaw/combined setpoints, a tilted start) against the per-trial engine, sample by sample."""
+    servo_params = load_servo_params()
+    configs = {g: load_controller_config(None, g) for g in ("simulation", "experiment")}
+    cases = _cases()
+    initial = [rpy_to_rot(*np.radians((10.0 * (i % 3), -5.0 * (i % 2), 0.0))) for i in range(len(cases))]
+    trials = [BatchTrial(config=configs[g], setpoint=rpy_to_rot(*np.radians(rpy)), initial=initial[i],
+                         servo_model=servo, servo_params=servo_params) for i, (g, rpy, servo) in enumerate(cases)]
+    duration = 10.0
+    result = BatchSimulation(robot, trials).run(duration, record_states=1001)
+    assert not result.failed.any() and not result.refused.any() and not result.ik_fallbacks.any()
+    for i, (g, rpy, servo) in enumerate(cases):
+        sim = ClosedLoopSimulation(robot, configs[g], make_servo_model(servo, servo_params),
+                                   initial_R=initial[i], setpoint_R=rpy_to_rot(*np.radians(rpy)))
+        out = sim.run(duration)
+        states = result.states
+        for name, expected, got in (("R", out.rotation, states["rotation"][i]), ("omega", out.omega, states["omega"][i]),
+                                    ("p", out.position, states["position"][i]),
+                                    ("q", out.joint_positions, states["joints"][i].reshape(-1, 12))):
+            error = float(np.max(np.abs(expected - got)))
+            assert error <= 1e-9, "%s %s %s: %s differs by %.3g" % (g, rpy, servo, name, error)
+        np.testing.assert_allclose(result.geodesic[i], out.geodesic, rtol=0, atol=1e-9)
+        np.testing.assert_allclose(result.rpy[i], out.rpy, rtol=0, atol=1e-9)
+
+
+def test_ideal_only_batch_does_not_alias_the_controller_targets(robot):
+    """Regression: with only ideal servos the joint state once aliased the controller's target array."""
+    config = load_controller_config(None, "simulation")
+    trial = BatchTrial(config=config, setpoint=rpy_to_rot(*np.radians((45.0, 45.0, 45.0))))
+    result = BatchSimulation(robot, [trial]).run(2.0)
+    out = ClosedLoopSimulation(robot, config, setpoint_R=trial.setpoint).run(2.0)
+    np.testing.assert_allclose(result.geodesic[0], out.geodesic, rtol=0, atol=1e-9)
+
+
+def test_a_diverging_trial_is_flagged_and_frozen_without_stopping_the_others(robot):
+    config = load_controller_config(None, "simulation")
+    good = BatchTrial(config=config, setpoint=rpy_to_rot(0.5, 0.0, 0.0))
+    sim = BatchSimulation(robot, [good, good])
+    sim.step()
+    sim.omega[1] = [math.inf, 0.0, 0.0]  # what a blown-up integration leaves
+    result = sim.run(0.5)
+    assert result.refused.tolist() == [False, True] or result.failed.tolist() == [False, True]
+    assert not result.trusted(1) and result.trusted(0)
+    assert np.isfinite(result.geodesic[0]).all()
+
+
+def test_batch_refuses_what_it_does_not_run(robot):
+    config = load_controller_config(None, "simulation")
+    with pytest.raises(ValueError, match="paper"):
+        BatchSimulation(robot, [BatchTrial(config=config.replace(stroke_scheme="coordinated"), setpoint=np.eye(3))])
+    with pytest.raises(ValueError, match="share dt"):
+        BatchSimulation(robot, [BatchTrial(config=config, setpoint=np.eye(3)),
+                                BatchTrial(config=config.replace(dt=0.02), setpoint=np.eye(3))])
+    with pytest.raises(ValueError, match="servo_params"):
+        BatchSimulation(robot, [BatchTrial(config=config, setpoint=np.eye(3), servo_model="rate-limited")])
+    with pytest.raises(ValueError, match="unknown servo"):
+        BatchSimulation(robot, [BatchTrial(config=config, setpoint=np.eye(3), servo_model="fast")])
+    with pytest.raises(ValueError, match="duration"):
+        BatchSimulation(robot, [BatchTrial(config=config, setpoint=np.eye(3))]).run(float("nan"))
+
+
+def test_tank_batch_agrees_with_the_per_trial_tank_plant_to_1e_9_over_10_s(robot):
+    """Five Table-1 trials on the tank plant, each with its own tank parameters (the identified set,
+    and variations that switch on every candidate effect), against the per-trial engine."""
+    import argparse
+
+    from quadruped_control.sim.plants.tank import load_tank_params
+    from quadruped_control.studies.paper_experiments import experiment_specs
+    from quadruped_control.studies.trial import trial_setup
+
+    args = argparse.Namespace(seed=0, tank_yaml=None, robot_yaml=None)
+    specs, _ = experiment_specs(args, "tank", "experiment", "rate-limited", 10.0, keep_trace=False)
+    specs = specs[::3]
+    base = load_tank_params()
+    tanks = [base,
+             base.with_values(appendage_damping_linear=(0.02, 0.03, 0.01), appendage_damping_quadratic=(0.05, 0.05, 0.1)),
+             base.with_values(rope_torsion_stiffness=0.05, rope_torsion_damping=0.02, paw_drag_scale=0.6),
+             base.with_values(added_mass_scale=3.0, paw_added_mass_scale=2.0, net_weight=2.0),
+             base.with_values(suspension=False, hydrostatics=False)]
+    trials, sims = [], []
+    for spec, tank in zip(specs, tanks):
+        setup = trial_setup(spec)
+        from quadruped_control.sim.plants.tank import TankModel
+        model = TankModel(setup.robot, tank)
+        initial = rpy_to_rot(*np.radians(spec.initial_rpy_deg))
+        setpoint = rpy_to_rot(*np.radians(spec.setpoint_rpy_deg))
+        trials.append(BatchTrial(config=setup.config, setpoint=setpoint, initial=initial,
+                                 servo_model=spec.servo_model, servo_params=setup.servo_params, tank=tank))
+        sims.append(ClosedLoopSimulation(setup.robot, setup.config,
+                                         make_servo_model(spec.servo_model, setup.servo_params),
+                                         initial_R=initial, setpoint_R=setpoint, model=model))
+    result = BatchSimulation(robot, trials).run(10.0, record_states=1001)
+    assert not result.failed.any() and not result.refused.any()
+    for i, sim in enumerate(sims):
+        out = sim.run(10.0)
+        states = result.states
+        for name, expected, got in (("R", out.rotation, states["rotation"][i]), ("omega", out.omega, states["omega"][i]),
+                                    ("p", out.position, states["position"][i]),
+                                    ("q", out.joint_positions, states["joints"][i].reshape(-1, 12))):
+            error = float(np.max(np.abs(expected - got)))
+            assert error <= 1e-9, "trial %d (%s): %s differs by %.3g" % (i, specs[i].label, name, error)

@@ -1,0 +1,60 @@
+"""studies.trial: the batched path (run_batch) gives the summaries of the per-trial path (run_trial)."""
+from __future__ import annotations
+
+import dataclasses
+
+import pytest
+
+from quadruped_control.sim.simulation import SimulationError
+from quadruped_control.studies.trial import TrialSpec, batch_unsupported, run_batch, run_trial
+
+
+def _specs():
+    return [TrialSpec(label="roll", setpoint_rpy_deg=(30.0, 0.0, 0.0), duration=6.0, quiet=True, keep_trace=True),
+            TrialSpec(label="yaw exp", setpoint_rpy_deg=(0.0, 0.0, 40.0), initial_rpy_deg=(5.0, 0.0, 0.0), duration=6.0,
+                      gains="experiment", servo_model="rate-limited", quiet=True, keep_trace=False),
+            TrialSpec(label="tank", setpoint_rpy_deg=(0.0, 20.0, 0.0), duration=6.0, plant="tank",
+                      tank_overrides=(("paw_drag_scale", 0.7),), gains="experiment", servo_model="rate-limited",
+                      quiet=True, keep_trace=False),
+            TrialSpec(label="short", setpoint_rpy_deg=(10.0, 10.0, 0.0), duration=3.0, quiet=True, keep_trace=False)]
+
+
+def test_run_batch_gives_the_per_trial_metrics_for_mixed_plants_and_durations():
+    specs = _specs()
+    batched = run_batch(specs)
+    assert [s["label"] for s in batched] == [s.label for s in specs]
+    for spec, summary in zip(specs, batched):
+        expected = run_trial(spec)
+        assert summary["engine"] == "batch"
+        assert summary["metrics"]["samples"] == expected["metrics"]["samples"]
+        assert summary["metrics"]["settled"] == expected["metrics"]["settled"]
+        for axis in ("roll", "pitch", "yaw"):
+            for key in ("t_r", "e_ss", "M_p"):
+                a, b = summary["metrics"][axis][key], expected["metrics"][axis][key]
+                assert (a is None) == (b is None), (spec.label, axis, key)
+                if a is not None:
+                    assert a == pytest.approx(b, abs=1e-6), (spec.label, axis, key)
+        a = summary["metrics"]["geodesic"]["final_smoothed_deg"]
+        assert a == pytest.approx(expected["metrics"]["geodesic"]["final_smoothed_deg"], abs=1e-6)
+        assert ("trace" in summary) == spec.keep_trace
+    # three groups: paper 6 s (two trials), tank 6 s, paper 3 s
+    assert sorted(s["info"]["batch_size"] for s in batched) == [1, 1, 2, 2]
+
+
+def test_batch_unsupported_names_the_reason_and_run_batch_refuses():
+    base = _specs()[0]
+    assert batch_unsupported(base) is None
+    for change, reason in ((dict(attitude_noise_deg=1.0), "noise"), (dict(controller="off"), "controller off"),
+                           (dict(scheme="coordinated"), "coordinated"), (dict(scheme_metrics=True), "stroke metrics")):
+        spec = dataclasses.replace(base, **change)
+        assert reason in batch_unsupported(spec)
+        with pytest.raises(ValueError, match="cannot run batched"):
+            run_batch([base, spec])
+
+
+def test_run_batch_stops_a_trial_the_robots_controller_would_hold():
+    """The batch has no hold: a trial whose measurement the controller would refuse (here every motion:
+    max_angular_rate 1e-6 rad/s) is an error, never a silently different trial."""
+    spec = dataclasses.replace(_specs()[0], config_overrides=(("max_angular_rate", 1e-6),), keep_trace=False)
+    with pytest.raises(SimulationError, match="refuse"):
+        run_batch([spec])
