@@ -12,9 +12,10 @@ goes through :func:`run_trial_batches` instead: the trials are cut into chunks, 
 same per-trial files, resume and progress bar (:func:`run_trials` is that with chunks of one).
 
 ``results[i]`` belongs to ``specs[i]``. Each finished trial is written at once to
-``<out>/trials/<key>.json`` (the key is the spec's label and a hash of all its fields, see
-:func:`spec_key`); a rerun with the same folder and the same specs loads those files instead of running
-the trials again, so an interrupted study resumes where it stopped and a changed spec is run afresh.
+``<out>/trials/<key>.json`` (the key is the spec's label and a hash of all its fields, of the code that
+computes a trial and of the configuration files, see :func:`spec_key`); a rerun with the same folder and
+the same specs loads those files instead of running the trials again, so an interrupted study resumes
+where it stopped, and a changed spec, changed code or a changed config file runs the trial afresh.
 Results are JSON (numpy arrays become lists); every result, fresh or resumed, is returned as read back
 from its file, so a resumed study and a fresh one see the same values.
 
@@ -28,17 +29,19 @@ from __future__ import annotations
 
 import contextlib
 import dataclasses
+import functools
 import hashlib
 import json
 import os
 import re
 import sys
 from concurrent.futures import Executor, Future, ProcessPoolExecutor, as_completed
-from typing import Any, Callable, Dict, Iterator, List, Optional, Sequence
+from typing import Any, Callable, Dict, Iterator, List, Optional, Sequence, Tuple
 
 import numpy as np
 
-__all__ = ["StudyError", "run_trial_batches", "run_trials", "spec_key", "trial_path"]
+__all__ = ["CODE_ROOTS", "StudyError", "code_fingerprint", "config_fingerprint", "run_trial_batches", "run_trials",
+           "spec_key", "trial_path"]
 
 TrialFn = Callable[[Any], Dict[str, Any]]
 #: ``fn(specs) -> [result, ...]``: many trials at once (the batched simulator), one result per spec, in order.
@@ -61,14 +64,93 @@ def _jsonable(value: Any) -> Any:
     return value
 
 
-def spec_key(spec: Any) -> str:
+#: The packages whose code computes a trial: their sources are part of every result's key.
+CODE_ROOTS = ("quadruped_common", "quadruped_control/model", "quadruped_control/control", "quadruped_control/sim",
+              "quadruped_control/studies")
+
+
+def _tree_root() -> str:
+    """The folder that holds quadruped_common/ and quadruped_control/ (this module's package's parent)."""
+    return os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
+
+
+def _hash_files(paths: Sequence[str], root: str) -> str:
+    digest = hashlib.sha256()
+    for path in sorted(paths):
+        digest.update(os.path.relpath(path, root).encode("utf-8") + b"\0")
+        try:
+            with open(path, "rb") as stream:
+                digest.update(stream.read())
+        except OSError as exc:  # a named file that is gone: its name and the error, not a crash
+            digest.update(("unreadable: %s" % exc).encode("utf-8"))
+        digest.update(b"\0")
+    return digest.hexdigest()
+
+
+@functools.lru_cache(maxsize=8)
+def code_fingerprint(root: Optional[str] = None) -> str:
+    """sha256 of the Python sources of :data:`CODE_ROOTS` under ``root`` (default: this installation):
+    any change to the model, the controller, the simulator or a study's trial code changes it. Computed
+    once per process."""
+    root = root or _tree_root()
+    paths = []
+    for top in CODE_ROOTS:
+        for folder, dirs, files in os.walk(os.path.join(root, top)):
+            dirs[:] = sorted(d for d in dirs if d != "__pycache__")
+            paths += [os.path.join(folder, name) for name in files if name.endswith(".py")]
+    return _hash_files(paths, root)
+
+
+def config_fingerprint(spec: Any, config_folder: Optional[str] = None) -> str:
+    """sha256 of the configuration a trial reads: every YAML file of the package's ``config/`` folder
+    (``config_folder``, default :func:`~quadruped_common.config.config_dir`) and every file a spec field
+    ending in ``_yaml`` names."""
+    from quadruped_common.config import config_dir
+
+    folder = config_folder or config_dir()
+    paths = tuple(sorted(os.path.join(folder, name) for name in os.listdir(folder)
+                         if name.endswith((".yaml", ".yml"))))
+    named: List[str] = []
+    if dataclasses.is_dataclass(spec) and not isinstance(spec, type):
+        named = [os.path.abspath(value) for name, value in sorted(dataclasses.asdict(spec).items())
+                 if name.endswith("_yaml") and isinstance(value, str)]
+    return _hashed(paths, folder) + ":" + _hashed(tuple(named), "/")
+
+
+def _hashed(paths: Tuple[str, ...], root: str) -> str:
+    """:func:`_hash_files`, remembered while no file's size or modification time changes (a study keys
+    thousands of specs on the same few files)."""
+    signature = []
+    for path in paths:
+        try:
+            stat = os.stat(path)
+            signature.append((path, stat.st_size, stat.st_mtime_ns))
+        except OSError:
+            signature.append((path, -1, -1))
+    return _hash_signed(tuple(signature), root)
+
+
+@functools.lru_cache(maxsize=256)
+def _hash_signed(signature: Tuple[Tuple[str, int, int], ...], root: str) -> str:
+    return _hash_files([path for path, _, _ in signature], root)
+
+
+def spec_key(spec: Any, code: Optional[str] = None, config: Optional[str] = None) -> str:
     """File name stem of a spec's result: its ``label`` (made file-safe) and a hash of all its fields
-    (dataclasses: ``dataclasses.asdict``; other objects: ``repr``)."""
+    (dataclasses: ``dataclasses.asdict``; other objects: ``repr``), of the code that computes it
+    (:func:`code_fingerprint`) and of the configuration it reads (:func:`config_fingerprint`).
+
+    A result computed by other code or from other configuration files therefore has another key and is
+    never reused: after a change the trial runs again (the older file stays in the folder, unused, and
+    :func:`run_trials` says how many there are). ``code`` and ``config`` replace the fingerprints (tests).
+    """
     if dataclasses.is_dataclass(spec) and not isinstance(spec, type):
         text = json.dumps(_jsonable(dataclasses.asdict(spec)), sort_keys=True)
     else:
         text = repr(spec)
-    digest = hashlib.sha1(text.encode("utf-8")).hexdigest()[:12]
+    code = code_fingerprint() if code is None else code
+    config = config_fingerprint(spec) if config is None else config
+    digest = hashlib.sha1("\n".join((text, code, config)).encode("utf-8")).hexdigest()[:12]
     label = str(getattr(spec, "label", "") or "trial")
     slug = re.sub(r"[^A-Za-z0-9_.+-]+", "_", label).strip("_")[:60] or "trial"
     return "%s-%s" % (slug, digest)
@@ -144,6 +226,18 @@ class _EachTrial:
         return [self.fn(spec) for spec in specs]
 
 
+def _report_stale(out_dir: str, paths: Sequence[Optional[str]], show: bool) -> int:
+    """Count (and, if ``show``, say in one line) the result files of ``out_dir`` that belong to none of
+    this study's keys: results of other specs, or of these specs computed by other code or configuration."""
+    folder = os.path.join(out_dir, "trials")
+    current = {os.path.basename(p) for p in paths if p}
+    stale = [name for name in os.listdir(folder) if name.endswith(".json") and name not in current]
+    if stale and show:
+        sys.stderr.write("study: %d result file(s) in %s belong to other trials, code or configuration; "
+                         "they are not reused\n" % (len(stale), folder))
+    return len(stale)
+
+
 def _chunks(todo: Sequence[int], batch_size: int, workers: int) -> List[List[int]]:
     """``todo`` in consecutive chunks of at most ``batch_size``, and at least ``workers`` chunks when
     there are that many trials (so every worker gets one), as even as possible."""
@@ -174,6 +268,7 @@ def run_trial_batches(fn: BatchFn, specs: Sequence[Any], out_dir: Optional[str],
         if resume:
             for i, path in enumerate(paths):
                 results[i] = _load(path)  # type: ignore[arg-type]
+            _report_stale(out_dir, paths, progress)
     todo = [i for i, r in enumerate(results) if r is None]
     workers = 1 if (executor is None and dask_scheduler is None and jobs == 1) else max(jobs, 2)
     chunks = _chunks(todo, batch_size, workers)

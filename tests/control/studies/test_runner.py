@@ -1,9 +1,11 @@
-"""The study runner: executors (inline, processes, Dask LocalCluster), ordering, resume, failures."""
+"""The study runner: executors (inline, processes, Dask LocalCluster), ordering, resume, failures, batched
+trial functions, and the key that covers code and configuration."""
 from __future__ import annotations
 
 import dataclasses
 import json
 import os
+from concurrent.futures import ThreadPoolExecutor
 from typing import Any, Dict
 
 import numpy as np
@@ -12,6 +14,8 @@ import pytest
 from quadruped_control import simulate
 from quadruped_control.studies import trial
 from quadruped_control.studies import StudyError, run_trials, spec_key, trial_path
+from quadruped_control.studies import runner
+from quadruped_control.studies.runner import _chunks, run_trial_batches
 
 
 @dataclasses.dataclass(frozen=True)
@@ -99,3 +103,127 @@ def test_cli_dask_scheduler_address(tmp_path) -> None:
         assert simulate.main(["--study", "paper-sim", "--duration", "0.5", "--out", out, "--quiet",
                               "--dask-scheduler", cluster.scheduler_address]) == 2
         assert len(os.listdir(os.path.join(out, "trials"))) == 3
+
+
+# ---- batched trial functions (run_trial_batches) ------------------------------------------------
+
+CALLS = []
+
+
+def square_one(spec):
+    return {"label": spec.label, "y": spec.x * spec.x}
+
+
+def square_many(specs):
+    CALLS.append(len(specs))
+    return [square_one(spec) for spec in specs]
+
+
+def broken_many(specs):
+    if any(spec.x == 3.0 for spec in specs):
+        raise RuntimeError("diverged")
+    return [square_one(spec) for spec in specs]
+
+
+def test_chunks_cover_everything_in_order_with_one_chunk_per_worker_at_least():
+    assert _chunks([], 10, 2) == []
+    assert _chunks(list(range(7)), 10, 1) == [list(range(7))]
+    assert _chunks(list(range(7)), 10, 2) == [[0, 1, 2, 3], [4, 5, 6]]
+    chunks = _chunks(list(range(25)), 10, 2)
+    assert [i for c in chunks for i in c] == list(range(25)) and max(map(len, chunks)) <= 10 and len(chunks) == 3
+
+
+def test_batches_write_one_file_per_trial_and_resume_with_the_per_trial_runner(tmp_path):
+    specs = [Spec("t%d" % i, float(i)) for i in range(9)]
+    CALLS.clear()
+    out = str(tmp_path)
+    results = run_trial_batches(square_many, specs, out, batch_size=4, progress=False)
+    assert [r["y"] for r in results] == [float(i * i) for i in range(9)]
+    assert sorted(CALLS) == [1, 4, 4] or sorted(CALLS) == [3, 3, 3]
+    for spec in specs:
+        with open(trial_path(out, spec)) as stream:
+            assert json.load(stream)["label"] == spec.label
+    # the per-trial runner resumes from the batch's files: nothing runs again
+    os.remove(trial_path(out, specs[4]))
+    again = run_trials(square_one, specs, out, progress=False)
+    assert again == results
+    CALLS.clear()
+    assert run_trial_batches(square_many, specs, out, batch_size=4, progress=False) == results
+    assert CALLS == []
+
+
+def test_batches_on_an_executor_and_a_failing_batch_keeps_the_finished_ones(tmp_path):
+    specs = [Spec("t%d" % i, float(i)) for i in range(6)]
+    with ThreadPoolExecutor(2) as pool:
+        results = run_trial_batches(square_many, specs, None, batch_size=2, executor=pool, progress=False)
+    assert [r["y"] for r in results] == [float(i * i) for i in range(6)]
+    with pytest.raises(StudyError, match="diverged"):
+        run_trial_batches(broken_many, specs, str(tmp_path), batch_size=2, progress=False)
+    kept = [os.path.exists(trial_path(str(tmp_path), spec)) for spec in specs]
+    assert kept[:2] == [True, True] and kept[2:4] == [False, False]
+
+
+def test_batches_refuse_bad_arguments():
+    with pytest.raises(ValueError):
+        run_trial_batches(square_many, [], None, batch_size=0)
+    with pytest.raises(ValueError):
+        run_trial_batches(square_many, [], None, jobs=0)
+
+
+# ---- the key covers the code and the configuration ------------------------------------------------
+
+def test_code_fingerprint_changes_with_any_source_file(tmp_path) -> None:
+    for top in runner.CODE_ROOTS:
+        os.makedirs(tmp_path / top, exist_ok=True)
+        (tmp_path / top / "m.py").write_text("x = 1\n")
+    (tmp_path / "quadruped_control" / "ros").mkdir()
+    (tmp_path / "quadruped_control" / "ros" / "node.py").write_text("y = 1\n")
+    fingerprint = runner.code_fingerprint.__wrapped__  # uncached
+    first = fingerprint(str(tmp_path))
+    (tmp_path / "quadruped_control" / "ros" / "node.py").write_text("y = 2\n")
+    assert fingerprint(str(tmp_path)) == first  # the ROS glue computes no trial
+    (tmp_path / "quadruped_control" / "model" / "m.py").write_text("x = 2\n")
+    assert fingerprint(str(tmp_path)) != first
+    assert len(runner.code_fingerprint()) == 64 and runner.code_fingerprint() == runner.code_fingerprint()
+
+
+def test_a_changed_config_file_or_code_runs_the_trial_again_and_says_so(tmp_path, monkeypatch, capsys) -> None:
+    config = tmp_path / "config"
+    config.mkdir()
+    (config / "robot.yaml").write_text("mass: 4.9\n")
+    original = runner.config_fingerprint
+    monkeypatch.setattr(runner, "config_fingerprint", lambda spec: original(spec, str(config)))
+    calls = []
+
+    def counted(spec):
+        calls.append(spec.label)
+        return square(spec)
+
+    specs = [Spec("a", 1.0), Spec("b", 2.0)]
+    out = str(tmp_path / "out")
+    run_trials(counted, specs, out, progress=False)
+    run_trials(counted, specs, out, progress=False)
+    assert calls == ["a", "b"]  # unchanged: resumed
+    (config / "robot.yaml").write_text("mass: 5.1\n")
+    run_trials(counted, specs, out, progress=True)
+    assert calls == ["a", "b", "a", "b"]
+    assert "2 result file(s)" in capsys.readouterr().err
+    monkeypatch.setattr(runner, "code_fingerprint", lambda: "other code")
+    run_trials(counted, specs[:1], out, progress=False)
+    assert calls[-1] == "a" and len(calls) == 5
+
+
+def test_a_file_named_by_a_spec_is_part_of_its_key(tmp_path) -> None:
+    @dataclasses.dataclass(frozen=True)
+    class FileSpec:
+        label: str
+        tank_yaml: str
+
+    path = tmp_path / "tank.yaml"
+    path.write_text("rope_length: 0.5\n")
+    spec = FileSpec("t", str(path))
+    first = spec_key(spec)
+    assert spec_key(spec) == first
+    path.write_text("rope_length: 0.6\n")
+    os.utime(path, ns=(1, 1))  # a new size or time: the remembered hash is not used
+    assert spec_key(spec) != first

@@ -58,3 +58,36 @@ def test_run_batch_stops_a_trial_the_robots_controller_would_hold():
     spec = dataclasses.replace(_specs()[0], config_overrides=(("max_angular_rate", 1e-6),), keep_trace=False)
     with pytest.raises(SimulationError, match="refuse"):
         run_batch([spec])
+
+
+def test_the_engine_choice_of_a_study():
+    from quadruped_common.config import ParameterError
+    from quadruped_control.studies.trial import AUTO_BATCH_MIN, use_batch_engine
+
+    spec = _specs()[0]
+    many = [dataclasses.replace(spec, label="t%d" % i) for i in range(AUTO_BATCH_MIN)]
+    assert use_batch_engine(many, "auto") and not use_batch_engine(many[:-1], "auto")
+    assert not use_batch_engine(many, "trial") and use_batch_engine(many[:1], "batch")
+    noisy = many[:-1] + [dataclasses.replace(spec, label="noisy", gyro_noise=0.01)]
+    assert not use_batch_engine(noisy, "auto")  # one trial the batch cannot run: all per trial
+    with pytest.raises(ParameterError, match="noisy.*noise"):
+        use_batch_engine(noisy, "batch")
+    with pytest.raises(ParameterError, match="engine"):
+        use_batch_engine(many, "gpu")
+
+
+def test_a_study_runs_batched_from_the_command_line(tmp_path):
+    from quadruped_control import simulate
+
+    out = str(tmp_path / "table1")
+    code = simulate.main(["--study", "paper-experiments", "--plant", "paper", "--duration", "3", "--engine", "batch",
+                          "--out", out, "--quiet", "--jobs", "1"])
+    assert code == 0
+    import glob
+    import json
+
+    files = glob.glob(out + "/**/trials/*.json", recursive=True)
+    assert len(files) == 15
+    for path in files:
+        with open(path) as stream:
+            assert json.load(stream)["engine"] == "batch"
