@@ -7,6 +7,7 @@ import json
 import os
 import signal
 import subprocess
+import sys
 import time
 
 import pytest
@@ -42,6 +43,10 @@ def _stop(process):
 def cluster(tmp_path):
     if not os.path.isfile(os.path.join(WS, "devel", "setup.bash")):
         pytest.skip("no catkin workspace at %s (scripts/setup.sh builds it)" % WS)
+    if os.path.realpath(sys.prefix) != os.path.realpath(os.path.join(REPO_ROOT, ".venv")):
+        # The launcher runs the project's venv; a client on another interpreter (CI's Python 3.8 job) would
+        # talk to a cluster of other Python and Dask versions, which Dask refuses.
+        pytest.skip("the client must run in the project's venv, as the cluster the launcher starts")
     scheduler_file = str(tmp_path / "scheduler.json")
     log = open(str(tmp_path / "cluster.log"), "w")
     processes = []
