@@ -32,6 +32,7 @@ from typing import Iterable, Sequence, Tuple, Union
 import numpy as np
 
 from quadruped_common.config import ParameterError
+from quadruped_common.jit import jitable
 from quadruped_common.so3 import hat
 from quadruped_control.model.params import RobotParams
 
@@ -124,6 +125,7 @@ def leg_wrench(v_foot_world: ArrayLike, r_foot_body: ArrayLike, R: ArrayLike,
     return force_world, _cross(r, force_body)
 
 
+@jitable
 def paw_drag_wrench_f(feet: Iterable[FootRow], drag_constant: float, bx: float, by: float, bz: float,
                       wx: float, wy: float, wz: float) -> Wrench6:
     """Fast path of :func:`leg_wrench` summed over the legs, on floats: eq. (drag), (force_leg),
@@ -180,6 +182,7 @@ def paw_buoyancy(r_feet_body: ArrayLike, R: ArrayLike, params: RobotParams) -> T
     return force_world, torque_body
 
 
+@jitable
 def paw_buoyancy_f(feet: Sequence[FootRow], net_paw_buoyancy: float) -> Tuple[float, Tuple[float, ...]]:
     """Fast path of :func:`paw_buoyancy`, eq. (buoy_force), (buoy_torque), on floats, for legs held over
     an integration step: (F_z, U) with F_buoyancy^W = (0, 0, F_z) and tau_buoyancy^B = U (R^T z_hat).
@@ -256,6 +259,7 @@ class BodyDragCoefficients:
         return tuple(self.quad_force.tolist() + self.quad_torque.tolist() + [self.visc_force, self.visc_torque])
 
 
+@jitable
 def body_drag_f(coefficients: Sequence[float], bx: float, by: float, bz: float, wx: float, wy: float,
                 wz: float) -> Wrench6:
     """The inertia-box body drag (f_D + f_V, g_D + g_V), eq. (quad) + (visc), on floats, body frame:

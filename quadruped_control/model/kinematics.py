@@ -52,6 +52,7 @@ from typing import Any, Optional, Sequence, Tuple, Union
 
 import numpy as np
 
+from quadruped_common.jit import jitable
 from quadruped_common.robot import LEGS, MIRROR_DIAG
 from quadruped_common.so3 import TWO_PI, hat, wrap_angle
 from quadruped_control.model.params import FiveBar, RobotParams
@@ -117,6 +118,7 @@ def wrap_into_range(angle: float, low: float, high: float) -> Optional[float]:
 # Five-bar linkage (plane frame F_P)
 # --------------------------------------------------------------------------------------------------
 
+@jitable
 def _closure_scale(a1: float, a3: float, c: float) -> float:
     """Magnitude of E^2 + F^2 of eq. (fk_EFG), for the relative tolerance of the closure test."""
     return 4.0 * a3 * a3 * (c + 2.0 * a1) ** 2
@@ -135,6 +137,7 @@ def _closure_error(theta1: float, theta2: float, disc: float, g: float, a1: floa
                             % (math.degrees(theta1), math.degrees(theta2)))
 
 
+@jitable
 def _closure_terms(c1: Any, s1: Any, c2: Any, s2: Any, c21: Any, a1: float, a3: float, c: float) -> Tuple[Any, ...]:
     """E, F, G of eq. (fk_EFG) and the discriminant E^2 + F^2 - G^2, from the cosines and sines of theta1,
     theta2 and cos(theta2 - theta1); valid for the symmetric mechanism a1 = a2, a3 = a4 (enforced by
@@ -145,27 +148,40 @@ def _closure_terms(c1: Any, s1: Any, c2: Any, s2: Any, c21: Any, a1: float, a3: 
     return e, f, g, e * e + f * f - g * g
 
 
+@jitable
+def _closure_point(theta1: float, theta2: float, a1: float, a2: float, a3: float, a4: float,
+                   c: float) -> Tuple[bool, float, float, float, float, float, float]:
+    """The one implementation of the five-bar forward kinematics, eq. (fk_EFG), (fk_phi), (fk_planar), on
+    floats, without raising (compiled code calls it too, :mod:`quadruped_common.jit`): ``(closes, x_d,
+    y_prime, phi, psi, disc, g)``. ``closes`` is False where E^2 + F^2 - G^2 < 0 (the passive links cannot
+    close) or the two elbows coincide (phi undefined); the other values are then meaningless, but for
+    ``disc`` and ``g`` that say why (:func:`_five_bar_closure` raises with them)."""
+    c1, s1 = math.cos(theta1), math.sin(theta1)
+    c2, s2 = math.cos(theta2), math.sin(theta2)
+    e, f, g, disc = _closure_terms(c1, s1, c2, s2, math.cos(theta2 - theta1), a1, a3, c)
+    # The relative tolerance only matters at the edge of the workspace; NaN fails every comparison.
+    if not ((disc >= 0.0 or disc >= -_ROUND_TOL * _closure_scale(a1, a3, c)) and g >= 1e-24):
+        return False, 0.0, 0.0, 0.0, 0.0, disc, g
+    phi = 2.0 * math.atan2(-f + math.sqrt(disc if disc > 0.0 else 0.0), g - e)  # eq. (fk_phi)
+    x_d = c + a2 * c2 + a4 * math.cos(phi)                                       # eq. (fk_planar)
+    y_prime = a2 * s2 + a4 * math.sin(phi)
+    return True, x_d, y_prime, phi, math.atan2(y_prime - a1 * s1, x_d - a1 * c1), disc, g
+
+
 def _five_bar_closure(theta1: float, theta2: float, a1: float, a2: float, a3: float, a4: float,
                       c: float) -> Tuple[float, float, float, float]:
-    """The one implementation of the five-bar forward kinematics, eq. (fk_EFG), (fk_phi), (fk_planar), on
-    floats: the core of :func:`five_bar_fk`, :func:`five_bar_jacobian`, :func:`foot_position`,
-    :func:`foot_jacobian` and the simulator's :func:`leg_kinematics_flat`.
+    """The five-bar forward kinematics of :func:`_closure_point`, raising: the core of :func:`five_bar_fk`,
+    :func:`five_bar_jacobian`, :func:`foot_position` and :func:`foot_jacobian`.
 
     Returns ``(x_d, y_prime, phi, psi)``: the foot in F_P and the absolute angles of the passive links
     a4 (phi, the "+" root of eq. (fk_phi)) and a3 (psi), not wrapped. ``theta1``, ``theta2`` must be
     finite (the callers check). Raises :class:`UnreachableError` if E^2 + F^2 - G^2 < 0 (the passive
     links cannot close) or if the two elbows coincide (phi undefined).
     """
-    c1, s1 = math.cos(theta1), math.sin(theta1)
-    c2, s2 = math.cos(theta2), math.sin(theta2)
-    e, f, g, disc = _closure_terms(c1, s1, c2, s2, math.cos(theta2 - theta1), a1, a3, c)
-    # The relative tolerance only matters at the edge of the workspace; NaN fails every comparison.
-    if not ((disc >= 0.0 or disc >= -_ROUND_TOL * _closure_scale(a1, a3, c)) and g >= 1e-24):
+    closes, x_d, y_prime, phi, psi, disc, g = _closure_point(theta1, theta2, a1, a2, a3, a4, c)
+    if not closes:
         raise _closure_error(theta1, theta2, disc, g, a1, a3, a4, c)
-    phi = 2.0 * math.atan2(-f + math.sqrt(disc if disc > 0.0 else 0.0), g - e)  # eq. (fk_phi)
-    x_d = c + a2 * c2 + a4 * math.cos(phi)                                       # eq. (fk_planar)
-    y_prime = a2 * s2 + a4 * math.sin(phi)
-    return x_d, y_prime, phi, math.atan2(y_prime - a1 * s1, x_d - a1 * c1)
+    return x_d, y_prime, phi, psi
 
 
 def _checked_closure(theta1: float, theta2: float, geometry: FiveBar) -> Tuple[float, float, float, float]:
@@ -221,19 +237,29 @@ def five_bar_ik(x_d: float, y_prime: float, geometry: FiveBar) -> Tuple[float, f
     return theta1, theta2, theta4, theta5
 
 
-def _five_bar_rates(theta1: float, theta2: float, phi: float, psi: float, a1: float,
-                    a2: float) -> Tuple[float, float, float, float]:
+@jitable
+def _five_bar_rates_core(theta1: float, theta2: float, phi: float, psi: float, a1: float,
+                         a2: float) -> Tuple[bool, float, float, float, float]:
     """The one implementation of the five-bar Jacobian d(x_d, y')/d(theta1, theta2) (the five-bar block
     of eq. (J_leg), see :func:`five_bar_jacobian`), on floats, at a configuration of
-    :func:`_five_bar_closure` (link angles phi of a4 and psi of a3). Returns (J11, J12, J21, J22);
-    raises :class:`UnreachableError` at the type-2 singularity sin(phi - psi) = 0."""
+    :func:`_closure_point` (link angles phi of a4 and psi of a3), without raising: (regular, J11, J12,
+    J21, J22), ``regular`` False at the type-2 singularity sin(phi - psi) = 0."""
     det = math.sin(phi - psi)
     if not abs(det) >= _SINGULAR_TOL:
-        raise UnreachableError("five-bar singular at theta1=%.2f deg, theta2=%.2f deg: passive links aligned"
-                               % (math.degrees(theta1), math.degrees(theta2)))
+        return False, 0.0, 0.0, 0.0, 0.0
     k1 = a1 * math.sin(psi - theta1) / det  # a1 sin(theta4) / sin(phi - psi)
     k2 = a2 * math.sin(phi - theta2) / det  # a2 sin(theta5) / sin(phi - psi)
-    return k1 * math.sin(phi), -(k2 * math.sin(psi)), -k1 * math.cos(phi), k2 * math.cos(psi)
+    return True, k1 * math.sin(phi), -(k2 * math.sin(psi)), -k1 * math.cos(phi), k2 * math.cos(psi)
+
+
+def _five_bar_rates(theta1: float, theta2: float, phi: float, psi: float, a1: float,
+                    a2: float) -> Tuple[float, float, float, float]:
+    """:func:`_five_bar_rates_core`, raising :class:`UnreachableError` at the singularity."""
+    regular, j11, j12, j21, j22 = _five_bar_rates_core(theta1, theta2, phi, psi, a1, a2)
+    if not regular:
+        raise UnreachableError("five-bar singular at theta1=%.2f deg, theta2=%.2f deg: passive links aligned"
+                               % (math.degrees(theta1), math.degrees(theta2)))
+    return j11, j12, j21, j22
 
 
 def five_bar_jacobian(theta1: float, theta2: float, geometry: FiveBar) -> np.ndarray:
@@ -275,6 +301,7 @@ def _q3(q: ArrayLike) -> Tuple[float, float, float]:
     return t1, t2, t3
 
 
+@jitable
 def _leg_point(x_d: float, y_prime: float, c3: float, s3: float, l_y: float,
                l_z: float) -> Tuple[float, float, float]:
     """eq. (fk_T): planar point (x_d, y') of F_P -> leg frame, rotated by the hip angle theta3
@@ -283,6 +310,7 @@ def _leg_point(x_d: float, y_prime: float, c3: float, s3: float, l_y: float,
     return x_d, c3 * u - s3 * l_z, s3 * u + c3 * l_z
 
 
+@jitable
 def _leg_rate(j11: float, j12: float, j21: float, j22: float, c3: float, s3: float, p_y: float, p_z: float,
               d1: float, d2: float, d3: float) -> Tuple[float, float, float]:
     """eq. (J_leg) applied to joint rates: the leg-frame foot velocity for (d1, d2, d3) = q_dot, i.e.
@@ -295,6 +323,7 @@ def _leg_rate(j11: float, j12: float, j21: float, j22: float, c3: float, s3: flo
     return jx, c3 * jy - p_z * d3, s3 * jy + p_y * d3  # x_hat x p = (0, -p_z, p_y)
 
 
+@jitable
 def _ee_body(frame: Tuple[float, ...], px: float, py: float, pz: float) -> Tuple[float, float, float]:
     """eq. (ee_body): r_e,i^B = o_i^B + M_i p_e^L for a leg ``frame`` (o_x, o_y, o_z, m_x, m_y, m_z) of
     :func:`_geometry` (M_i = diag(m_x, m_y, m_z))."""
@@ -566,13 +595,27 @@ def leg_kinematics_flat(q: Sequence[Sequence[float]], q_dot: Sequence[Sequence[f
     last = _GEOMETRY_LAST
     constants = last[1] if last[0] is params else _geometry(params)
     _, frames, a1, a2, a3, a4, c, l_y, l_z = constants[:9]
-    cos, sin = math.cos, math.sin
     out: Tuple[float, ...] = ()
     for (t1, t2, t3), (d1, d2, d3), frame in zip(q, q_dot, frames):
-        x_d, y_prime, phi, psi = _five_bar_closure(t1, t2, a1, a2, a3, a4, c)
-        j11, j12, j21, j22 = _five_bar_rates(t1, t2, phi, psi, a1, a2)
-        c3, s3 = cos(t3), sin(t3)
-        px, py, pz = _leg_point(x_d, y_prime, c3, s3, l_y, l_z)
-        vx, vy, vz = _leg_rate(j11, j12, j21, j22, c3, s3, py, pz, d1, d2, d3)
-        out += _ee_body(frame, px, py, pz) + (frame[3] * vx, frame[4] * vy, frame[5] * vz)  # M_i J^L q_dot
+        ok, x, y, z, vx, vy, vz = leg_row(t1, t2, t3, d1, d2, d3, frame, a1, a2, a3, a4, c, l_y, l_z)
+        if not ok:  # say why, with the raising forms of the same cores
+            _five_bar_rates(t1, t2, *_five_bar_closure(t1, t2, a1, a2, a3, a4, c)[2:], a1, a2)
+        out += (x, y, z, vx, vy, vz)
     return out
+
+
+@jitable
+def leg_row(t1: float, t2: float, t3: float, d1: float, d2: float, d3: float, frame: Sequence[float], a1: float,
+            a2: float, a3: float, a4: float, c: float, l_y: float, l_z: float) -> Tuple[bool, float, float, float,
+                                                                                       float, float, float]:
+    """One leg of :func:`leg_kinematics_flat`, without raising (compiled code calls it too): (ok, r_e,i^B,
+    J_P,i^B q_dot_i) for joint angles (t1, t2, t3), rates (d1, d2, d3) and the leg ``frame`` (o_x, o_y,
+    o_z, m_x, m_y, m_z) of :func:`_geometry`; ``ok`` False where the five-bar cannot close or is singular
+    (the values are then meaningless). eq. (fk_EFG), (fk_phi), (fk_planar), (fk_T), (J_leg), (ee_body)."""
+    closes, x_d, y_prime, phi, psi, _, _ = _closure_point(t1, t2, a1, a2, a3, a4, c)
+    regular, j11, j12, j21, j22 = _five_bar_rates_core(t1, t2, phi, psi, a1, a2)
+    c3, s3 = math.cos(t3), math.sin(t3)
+    px, py, pz = _leg_point(x_d, y_prime, c3, s3, l_y, l_z)
+    vx, vy, vz = _leg_rate(j11, j12, j21, j22, c3, s3, py, pz, d1, d2, d3)
+    x, y, z = _ee_body(frame, px, py, pz)
+    return closes and regular, x, y, z, frame[3] * vx, frame[4] * vy, frame[5] * vz  # M_i J^L q_dot

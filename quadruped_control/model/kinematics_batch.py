@@ -2,19 +2,15 @@
 
 The batched simulator (:mod:`quadruped_control.sim.batch`) steps many closed-loop trials at once; its
 controller needs the leg inverse kinematics of eq. (ee_body) inverted, (ik_theta3), (ik_dists),
-(ik_alphas), (ik_theta1245) for every foot target of every trial, and its plant the forward kinematics
-eq. (fk_EFG), (fk_phi), (fk_planar), (fk_T), (ee_body) with the leg Jacobian eq. (J_leg) times the joint
-rates. Here they take arrays of shape (..., 4, 3) (any leading trial axes, then legs 1..4, then the
-three coordinates or joints) and return a validity mask instead of raising: in a batch, one trial's
-unreachable target must not stop the others.
+(ik_alphas), (ik_theta1245) for every foot target of every trial. Here it takes arrays of shape
+(..., 4, 3) (any leading trial axes, then legs 1..4, then the three coordinates) and returns a validity
+mask instead of raising: in a batch, one trial's unreachable target must not stop the others. (The
+batched plants' forward kinematics is the per-trial function itself,
+:func:`~quadruped_control.model.kinematics.leg_row`, in a compiled loop.)
 
-These are the array forms of :func:`~quadruped_control.model.kinematics.joint_angles_floats` and
-:func:`~quadruped_control.model.kinematics.leg_kinematics_flat` (the robot's per-step float paths): the
-same formulas in the same order, with the numpy ufuncs for the ``math`` ones, and the scalar cores that
-are plain arithmetic (:func:`~quadruped_control.model.kinematics._closure_terms`,
-:func:`~quadruped_control.model.kinematics._leg_point`, :func:`~quadruped_control.model.kinematics._leg_rate`)
-called on arrays as they are. The tests compare
-them with the float paths over the workspace, boundary included.
+This is the array form of :func:`~quadruped_control.model.kinematics.joint_angles_floats` (the robot's
+per-step float path): the same formulas in the same order, with the numpy ufuncs for the ``math`` ones.
+The tests compare them over the workspace, boundary included.
 """
 from __future__ import annotations
 
@@ -26,11 +22,10 @@ import numpy as np
 
 from quadruped_common.robot import LEGS, MIRROR_DIAG
 from quadruped_common.so3 import TWO_PI
-from quadruped_control.model.kinematics import (_ANGLE_TOL, _ROUND_TOL, _SINGULAR_TOL, _closure_terms, _leg_point,
-                                                _leg_rate)
+from quadruped_control.model.kinematics import _ANGLE_TOL, _ROUND_TOL
 from quadruped_control.model.params import RobotParams
 
-__all__ = ["LegGeometry", "joint_angles_batch", "leg_kinematics_batch"]
+__all__ = ["LegGeometry", "joint_angles_batch"]
 
 
 @dataclass(frozen=True)
@@ -109,40 +104,3 @@ def joint_angles_batch(r: np.ndarray, geometry: LegGeometry,
         ok &= (theta1 <= g.high[0] + _ANGLE_TOL) & (theta2 <= g.high[1] + _ANGLE_TOL)
     angles = np.stack((theta1, theta2, theta3), axis=-1)
     return np.where(ok[..., None], angles, 0.0), ok
-
-
-def leg_kinematics_batch(q: np.ndarray, q_dot: np.ndarray,
-                         geometry: LegGeometry) -> Tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Foot positions r_e,i^B, joint-induced foot velocities J_P,i^B q_dot_i (both (..., 4, 3), body
-    frame) for joint angles and rates ``q``, ``q_dot`` (..., 4, 3), and the mask (...,) of the trials
-    whose four five-bars all close and are not singular (where the float path raises
-    :class:`~quadruped_control.model.kinematics.UnreachableError`).
-
-    eq. (fk_EFG), (fk_phi), (fk_planar) (:func:`~quadruped_control.model.kinematics._five_bar_closure`),
-    the five-bar Jacobian (:func:`~quadruped_control.model.kinematics._five_bar_rates`), eq. (fk_T) and
-    eq. (J_leg) (the float cores themselves), eq. (ee_body).
-    """
-    g = geometry
-    a1, a2, a3, a4, c = g.a1, g.a2, g.a3, g.a4, g.c
-    t1, t2, t3 = q[..., 0], q[..., 1], q[..., 2]
-    c1, s1 = np.cos(t1), np.sin(t1)
-    c2, s2 = np.cos(t2), np.sin(t2)
-    e, f, gg, disc = _closure_terms(c1, s1, c2, s2, np.cos(t2 - t1), a1, a3, c)  # eq. (fk_EFG)
-    scale = 4.0 * a3 * a3 * (c + 2.0 * a1) ** 2
-    ok = ((disc >= 0.0) | (disc >= -_ROUND_TOL * scale)) & (gg >= 1e-24)
-    phi = 2.0 * np.arctan2(-f + np.sqrt(np.maximum(disc, 0.0)), gg - e)
-    x_d = c + a2 * c2 + a4 * np.cos(phi)
-    y_prime = a2 * s2 + a4 * np.sin(phi)
-    psi = np.arctan2(y_prime - a1 * s1, x_d - a1 * c1)
-    det = np.sin(phi - psi)
-    ok &= np.abs(det) >= _SINGULAR_TOL
-    safe_det = np.where(ok, det, 1.0)
-    k1 = a1 * np.sin(psi - t1) / safe_det
-    k2 = a2 * np.sin(phi - t2) / safe_det
-    j11, j12, j21, j22 = k1 * np.sin(phi), -(k2 * np.sin(psi)), -k1 * np.cos(phi), k2 * np.cos(psi)
-    c3, s3 = np.cos(t3), np.sin(t3)
-    px, py, pz = _leg_point(x_d, y_prime, c3, s3, g.l_y, g.l_z)
-    vx, vy, vz = _leg_rate(j11, j12, j21, j22, c3, s3, py, pz, q_dot[..., 0], q_dot[..., 1], q_dot[..., 2])
-    positions = g.origin + g.mirror * np.stack((px, py, pz), axis=-1)
-    velocities = g.mirror * np.stack((vx, vy, vz), axis=-1)
-    return positions, velocities, ok.all(axis=-1)

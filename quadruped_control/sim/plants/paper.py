@@ -46,6 +46,7 @@ from typing import Callable, Optional, Sequence, Tuple, Union
 
 import numpy as np
 
+from quadruped_common.jit import jitable
 from quadruped_common.so3 import hat
 from quadruped_control.model import hydrodynamics
 from quadruped_control.model.hydrodynamics import body_drag_f, paw_drag_wrench_f
@@ -68,8 +69,11 @@ __all__ = [
     "RigidBodyState",
     "StateDerivative",
     "Wrench",
+    "body_wrench_f",
     "held_joint_input",
     "joint_velocity",
+    "paper_rk4_held",
+    "paper_stage",
 ]
 
 
@@ -157,6 +161,105 @@ class Wrench:
 
 # --------------------------------------------------------------------------------------------------
 # Model
+# --------------------------------------------------------------------------------------------------
+
+# --------------------------------------------------------------------------------------------------
+# The equations of motion on floats (compiled too: quadruped_common.jit)
+# --------------------------------------------------------------------------------------------------
+
+@jitable
+def body_wrench_f(feet: Sequence[Sequence[float]], drag_constant: float, drag: Sequence[float],
+                  up_torque: Sequence[float], bx: float, by: float, bz: float, R: Mat3, wx: float, wy: float,
+                  wz: float) -> Tuple[float, float, float, float, float, float]:
+    """Force (body axes) and torque (body, about the centre of mass) of the paw drag, body drag, paw
+    buoyancy and restoring terms of eq. (trans), (rot), on floats, for the body-axes velocity
+    (bx, by, bz) = R^T v and rate omega: the hydrodynamics fast paths
+    (:func:`~quadruped_control.model.hydrodynamics.paw_drag_wrench_f` over the legs' rows ``feet``,
+    :func:`~quadruped_control.model.hydrodynamics.body_drag_f` with the coefficients ``drag``) and the
+    buoyancy matrix U (``up_torque``, row-major) of the :class:`~.rigid_body.StepContext`. Used by
+    :func:`paper_stage` and by the tank plant (:mod:`quadruped_control.sim.plants.tank_dynamics`). Paw
+    buoyancy's force is left to the caller.
+    """
+    fx, fy, fz, tx, ty, tz = paw_drag_wrench_f(feet, drag_constant, bx, by, bz, wx, wy, wz)
+    dfx, dfy, dfz, dtx, dty, dtz = body_drag_f(drag, bx, by, bz, wx, wy, wz)
+    # Paw buoyancy and restoring torques: U (R^T z_hat), R^T z_hat = third row of R.
+    u0, u1, u2, u3, u4, u5, u6, u7, u8 = up_torque
+    r6, r7, r8 = R[6], R[7], R[8]
+    return (fx + dfx, fy + dfy, fz + dfz,
+            tx + dtx + (u0 * r6 + u1 * r7 + u2 * r8),
+            ty + dty + (u3 * r6 + u4 * r7 + u5 * r8),
+            tz + dtz + (u6 * r6 + u7 * r7 + u8 * r8))
+
+
+@jitable
+def paper_stage(feet: Sequence[Sequence[float]], drag_constant: float, drag: Sequence[float],
+                up_torque: Sequence[float], lift: float, inertia: Mat3, inertia_inverse: Mat3, inverse_mass: float,
+                R0: Mat3, vx: float, vy: float, vz: float, x: float, y: float, z: float, wx: float, wy: float,
+                wz: float) -> Tuple[float, ...]:
+    """(dv/dt, dxi/dt, domega/dt) (9 floats) of the chart state with velocity v, chart coordinate
+    xi = (x, y, z) (R = R0 exp(hat(xi))) and rate omega: eq. (trans), (rot) and the chart rate
+    J_r(xi)^-1 omega. dp/dt = v is left to the caller (no force depends on the position). The
+    integrator's hot path, on floats, the forces from :func:`body_wrench_f`; ``lift`` the paw buoyancy
+    force F_buoyancy^W . z_hat, ``inertia``, ``inertia_inverse`` row-major I and I^-1."""
+    R, (rx, ry, rz) = chart_point(R0, x, y, z, wx, wy, wz)
+    r0, r1, r2, r3, r4, r5, r6, r7, r8 = R
+    bx, by, bz = r0 * vx + r3 * vy + r6 * vz, r1 * vx + r4 * vy + r7 * vz, r2 * vx + r5 * vy + r8 * vz
+    fx, fy, fz, tx, ty, tz = body_wrench_f(feet, drag_constant, drag, up_torque, bx, by, bz, R, wx, wy, wz)
+    # I domega/dt = tau - omega x I omega, eq. (rot).
+    i0, i1, i2, i3, i4, i5, i6, i7, i8 = inertia
+    hx, hy, hz = i0 * wx + i1 * wy + i2 * wz, i3 * wx + i4 * wy + i5 * wz, i6 * wx + i7 * wy + i8 * wz
+    tx -= wy * hz - wz * hy
+    ty -= wz * hx - wx * hz
+    tz -= wx * hy - wy * hx
+    j0, j1, j2, j3, j4, j5, j6, j7, j8 = inertia_inverse
+    # m dv/dt = R f^B + F_buoyancy^W, eq. (trans).
+    return ((r0 * fx + r1 * fy + r2 * fz) * inverse_mass,
+            (r3 * fx + r4 * fy + r5 * fz) * inverse_mass,
+            (r6 * fx + r7 * fy + r8 * fz + lift) * inverse_mass,
+            rx, ry, rz,
+            j0 * tx + j1 * ty + j2 * tz, j3 * tx + j4 * ty + j5 * tz, j6 * tx + j7 * ty + j8 * tz)
+
+
+@jitable
+def paper_rk4_held(feet: Sequence[Sequence[float]], drag_constant: float, drag: Sequence[float],
+                   up_torque: Sequence[float], lift: float, inertia: Mat3, inertia_inverse: Mat3, inverse_mass: float,
+                   R0: Mat3, p0x: float, p0y: float, p0z: float, v0x: float, v0y: float, v0z: float, w0x: float,
+                   w0y: float, w0z: float, dt: float) -> Tuple[float, ...]:
+    """One classic RK4 step of :func:`paper_stage` in the chart around R0, the legs held over it: the
+    chart state at its end (p, v, xi, omega), 12 floats (:func:`~.rigid_body.chart_step_end` maps it
+    back to a state). The stages only see (v, xi, omega) since no force depends on the position, whose
+    stage derivatives are the stage velocities. Same arithmetic as the generic
+    :meth:`FloatingBaseModel._rk4` (the tests compare them)."""
+    h = 0.5 * dt
+    a1x, a1y, a1z, x1, y1, z1, b1x, b1y, b1z = paper_stage(
+        feet, drag_constant, drag, up_torque, lift, inertia, inertia_inverse, inverse_mass, R0,
+        v0x, v0y, v0z, 0.0, 0.0, 0.0, w0x, w0y, w0z)
+    v2x, v2y, v2z = v0x + h * a1x, v0y + h * a1y, v0z + h * a1z
+    a2x, a2y, a2z, x2, y2, z2, b2x, b2y, b2z = paper_stage(
+        feet, drag_constant, drag, up_torque, lift, inertia, inertia_inverse, inverse_mass, R0,
+        v2x, v2y, v2z, h * x1, h * y1, h * z1, w0x + h * b1x, w0y + h * b1y, w0z + h * b1z)
+    v3x, v3y, v3z = v0x + h * a2x, v0y + h * a2y, v0z + h * a2z
+    a3x, a3y, a3z, x3, y3, z3, b3x, b3y, b3z = paper_stage(
+        feet, drag_constant, drag, up_torque, lift, inertia, inertia_inverse, inverse_mass, R0,
+        v3x, v3y, v3z, h * x2, h * y2, h * z2, w0x + h * b2x, w0y + h * b2y, w0z + h * b2z)
+    v4x, v4y, v4z = v0x + dt * a3x, v0y + dt * a3y, v0z + dt * a3z
+    a4x, a4y, a4z, x4, y4, z4, b4x, b4y, b4z = paper_stage(
+        feet, drag_constant, drag, up_torque, lift, inertia, inertia_inverse, inverse_mass, R0,
+        v4x, v4y, v4z, dt * x3, dt * y3, dt * z3, w0x + dt * b3x, w0y + dt * b3y, w0z + dt * b3z)
+    s = dt / 6.0
+    return (p0x + s * (v0x + 2.0 * (v2x + v3x) + v4x),
+            p0y + s * (v0y + 2.0 * (v2y + v3y) + v4y),
+            p0z + s * (v0z + 2.0 * (v2z + v3z) + v4z),
+            v0x + s * (a1x + 2.0 * (a2x + a3x) + a4x),
+            v0y + s * (a1y + 2.0 * (a2y + a3y) + a4y),
+            v0z + s * (a1z + 2.0 * (a2z + a3z) + a4z),
+            s * (x1 + 2.0 * (x2 + x3) + x4), s * (y1 + 2.0 * (y2 + y3) + y4), s * (z1 + 2.0 * (z2 + z3) + z4),
+            w0x + s * (b1x + 2.0 * (b2x + b3x) + b4x), w0y + s * (b1y + 2.0 * (b2y + b3y) + b4y),
+            w0z + s * (b1z + 2.0 * (b2z + b3z) + b4z))
+
+
+# --------------------------------------------------------------------------------------------------
+# The model
 # --------------------------------------------------------------------------------------------------
 
 class FloatingBaseModel:
@@ -262,48 +365,15 @@ class FloatingBaseModel:
 
     def _body_wrench(self, context: StepContext, bx: float, by: float, bz: float, R: Mat3,
                      wx: float, wy: float, wz: float) -> Tuple[float, float, float, float, float, float]:
-        """Force (body axes) and torque (body, about the centre of mass) of the paw drag, body drag,
-        paw buoyancy and restoring terms of eq. (trans), (rot), on floats, for the body-axes velocity
-        (bx, by, bz) = R^T v and rate omega: the hydrodynamics fast paths
-        (:func:`~quadruped_control.model.hydrodynamics.paw_drag_wrench_f`,
-        :func:`~quadruped_control.model.hydrodynamics.body_drag_f`, the buoyancy matrix of the
-        :class:`~.rigid_body.StepContext`). Used by :meth:`_stage` and by the tank plant
-        (:mod:`quadruped_control.sim.plants.tank`). Paw buoyancy's force is left to the caller.
-        """
-        fx, fy, fz, tx, ty, tz = paw_drag_wrench_f(context.feet, self.drag_constant, bx, by, bz, wx, wy, wz)
-        dfx, dfy, dfz, dtx, dty, dtz = body_drag_f(self._drag, bx, by, bz, wx, wy, wz)
-        # Paw buoyancy and restoring torques: U (R^T z_hat), R^T z_hat = third row of R.
-        u0, u1, u2, u3, u4, u5, u6, u7, u8 = context.up_torque
-        r6, r7, r8 = R[6], R[7], R[8]
-        return (fx + dfx, fy + dfy, fz + dfz,
-                tx + dtx + (u0 * r6 + u1 * r7 + u2 * r8),
-                ty + dty + (u3 * r6 + u4 * r7 + u5 * r8),
-                tz + dtz + (u6 * r6 + u7 * r7 + u8 * r8))
+        """:func:`body_wrench_f` with this plant's drag and the step's legs."""
+        return body_wrench_f(context.feet, self.drag_constant, self._drag, context.up_torque, bx, by, bz, R, wx, wy, wz)
 
     def _stage(self, context: StepContext, R0: Mat3, vx: float, vy: float, vz: float, x: float, y: float,
                z: float, wx: float, wy: float, wz: float) -> Tuple[float, ...]:
-        """(dv/dt, dxi/dt, domega/dt) (9 floats) of the chart state with velocity v, chart coordinate
-        xi = (x, y, z) (R = R0 exp(hat(xi))) and rate omega: eq. (trans), (rot) and the chart rate
-        J_r(xi)^-1 omega. dp/dt = v is left to the caller (no force depends on the position). The
-        integrator's hot path, on floats, the forces from :meth:`_body_wrench`."""
-        R, (rx, ry, rz) = chart_point(R0, x, y, z, wx, wy, wz)
-        r0, r1, r2, r3, r4, r5, r6, r7, r8 = R
-        bx, by, bz = r0 * vx + r3 * vy + r6 * vz, r1 * vx + r4 * vy + r7 * vz, r2 * vx + r5 * vy + r8 * vz
-        fx, fy, fz, tx, ty, tz = self._body_wrench(context, bx, by, bz, R, wx, wy, wz)
-        # I domega/dt = tau - omega x I omega, eq. (rot).
-        i0, i1, i2, i3, i4, i5, i6, i7, i8 = self._inertia
-        hx, hy, hz = i0 * wx + i1 * wy + i2 * wz, i3 * wx + i4 * wy + i5 * wz, i6 * wx + i7 * wy + i8 * wz
-        tx -= wy * hz - wz * hy
-        ty -= wz * hx - wx * hz
-        tz -= wx * hy - wy * hx
-        j0, j1, j2, j3, j4, j5, j6, j7, j8 = self._inertia_inverse
-        # m dv/dt = R f^B + F_buoyancy^W, eq. (trans).
-        inv_m = self._inverse_mass
-        return ((r0 * fx + r1 * fy + r2 * fz) * inv_m,
-                (r3 * fx + r4 * fy + r5 * fz) * inv_m,
-                (r6 * fx + r7 * fy + r8 * fz + context.lift) * inv_m,
-                rx, ry, rz,
-                j0 * tx + j1 * ty + j2 * tz, j3 * tx + j4 * ty + j5 * tz, j6 * tx + j7 * ty + j8 * tz)
+        """:func:`paper_stage` of this plant and the step's legs."""
+        return paper_stage(context.feet, self.drag_constant, self._drag, context.up_torque, context.lift,
+                           self._inertia, self._inertia_inverse, self._inverse_mass, R0, vx, vy, vz, x, y, z,
+                           wx, wy, wz)
 
     def _chart_derivative(self, context: StepContext, R0: Mat3, y: Sequence[float]) -> Tuple[float, ...]:
         """d/dt of the chart state y = (p, v, xi, omega), 12 floats, with R = R0 exp(hat(xi))."""
@@ -312,43 +382,19 @@ class FloatingBaseModel:
     # ---- integration -------------------------------------------------------------------------
 
     def _rk4_held(self, state: RigidBodyState, dt: float, context: StepContext) -> RigidBodyState:
-        """:meth:`_rk4` for an input held over the step (one context for all stages), on unpacked floats.
-
-        Same arithmetic as :meth:`_rk4` (the tests compare them): the stages only see (v, xi, omega)
-        since no force depends on the position, whose stage derivatives are the stage velocities.
-        """
+        """:meth:`_rk4` for an input held over the step (one context for all stages):
+        :func:`paper_rk4_held` on unpacked floats."""
         R0 = tuple(state.rotation.ravel().tolist())
         p0x, p0y, p0z = state.position.tolist()
         v0x, v0y, v0z = state.velocity.tolist()
         w0x, w0y, w0z = state.omega.tolist()
-        h = 0.5 * dt
-        stage = self._stage
         try:
-            a1x, a1y, a1z, x1, y1, z1, b1x, b1y, b1z = stage(context, R0, v0x, v0y, v0z, 0.0, 0.0, 0.0,
-                                                             w0x, w0y, w0z)
-            v2x, v2y, v2z = v0x + h * a1x, v0y + h * a1y, v0z + h * a1z
-            a2x, a2y, a2z, x2, y2, z2, b2x, b2y, b2z = stage(context, R0, v2x, v2y, v2z, h * x1, h * y1, h * z1,
-                                                             w0x + h * b1x, w0y + h * b1y, w0z + h * b1z)
-            v3x, v3y, v3z = v0x + h * a2x, v0y + h * a2y, v0z + h * a2z
-            a3x, a3y, a3z, x3, y3, z3, b3x, b3y, b3z = stage(context, R0, v3x, v3y, v3z, h * x2, h * y2, h * z2,
-                                                             w0x + h * b2x, w0y + h * b2y, w0z + h * b2z)
-            v4x, v4y, v4z = v0x + dt * a3x, v0y + dt * a3y, v0z + dt * a3z
-            a4x, a4y, a4z, x4, y4, z4, b4x, b4y, b4z = stage(context, R0, v4x, v4y, v4z, dt * x3, dt * y3,
-                                                             dt * z3, w0x + dt * b3x, w0y + dt * b3y,
-                                                             w0z + dt * b3z)
+            y = paper_rk4_held(context.feet, self.drag_constant, self._drag, context.up_torque, context.lift,
+                               self._inertia, self._inertia_inverse, self._inverse_mass, R0, p0x, p0y, p0z,
+                               v0x, v0y, v0z, w0x, w0y, w0z, dt)
         except (ValueError, OverflowError) as exc:  # math.sin(inf) etc. once the state has blown up
             raise diverged(dt, state, str(exc)) from None
-        s = dt / 6.0
-        return chart_step_end(R0, (p0x + s * (v0x + 2.0 * (v2x + v3x) + v4x),
-                                   p0y + s * (v0y + 2.0 * (v2y + v3y) + v4y),
-                                   p0z + s * (v0z + 2.0 * (v2z + v3z) + v4z),
-                                   v0x + s * (a1x + 2.0 * (a2x + a3x) + a4x),
-                                   v0y + s * (a1y + 2.0 * (a2y + a3y) + a4y),
-                                   v0z + s * (a1z + 2.0 * (a2z + a3z) + a4z)),
-                              (s * (x1 + 2.0 * (x2 + x3) + x4), s * (y1 + 2.0 * (y2 + y3) + y4),
-                               s * (z1 + 2.0 * (z2 + z3) + z4)),
-                              (w0x + s * (b1x + 2.0 * (b2x + b3x) + b4x), w0y + s * (b1y + 2.0 * (b2y + b3y) + b4y),
-                               w0z + s * (b1z + 2.0 * (b2z + b3z) + b4z)), dt, state)
+        return chart_step_end(R0, y[0:6], y[6:9], y[9:12], dt, state)
 
     def _rk4(self, state: RigidBodyState, dt: float, contexts: Sequence[StepContext]) -> RigidBodyState:
         """One classic RK4 step in the chart; ``contexts`` hold the inputs at t, t + dt/2, t + dt."""

@@ -21,6 +21,7 @@ from typing import Sequence, Tuple, Union
 
 import numpy as np
 
+from quadruped_common.jit import jitable
 from quadruped_common.robot import LEGS
 from quadruped_control.model.hydrodynamics import paw_buoyancy_f
 
@@ -50,6 +51,7 @@ __all__ = [
     "exp_rotation",
     "joint_array",
     "matmul",
+    "polish",
     "vector3",
 ]
 
@@ -155,6 +157,7 @@ def check_dt(dt: float) -> float:
 # The SO(3) chart of the integrator
 # --------------------------------------------------------------------------------------------------
 
+@jitable
 def exp_rotation(x: float, y: float, z: float) -> Mat3:
     """exp(hat(xi)) by Rodrigues' formula (the maths of so3.exp_so3, on floats and without input checks)."""
     t2 = x * x + y * y + z * z
@@ -171,6 +174,7 @@ def exp_rotation(x: float, y: float, z: float) -> Mat3:
             bxz - a * y, byz + a * x, 1.0 - b * (x * x + y * y))
 
 
+@jitable
 def matmul(A: Sequence[float], B: Sequence[float]) -> Mat3:
     """A B for row-major 3x3 matrices (9 floats each)."""
     a0, a1, a2, a3, a4, a5, a6, a7, a8 = A
@@ -185,6 +189,7 @@ def as_mat3(M: ArrayLike) -> Mat3:
     return tuple(np.asarray(M, dtype=float).reshape(9).tolist())  # type: ignore[return-value]
 
 
+@jitable
 def chart_rate(x: float, y: float, z: float, wx: float, wy: float, wz: float) -> Vec3:
     """d xi / dt = J_r(xi)^-1 omega for R = R_0 exp(hat(xi)) with R^T dR/dt = hat(omega).
 
@@ -201,6 +206,7 @@ def chart_rate(x: float, y: float, z: float, wx: float, wy: float, wz: float) ->
     return wx + 0.5 * ax + c * bx, wy + 0.5 * ay + c * by, wz + 0.5 * az + c * bz
 
 
+@jitable
 def chart_point(R0: Mat3, x: float, y: float, z: float, wx: float, wy: float, wz: float) -> Tuple[Mat3, Vec3]:
     """(R, d xi/dt) at chart coordinate xi = (x, y, z) around R0: R = R0 exp(hat(xi)) and the rate
     :func:`chart_rate` of the body rate omega. At xi = 0 (the first Runge-Kutta stage) exp(hat(xi)) = I
@@ -208,6 +214,20 @@ def chart_point(R0: Mat3, x: float, y: float, z: float, wx: float, wy: float, wz
     if x == 0.0 and y == 0.0 and z == 0.0:
         return R0, (wx, wy, wz)
     return matmul(R0, exp_rotation(x, y, z)), chart_rate(x, y, z, wx, wy, wz)
+
+
+@jitable
+def polish(R: Mat3) -> Mat3:
+    """One Newton-Schulz step towards SO(3), R (3 I - R^T R) / 2: removes the O(eps) drift that products
+    of rotations accumulate."""
+    a0, a1, a2, a3, a4, a5, a6, a7, a8 = R
+    n0 = 1.5 - 0.5 * (a0 * a0 + a3 * a3 + a6 * a6)
+    n4 = 1.5 - 0.5 * (a1 * a1 + a4 * a4 + a7 * a7)
+    n8 = 1.5 - 0.5 * (a2 * a2 + a5 * a5 + a8 * a8)
+    n1 = -0.5 * (a0 * a1 + a3 * a4 + a6 * a7)
+    n2 = -0.5 * (a0 * a2 + a3 * a5 + a6 * a8)
+    n5 = -0.5 * (a1 * a2 + a4 * a5 + a7 * a8)
+    return matmul(R, (n0, n1, n2, n1, n4, n5, n2, n5, n8))
 
 
 def diverged(dt: float, start: RigidBodyState, reason: str) -> DynamicsError:
@@ -225,14 +245,8 @@ def chart_step_end(R0: Mat3, position_velocity: Tuple[float, ...], xi: Vec3, ome
     values = position_velocity + xi + omega
     if not isfinite(sum(values)) and not all(map(isfinite, values)):
         raise diverged(dt, start, "non-finite state")
-    a0, a1, a2, a3, a4, a5, a6, a7, a8 = R1 = matmul(R0, exp_rotation(*xi))
-    n0 = 1.5 - 0.5 * (a0 * a0 + a3 * a3 + a6 * a6)
-    n4 = 1.5 - 0.5 * (a1 * a1 + a4 * a4 + a7 * a7)
-    n8 = 1.5 - 0.5 * (a2 * a2 + a5 * a5 + a8 * a8)
-    n1 = -0.5 * (a0 * a1 + a3 * a4 + a6 * a7)
-    n2 = -0.5 * (a0 * a2 + a3 * a5 + a6 * a8)
-    n5 = -0.5 * (a1 * a2 + a4 * a5 + a7 * a8)
-    data = np.array(position_velocity + matmul(R1, (n0, n1, n2, n1, n4, n5, n2, n5, n8)) + omega)
+    R1 = polish(matmul(R0, exp_rotation(xi[0], xi[1], xi[2])))
+    data = np.array(position_velocity + R1 + omega)
     return RigidBodyState(data[0:3], data[3:6], data[6:15].reshape(3, 3), data[15:18])
 
 

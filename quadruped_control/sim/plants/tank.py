@@ -53,8 +53,11 @@ from quadruped_control.model.kinematics import leg_kinematics_flat
 from quadruped_control.model.params import RobotParams
 from quadruped_control.sim.plants.added_mass import ellipsoid_added_mass, point_mass_matrix, sphere_added_mass
 from quadruped_control.sim.plants.paper import FloatingBaseModel
-from quadruped_control.sim.plants.rigid_body import (Mat3, RigidBodyState, StepContext, as_mat3, chart_point, check_dt,
-                                                     joint_array)
+from quadruped_control.sim.plants.rigid_body import (Mat3, RigidBodyState, StepContext, as_mat3, chart_step_end,
+                                                     check_dt, diverged, joint_array)
+from quadruped_control.sim.plants.tank_dynamics import (TankConstants, appendage_damping_torque, leg_sums, mass_solver,
+                                                        rope_force, rope_torsion_torque, rope_twist, tank_forces,
+                                                        tank_rk4)
 
 __all__ = ["TankModel", "TankParams", "appendage_damping_torque", "hydrostatic_wrench", "load_tank_params",
            "rope_force", "rope_torsion_torque", "rope_twist", "torso_ellipsoid"]
@@ -184,22 +187,6 @@ def load_tank_params(path: Optional[str] = None, tree: Optional[Mapping[str, Any
     return load_config(path, "tank.yaml", tank_params_from_dict)
 
 
-def rope_force(hook_world: Sequence[float], hook_velocity: Sequence[float], anchor: Sequence[float],
-               length: float, stiffness: float, damping: float) -> Vec3:
-    """Rope force on the hook, world frame (N): T d / |d| with d = anchor - hook and
-    T = max(0, k (|d| - L_0) + c d|d|/dt) while |d| > L_0, zero when slack (a rope only pulls)."""
-    dx, dy, dz = anchor[0] - hook_world[0], anchor[1] - hook_world[1], anchor[2] - hook_world[2]
-    distance = math.sqrt(dx * dx + dy * dy + dz * dz)
-    if distance <= length:
-        return (0.0, 0.0, 0.0)
-    ux, uy, uz = dx / distance, dy / distance, dz / distance
-    rate = -(ux * hook_velocity[0] + uy * hook_velocity[1] + uz * hook_velocity[2])  # d|d|/dt
-    tension = stiffness * (distance - length) + damping * rate
-    if tension <= 0.0:
-        return (0.0, 0.0, 0.0)
-    return (tension * ux, tension * uy, tension * uz)
-
-
 def hydrostatic_wrench(R: np.ndarray, weight: float, buoyancy: float,
                        center_of_buoyancy: Sequence[float]) -> Tuple[np.ndarray, np.ndarray]:
     """Torso weight W at the centre of mass and buoyancy B at r_cb: (force world (B - W) z_hat,
@@ -207,34 +194,6 @@ def hydrostatic_wrench(R: np.ndarray, weight: float, buoyancy: float,
     up_body = np.asarray(R, dtype=float)[2, :]
     return (np.array([0.0, 0.0, buoyancy - weight]),
             hydrodynamics.torso_buoyancy_torque_matrix(buoyancy, center_of_buoyancy) @ up_body)
-
-
-def appendage_damping_torque(omega: Sequence[float], linear: Sequence[float],
-                             quadratic: Sequence[float]) -> Vec3:
-    """tau_appendage = -(c_lin + c_quad |omega|) omega per body axis (N m): linear plus quadratic
-    rotational damping of the legs, housings and corners the inertia box leaves out (module docstring)."""
-    return tuple(-(c + k * abs(w)) * w for w, c, k in zip(omega, linear, quadratic))  # type: ignore[return-value]
-
-
-def rope_twist(R: Sequence[float], R0: Sequence[float]) -> float:
-    """Twist (rad, [-pi, pi]) of the rotation Q = R R0^T about the world vertical: the angle of the twist
-    part of its swing-twist decomposition, 2 atan2(q_z, q_w) = 2 atan2(Q_10 - Q_01, 1 + tr Q).
-    ``R``, ``R0``: row-major 3x3 (9 floats)."""
-    q10 = R[3] * R0[0] + R[4] * R0[1] + R[5] * R0[2]
-    q01 = R[0] * R0[3] + R[1] * R0[4] + R[2] * R0[5]
-    trace = sum(R[3 * i] * R0[3 * i] + R[3 * i + 1] * R0[3 * i + 1] + R[3 * i + 2] * R0[3 * i + 2] for i in range(3))
-    return 2.0 * math.atan2(q10 - q01, 1.0 + trace)
-
-
-def rope_torsion_torque(R: Sequence[float], R0: Sequence[float], omega: Sequence[float], stiffness: float,
-                        damping: float) -> Vec3:
-    """Body-axes torque (N m) of a rope twisted by :func:`rope_twist` from its untwisted attitude ``R0``:
-    T = -(k_t theta + c_t omega_z^W) about the world vertical, i.e. T R^T z_hat in body axes (module
-    docstring). ``R``, ``R0`` row-major; ``omega`` body axes."""
-    up = (R[6], R[7], R[8])  # R^T z_hat
-    omega_z_world = up[0] * omega[0] + up[1] * omega[1] + up[2] * omega[2]
-    torque = -(stiffness * rope_twist(R, R0) + damping * omega_z_world)
-    return (torque * up[0], torque * up[1], torque * up[2])
 
 
 def torso_ellipsoid(params: RobotParams, scale: float = 1.0) -> Tuple[float, float, float]:
@@ -246,50 +205,9 @@ def torso_ellipsoid(params: RobotParams, scale: float = 1.0) -> Tuple[float, flo
     return tuple(float(v) for v in dims * factor)  # type: ignore[return-value]
 
 
-def _cross(a: Sequence[float], b: Sequence[float]) -> Vec3:
-    return (a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2], a[0] * b[1] - a[1] * b[0])
-
-
-def _mat6_vec(M: Sequence[float], x: Sequence[float]) -> Tuple[float, ...]:
-    """M x for a row-major 6x6 M (36 floats)."""
-    x0, x1, x2, x3, x4, x5 = x
-    return tuple(M[i] * x0 + M[i + 1] * x1 + M[i + 2] * x2 + M[i + 3] * x3 + M[i + 4] * x4 + M[i + 5] * x5
-                 for i in (0, 6, 12, 18, 24, 30))
-
-
-def _inverse3(m: Sequence[float]) -> Tuple[float, ...]:
-    """Inverse of a row-major 3x3 matrix by cofactors."""
-    a, b, c, d, e, f, g, h, i = m
-    A, B, C = e * i - f * h, f * g - d * i, d * h - e * g
-    det = a * A + b * B + c * C
-    if not (det != 0.0 and math.isfinite(det)):
-        raise ValueError("singular mass matrix block (det %r)" % (det,))
-    k = 1.0 / det
-    return (A * k, (c * h - b * i) * k, (b * f - c * e) * k,
-            B * k, (a * i - c * g) * k, (c * d - a * f) * k,
-            C * k, (b * g - a * h) * k, (a * e - b * d) * k)
-
-
-def _solve_mass(solver: Tuple[Tuple[float, ...], ...], g: Sequence[float]) -> Tuple[float, ...]:
-    """nu_dot = M^-1 g for M = [[A, B], [B^T, D]] with A diagonal, by the Schur complement
-    S = D - B^T A^-1 B: x2 = S^-1 (g2 - B^T A^-1 g1), x1 = A^-1 (g1 - B x2). ``solver`` is
-    (diag A^-1, B, S^-1) from :meth:`TankModel._mass_solver`; tested against numpy.linalg.solve."""
-    (a0, a1, a2), B, Si = solver
-    y0, y1, y2 = a0 * g[0], a1 * g[1], a2 * g[2]  # A^-1 g1
-    h0 = g[3] - (B[0] * y0 + B[3] * y1 + B[6] * y2)  # g2 - B^T A^-1 g1
-    h1 = g[4] - (B[1] * y0 + B[4] * y1 + B[7] * y2)
-    h2 = g[5] - (B[2] * y0 + B[5] * y1 + B[8] * y2)
-    x3 = Si[0] * h0 + Si[1] * h1 + Si[2] * h2
-    x4 = Si[3] * h0 + Si[4] * h1 + Si[5] * h2
-    x5 = Si[6] * h0 + Si[7] * h1 + Si[8] * h2
-    return (a0 * (g[0] - (B[0] * x3 + B[1] * x4 + B[2] * x5)),
-            a1 * (g[1] - (B[3] * x3 + B[4] * x4 + B[5] * x5)),
-            a2 * (g[2] - (B[6] * x3 + B[7] * x4 + B[8] * x5)), x3, x4, x5)
-
-
 class _TankContext(StepContext):
     """A step's inputs plus the tank's per-step constants: the mass-matrix solver and the leg sums
-    (sum r_i, sum c_i, sum r_i r_i^T, sum c_i r_i^T, sum r_i . c_i) of the paw added-mass terms."""
+    (:func:`~.tank_dynamics.leg_sums`) of the paw added-mass terms."""
 
     __slots__ = ("mass_solver", "leg_sums")
 
@@ -334,8 +252,12 @@ class TankModel(FloatingBaseModel):
         self._anchor: Vec3 = (0.0, 0.0, 0.0)
         self.untwisted = np.eye(3)
         self._untwisted = tuple(self.untwisted.ravel().tolist())
-        self._appendage_damping = any(tank.appendage_damping_linear) or any(tank.appendage_damping_quadratic)
         self._body_m = tuple(self.body_mass_matrix.ravel().tolist())
+        if np.any(self.body_mass_matrix[:3, :3] != np.diag(np.diag(self.body_mass_matrix[:3, :3]))) \
+                or np.any(self.body_mass_matrix[:3, 3:] != 0.0):
+            raise ValueError("the torso's translational mass block must be diagonal and uncoupled (mass matrix "
+                             "about the centre of mass of a symmetric ellipsoid)")
+        self._constants = self._build_constants()
 
     # ---- set-up ------------------------------------------------------------------------------
 
@@ -353,6 +275,7 @@ class TankModel(FloatingBaseModel):
         # The rope hangs untwisted in this attitude (rope torsion measures the twist from it).
         self.untwisted = np.array(state.rotation, dtype=float)
         self._untwisted = tuple(self.untwisted.ravel().tolist())
+        self._constants = self._build_constants()
 
     def mass_matrix(self, foot_positions: Sequence[Sequence[float]]) -> np.ndarray:
         """M = M_RB + M_A + sum_i M_paw(r_i) (6x6, body axes about the centre of mass)."""
@@ -362,122 +285,62 @@ class TankModel(FloatingBaseModel):
                 M += point_mass_matrix(self.paw_added_mass, r[:3])
         return M
 
+    def constants(self) -> TankConstants:
+        """This plant's :data:`~.tank_dynamics.TankConstants` (anchor and untwisted attitude of the last
+        :meth:`attach`)."""
+        return self._constants
+
+    def _build_constants(self) -> TankConstants:
+        tank = self.tank
+        return (self.drag_constant, self._drag,
+                (self.torso_buoyancy - self.torso_weight) if tank.hydrostatics else 0.0, bool(tank.suspension),
+                tuple(float(x) for x in tank.hook), self._anchor,
+                (float(tank.rope_length), float(tank.rope_stiffness), float(tank.rope_damping)),
+                (float(tank.rope_torsion_stiffness), float(tank.rope_torsion_damping)), self._untwisted,
+                tuple(float(x) for x in tank.appendage_damping_linear),
+                tuple(float(x) for x in tank.appendage_damping_quadratic), self._body_m, float(self.paw_added_mass))
+
     def _mass_solver(self, sr: Sequence[float], S: Sequence[float]) -> Tuple[Tuple[float, ...], ...]:
-        """(diag A^-1, B, S^-1) of :func:`_solve_mass` for M = M_RB + M_A + sum_i M_paw(r_i): the paws
-        add m_a [[4 I, -hat(sr)], [hat(sr), sum_i (|r_i|^2 I - r_i r_i^T)]] (sr = sum r_i, S = sum r_i r_i^T)."""
-        M = self._body_m
-        ma = self.paw_added_mass
-        if any(M[6 * i + j] != 0.0 for i in range(3) for j in range(6) if i != j):
-            raise ValueError("the torso's translational mass block must be diagonal (mass matrix about the "
-                             "centre of mass of a symmetric ellipsoid)")
-        a_inv = tuple(1.0 / (M[7 * i] + 4.0 * ma) for i in range(3))
-        x, y, z = sr
-        B = (0.0, ma * z, -ma * y, -ma * z, 0.0, ma * x, ma * y, -ma * x, 0.0)  # -m_a hat(sr)
-        trace = S[0] + S[4] + S[8]
-        D = [M[18 + 6 * i + 3 + j] + ma * ((trace if i == j else 0.0) - S[3 * i + j])
-             for i in range(3) for j in range(3)]
-        # S = D - B^T A^-1 B
-        schur = [D[3 * i + j] - sum(B[3 * k + i] * a_inv[k] * B[3 * k + j] for k in range(3))
-                 for i in range(3) for j in range(3)]
-        return a_inv, B, _inverse3(schur)
+        """:func:`~.tank_dynamics.mass_solver` of this plant (ValueError if the matrix is singular)."""
+        solver = mass_solver(self._body_m, self.paw_added_mass, sr, S)
+        if not all(math.isfinite(x) for x in solver[2]):
+            raise ValueError("singular mass matrix (legs at %r)" % (tuple(sr),))
+        return solver
 
     # ---- equations of motion -------------------------------------------------------------------
 
     def generalized_forces(self, context: "_TankContext", p: Sequence[float], v: Sequence[float], R: Mat3,
                            w: Sequence[float]) -> Tuple[float, ...]:
-        """Right-hand side of eq. (tank): the 6 body-axes generalised forces minus C(nu) nu and f_paw."""
-        r0, r1, r2, r3, r4, r5, r6, r7, r8 = R
-        b = (r0 * v[0] + r3 * v[1] + r6 * v[2], r1 * v[0] + r4 * v[1] + r7 * v[2], r2 * v[0] + r5 * v[1] + r8 * v[2])
-        fx, fy, fz, tx, ty, tz = self._body_wrench(context, b[0], b[1], b[2], R, w[0], w[1], w[2])
-        up = (r6, r7, r8)  # R^T z_hat
-        tank = self.tank
-        lift = context.lift  # world-up forces: paw buoyancy, then torso hydrostatics (its moment is in U)
-        if tank.hydrostatics:
-            lift += self.torso_buoyancy - self.torso_weight
-        fx, fy, fz = fx + lift * up[0], fy + lift * up[1], fz + lift * up[2]
-        if tank.suspension:
-            h = tank.hook
-            Rh = (r0 * h[0] + r1 * h[1] + r2 * h[2], r3 * h[0] + r4 * h[1] + r5 * h[2],
-                  r6 * h[0] + r7 * h[1] + r8 * h[2])
-            wxh = _cross(w, h)
-            Rwxh = (r0 * wxh[0] + r1 * wxh[1] + r2 * wxh[2], r3 * wxh[0] + r4 * wxh[1] + r5 * wxh[2],
-                    r6 * wxh[0] + r7 * wxh[1] + r8 * wxh[2])
-            F = rope_force((p[0] + Rh[0], p[1] + Rh[1], p[2] + Rh[2]), (v[0] + Rwxh[0], v[1] + Rwxh[1], v[2] + Rwxh[2]),
-                           self._anchor, tank.rope_length, tank.rope_stiffness, tank.rope_damping)
-            Fb = (r0 * F[0] + r3 * F[1] + r6 * F[2], r1 * F[0] + r4 * F[1] + r7 * F[2],
-                  r2 * F[0] + r5 * F[1] + r8 * F[2])
-            m = _cross(h, Fb)
-            fx, fy, fz, tx, ty, tz = fx + Fb[0], fy + Fb[1], fz + Fb[2], tx + m[0], ty + m[1], tz + m[2]
-            if tank.rope_torsion_stiffness > 0.0 or tank.rope_torsion_damping > 0.0:
-                m = rope_torsion_torque(R, self._untwisted, w, tank.rope_torsion_stiffness, tank.rope_torsion_damping)
-                tx, ty, tz = tx + m[0], ty + m[1], tz + m[2]
-        if self._appendage_damping:
-            m = appendage_damping_torque(w, tank.appendage_damping_linear, tank.appendage_damping_quadratic)
-            tx, ty, tz = tx + m[0], ty + m[1], tz + m[2]
-        # Kirchhoff terms of M_RB + M_A: [omega x p; v x p + omega x h], [p; h] = M nu.
-        ph = _mat6_vec(self._body_m, b + tuple(w))
-        a, c1, c2 = _cross(w, ph[:3]), _cross(b, ph[:3]), _cross(w, ph[3:])
-        fx, fy, fz = fx - a[0], fy - a[1], fz - a[2]
-        tx, ty, tz = tx - c1[0] - c2[0], ty - c1[1] - c2[1], tz - c1[2] - c2[2]
-        ma = self.paw_added_mass
-        if ma > 0.0:
-            # Paw added mass, summed over the legs: f_i = -m_a (omega x v + omega x (omega x r_i)
-            # + 2 omega x c_i), moments r_i x f_i; with sr = sum r_i, sc = sum c_i, S = sum r_i r_i^T,
-            # P = sum c_i r_i^T, rc = sum r_i . c_i:
-            #   sum f_i = -m_a (4 omega x v + omega x (omega x sr) + 2 omega x sc)
-            #   sum r_i x f_i = -m_a (sr x (omega x v) + (S omega) x omega + 2 (omega rc - P omega))
-            sr, sc, S, P, rc = context.leg_sums
-            wv = _cross(w, b)
-            wwr = _cross(w, _cross(w, sr))
-            wc = _cross(w, sc)
-            fx -= ma * (4.0 * wv[0] + wwr[0] + 2.0 * wc[0])
-            fy -= ma * (4.0 * wv[1] + wwr[1] + 2.0 * wc[1])
-            fz -= ma * (4.0 * wv[2] + wwr[2] + 2.0 * wc[2])
-            rwv = _cross(sr, wv)
-            Sw = (S[0] * w[0] + S[1] * w[1] + S[2] * w[2], S[3] * w[0] + S[4] * w[1] + S[5] * w[2],
-                  S[6] * w[0] + S[7] * w[1] + S[8] * w[2])
-            Pw = (P[0] * w[0] + P[1] * w[1] + P[2] * w[2], P[3] * w[0] + P[4] * w[1] + P[5] * w[2],
-                  P[6] * w[0] + P[7] * w[1] + P[8] * w[2])
-            sww = _cross(Sw, w)
-            tx -= ma * (rwv[0] + sww[0] + 2.0 * (w[0] * rc - Pw[0]))
-            ty -= ma * (rwv[1] + sww[1] + 2.0 * (w[1] * rc - Pw[1]))
-            tz -= ma * (rwv[2] + sww[2] + 2.0 * (w[2] * rc - Pw[2]))
-        return fx, fy, fz, tx, ty, tz
-
-    def _chart_derivative(self, context: "_TankContext", R0: Mat3,  # type: ignore[override]
-                          y: Sequence[float]) -> Tuple[float, ...]:
-        """d/dt of the chart state y = (p, v, xi, omega) under eq. (tank)."""
-        R, xi_rate = chart_point(R0, y[6], y[7], y[8], y[9], y[10], y[11])
-        v, w = y[3:6], y[9:12]
-        nu_dot = _solve_mass(context.mass_solver, self.generalized_forces(context, y[0:3], v, R, w))
-        r0, r1, r2, r3, r4, r5, r6, r7, r8 = R
-        b = (r0 * v[0] + r3 * v[1] + r6 * v[2], r1 * v[0] + r4 * v[1] + r7 * v[2], r2 * v[0] + r5 * v[1] + r8 * v[2])
-        wb = _cross(w, b)
-        ax, ay, az = nu_dot[0] + wb[0], nu_dot[1] + wb[1], nu_dot[2] + wb[2]
-        return (tuple(v) + (r0 * ax + r1 * ay + r2 * az, r3 * ax + r4 * ay + r5 * az, r6 * ax + r7 * ay + r8 * az)
-                + xi_rate + tuple(nu_dot[3:]))
+        """Right-hand side of eq. (tank) (:func:`~.tank_dynamics.tank_forces`)."""
+        return tank_forces(self._constants, context.feet, context.lift, context.up_torque, context.leg_sums,
+                           p[0], p[1], p[2], v[0], v[1], v[2], R, w[0], w[1], w[2])
 
     def _step_context(self, q: Any, q_dot: Any) -> "_TankContext":
         flat = leg_kinematics_flat(q.tolist() if isinstance(q, np.ndarray) else q,
                                     q_dot.tolist() if isinstance(q_dot, np.ndarray) else q_dot, self.params)
         context = _TankContext(flat, self.net_paw_buoyancy, self._restoring)
-        feet = np.array(flat).reshape(4, 6)
-        r, c = feet[:, :3], feet[:, 3:]
-        context.leg_sums = (tuple(r.sum(axis=0).tolist()), tuple(c.sum(axis=0).tolist()),
-                            tuple((r.T @ r).ravel().tolist()), tuple((c.T @ r).ravel().tolist()),
-                            float(np.sum(r * c)))
+        context.leg_sums = leg_sums(context.feet)
         context.mass_solver = self._mass_solver(context.leg_sums[0], context.leg_sums[2])
         return context
+
+    def _rk4_tank(self, state: RigidBodyState, dt: float, context: "_TankContext") -> RigidBodyState:
+        R0 = tuple(state.rotation.ravel().tolist())
+        y0 = tuple(state.position.tolist() + state.velocity.tolist() + [0.0, 0.0, 0.0] + state.omega.tolist())
+        try:
+            y = tank_rk4(self._constants, context.feet, context.lift, context.up_torque, context.leg_sums,
+                         context.mass_solver, R0, y0, dt)
+        except (ValueError, OverflowError) as exc:  # math.sin(inf) etc. once the state has blown up
+            raise diverged(dt, state, str(exc)) from None
+        return chart_step_end(R0, y[0:6], y[6:9], y[9:12], dt, state)
 
     def step(self, state: RigidBodyState, q: Any, q_dot: Any, dt: float) -> RigidBodyState:
         dt = check_dt(dt)
         state = state.validate()
         context = self._step_context(joint_array(q, "q"), joint_array(q_dot, "q_dot"))
-        return self._rk4(state, dt, (context, context, context))
+        return self._rk4_tank(state, dt, context)
 
     def step_trusted(self, state: RigidBodyState, q: Any, q_dot: Any, dt: float) -> RigidBodyState:
-        context = self._step_context(q, q_dot)
-        return self._rk4(state, dt, (context, context, context))
+        return self._rk4_tank(state, dt, self._step_context(q, q_dot))
 
     # ---- energy ------------------------------------------------------------------------------
 

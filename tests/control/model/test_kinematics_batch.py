@@ -1,15 +1,14 @@
 """The batched leg kinematics against the robot's float paths."""
 from __future__ import annotations
 
-import dataclasses
 import math
 
 import numpy as np
 import pytest
 
 from quadruped_control.model.kinematics import (UnreachableError, _five_bar_closure, _five_bar_rates,
-                                                joint_angles_floats, leg_kinematics_flat)
-from quadruped_control.model.kinematics_batch import LegGeometry, joint_angles_batch, leg_kinematics_batch
+                                                joint_angles_floats, leg_kinematics_flat, leg_row)
+from quadruped_control.model.kinematics_batch import LegGeometry, joint_angles_batch
 from quadruped_control.model.params import load_robot_params
 from quadruped_control.sim.simulation import nominal_joint_angles
 
@@ -38,34 +37,31 @@ def test_ik_batch_matches_float_path_inside_and_outside_the_workspace(robot):
     assert 100 < reached < 1600  # both cases exercised
 
 
-def test_leg_kinematics_batch_matches_float_path(robot):
-    rng = np.random.default_rng(4)
-    q0 = nominal_joint_angles(robot)
-    q = q0 + rng.normal(0.0, 0.05, (50, 4, 3))
-    q_dot = rng.normal(0.0, 2.0, (50, 4, 3))
-    feet, rates, ok = leg_kinematics_batch(q, q_dot, LegGeometry.from_params(robot))
-    assert ok.all()
-    for n in range(50):
-        flat = np.array(leg_kinematics_flat(q[n].tolist(), q_dot[n].tolist(), robot)).reshape(4, 6)
-        np.testing.assert_allclose(feet[n], flat[:, :3], rtol=0, atol=1e-14)
-        np.testing.assert_allclose(rates[n], flat[:, 3:], rtol=0, atol=1e-12)
-
-
-def test_leg_kinematics_batch_flags_five_bars_that_cannot_close(robot):
-    """With short passive links many motor angles cannot close the five-bar: the mask says which, where
-    the float cores raise (closure or type-2 singularity)."""
-    geometry = dataclasses.replace(LegGeometry.from_params(robot), a3=0.6 * robot.five_bar.a3,
-                                   a4=0.6 * robot.five_bar.a4)
+def test_leg_row_flags_five_bars_that_cannot_close_where_the_float_cores_raise(robot):
+    """leg_row (the compiled plants' per-leg kinematics) says ok exactly where the raising cores of
+    leg_kinematics_flat succeed; with short passive links many motor angles cannot close the five-bar."""
+    fb = robot.five_bar
+    a1, a2, a3, a4, c = fb.a1, fb.a2, 0.6 * fb.a3, 0.6 * fb.a4, fb.c
+    frame = (0.1, 0.2, 0.0, 1.0, 1.0, 1.0)
     rng = np.random.default_rng(7)
-    q = np.repeat(rng.uniform(-math.pi, math.pi, (300, 1, 3)), 4, axis=1)  # the same angles on every leg
-    _, _, ok = leg_kinematics_batch(q, np.zeros_like(q), geometry)
-    g = geometry
-    for n in range(300):
+    outcomes = set()
+    for t1, t2, t3 in rng.uniform(-math.pi, math.pi, (300, 3)):
+        ok = leg_row(t1, t2, t3, 0.1, -0.2, 0.3, frame, a1, a2, a3, a4, c, robot.l_y, robot.l_z)[0]
         try:
-            _, _, phi, psi = _five_bar_closure(q[n, 0, 0], q[n, 0, 1], g.a1, g.a2, g.a3, g.a4, g.c)
-            _five_bar_rates(q[n, 0, 0], q[n, 0, 1], phi, psi, g.a1, g.a2)  # the singularity check
+            _, _, phi, psi = _five_bar_closure(t1, t2, a1, a2, a3, a4, c)
+            _five_bar_rates(t1, t2, phi, psi, a1, a2)  # the singularity check
             closes = True
         except UnreachableError:
             closes = False
-        assert ok[n] == closes
-    assert 10 < ok.sum() < 290
+        assert ok == closes
+        outcomes.add(ok)
+    assert outcomes == {True, False}
+
+
+def test_leg_kinematics_flat_says_why_a_leg_cannot_close(robot):
+    """Where leg_row says no, the float path raises the raising cores' error (here: a NaN angle; the
+    robot's own five-bar closes at every motor angle)."""
+    q = nominal_joint_angles(robot).tolist()
+    q[2] = [math.nan, q[2][1], q[2][2]]
+    with pytest.raises(UnreachableError, match="finite"):
+        leg_kinematics_flat(q, np.zeros((4, 3)).tolist(), robot)

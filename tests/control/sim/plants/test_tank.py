@@ -17,7 +17,8 @@ from quadruped_control.sim.plants import TankModel, TankParams, load_tank_params
 from quadruped_control.sim.plants.added_mass import (ellipsoid_added_mass, ellipsoid_coefficients, kirchhoff_terms,
                                                  point_mass_matrix)
 from quadruped_control.sim.plants.paper import FloatingBaseModel, RigidBodyState
-from quadruped_control.sim.plants.tank import _solve_mass, hydrostatic_wrench, rope_force, torso_ellipsoid
+from quadruped_control.sim.plants.tank import hydrostatic_wrench, rope_force, torso_ellipsoid
+from quadruped_control.sim.plants.tank_dynamics import solve_mass
 from quadruped_control.sim.simulation import ClosedLoopSimulation, PlantSimulator, nominal_joint_angles
 
 ROBOT = load_robot_params()
@@ -97,7 +98,7 @@ def test_schur_mass_solve_matches_numpy() -> None:
         feet = rng.normal(scale=0.2, size=(4, 3))
         g = rng.normal(size=6)
         solver = model._mass_solver(tuple(feet.sum(axis=0)), tuple((feet.T @ feet).ravel()))
-        np.testing.assert_allclose(_solve_mass(solver, g), np.linalg.solve(model.mass_matrix(feet.tolist()), g),
+        np.testing.assert_allclose(solve_mass(solver, *g), np.linalg.solve(model.mass_matrix(feet.tolist()), g),
                                    rtol=1e-10, atol=1e-12)
 
 

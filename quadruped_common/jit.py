@@ -1,0 +1,95 @@
+"""Optional compilation with numba of the simulator's scalar cores: one source, compiled or plain.
+
+The batched simulator steps thousands of trials; per trial and step it runs the same few hundred float
+operations as the per-trial plants. Vectorised over trials with numpy, each of those operations is a
+separate pass over memory with its own call overhead; compiled with numba, a loop over the trials runs
+the plain scalar functions themselves. So the model's scalar functions are written once, in the subset
+of Python that both CPython and numba's nopython mode run (floats, tuples, small arrays, ``math``):
+
+- :func:`jitable` marks such a function. It returns the function unchanged, so every Python caller
+  (the robot's controller, the per-trial simulator) runs exactly the code it ran before; compiled code
+  that calls it compiles it inline (numba's ``register_jitable``).
+- :func:`kernel` compiles a function for Python callers (``numba.njit``), with numpy's floating-point
+  error model (a division by zero in a diverging trial gives inf or nan, which the caller flags, instead
+  of raising inside the loop) and the compiled code cached on disk.
+
+Without numba (the robot's Python 3.8 environment, which never runs the batch) both return the function
+unchanged and everything runs as plain Python, slowly but with the same results; ``UQ_NO_JIT=1``
+forces that path (the tests compare the two).
+
+numba's on-disk cache is invalidated by the modification time of the kernel's own file only, not of
+the functions it inlines from other files, so a stale kernel could survive a change in, say, the drag
+law. The cache therefore lives in a folder named by a hash of every source file a kernel can reach
+(:func:`source_fingerprint` of :data:`KERNEL_SOURCES`): any change there starts a fresh cache, which
+costs about a minute of compilation on first use (the two plants' kernels).
+"""
+from __future__ import annotations
+
+import hashlib
+import os
+from typing import Callable, Optional, Sequence, TypeVar
+
+__all__ = ["AVAILABLE", "KERNEL_SOURCES", "jitable", "kernel", "source_fingerprint"]
+
+F = TypeVar("F", bound=Callable)
+
+try:  # pragma: no cover - depends on the environment
+    if os.environ.get("UQ_NO_JIT", "") == "1":
+        raise ImportError("UQ_NO_JIT=1")
+    import numba
+    from numba.extending import register_jitable
+except ImportError:  # pragma: no cover - the robot's environment
+    numba = None
+    register_jitable = None
+
+#: True when :func:`kernel` compiles (numba importable and UQ_NO_JIT unset).
+AVAILABLE = numba is not None
+
+#: The folders whose code a kernel can reach (the floors below the simulator, and the simulator).
+KERNEL_SOURCES = ("quadruped_common", os.path.join("quadruped_control", "model"),
+                  os.path.join("quadruped_control", "sim"))
+
+
+def source_fingerprint(folders: Sequence[str] = KERNEL_SOURCES, root: Optional[str] = None) -> str:
+    """sha256 (16 hex digits) of the Python sources under ``folders`` (relative to ``root``, default the
+    folder that holds the packages), by path and content."""
+    root = root or os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+    digest = hashlib.sha256()
+    for package in folders:
+        for folder, dirs, files in os.walk(os.path.join(root, package)):
+            dirs[:] = sorted(d for d in dirs if d != "__pycache__")
+            for name in sorted(files):
+                if name.endswith(".py"):
+                    path = os.path.join(folder, name)
+                    digest.update(os.path.relpath(path, root).encode())
+                    with open(path, "rb") as handle:
+                        digest.update(handle.read())
+    return digest.hexdigest()[:16]
+
+
+def _cache_dir() -> str:
+    base = os.environ.get("UQ_JIT_CACHE") or os.path.join(
+        os.environ.get("XDG_CACHE_HOME") or os.path.join(os.path.expanduser("~"), ".cache"),
+        "underwater_quadruped", "numba")
+    return os.path.join(base, source_fingerprint())
+
+
+if numba is not None:  # pragma: no branch
+    # Read by numba when a cached dispatcher is created (at decoration), so set before any kernel.
+    numba.config.CACHE_DIR = _cache_dir()
+
+
+def jitable(function: F) -> F:
+    """``function`` unchanged; callable from compiled code too (module docstring)."""
+    if register_jitable is None:
+        return function
+    return register_jitable(function)
+
+
+def kernel(function: F) -> F:
+    """``function`` compiled for Python callers (module docstring); unchanged without numba. The
+    plain function stays reachable as ``.py_func`` either way (the tests run both)."""
+    if numba is None:
+        function.py_func = function  # type: ignore[attr-defined]
+        return function
+    return numba.njit(cache=True, error_model="numpy")(function)

@@ -1,0 +1,311 @@
+"""The tank plant's equations of motion, eq. (tank) of :mod:`.tank`, on floats: one source for the
+per-trial plant (:class:`~quadruped_control.sim.plants.tank.TankModel`, plain Python) and the batch
+(:class:`~quadruped_control.sim.plants.tank_batch.TankPlantBatch`, a loop over trials compiled by numba
+when it is installed, :mod:`quadruped_common.jit`).
+
+- :func:`rope_force`, :func:`rope_twist`, :func:`rope_torsion_torque`, :func:`appendage_damping_torque`:
+  the tank's own force laws (physics and sources in :mod:`.tank`'s docstring);
+- :func:`leg_sums`, :func:`mass_solver`, :func:`solve_mass`: the mass matrix
+  M = M_RB + M_A + sum_i M_paw(r_i) of a held step and its solution by the Schur complement;
+- :func:`tank_forces`: the right-hand side of eq. (tank), the paper's forces
+  (:func:`~quadruped_control.sim.plants.paper.body_wrench_f`) plus the rope, hydrostatics, candidate
+  effects, Kirchhoff terms of M_RB + M_A and the paws' added-mass terms;
+- :func:`tank_chart_derivative`, :func:`tank_rk4`: the classic RK4 in the SO(3) chart over the
+  12-float chart state (p, v, xi, omega) (the rope makes the forces depend on the position).
+
+The per-trial constants travel as a :data:`TankConstants` tuple (built by
+:meth:`TankModel.constants <quadruped_control.sim.plants.tank.TankModel.constants>`), whose fields are
+floats, 3-vectors, the body drag coefficients (8) and M_RB + M_A (36, row-major): tuples in the
+per-trial plant, rows of arrays in the batch.
+"""
+from __future__ import annotations
+
+import math
+from typing import Any, Sequence, Tuple
+
+from quadruped_common.jit import jitable
+from quadruped_control.sim.plants.paper import body_wrench_f
+from quadruped_control.sim.plants.rigid_body import Mat3, chart_point
+
+__all__ = ["TankConstants", "appendage_damping_torque", "leg_sums", "mass_solver", "rope_force",
+           "rope_torsion_torque", "rope_twist", "solve_mass", "tank_chart_derivative", "tank_forces", "tank_rk4"]
+
+Vec3 = Tuple[float, float, float]
+
+#: (drag_constant, body drag coefficients (8), extra lift (torso buoyancy - weight, N), suspension (bool),
+#: hook (3, m), anchor (3, m, world), rope (length, stiffness, damping), torsion (stiffness, damping),
+#: untwisted R_0 (9), appendage damping linear (3), quadratic (3), M_RB + M_A (36), paw added mass m_a)
+TankConstants = Tuple[Any, ...]
+
+
+@jitable
+def _cross(ax: float, ay: float, az: float, bx: float, by: float, bz: float) -> Vec3:
+    return ay * bz - az * by, az * bx - ax * bz, ax * by - ay * bx
+
+
+@jitable
+def rope_force(hook_world: Sequence[float], hook_velocity: Sequence[float], anchor: Sequence[float],
+               length: float, stiffness: float, damping: float) -> Vec3:
+    """Rope force on the hook, world frame (N): T d / |d| with d = anchor - hook and
+    T = max(0, k (|d| - L_0) + c d|d|/dt) while |d| > L_0, zero when slack (a rope only pulls)."""
+    dx, dy, dz = anchor[0] - hook_world[0], anchor[1] - hook_world[1], anchor[2] - hook_world[2]
+    distance = math.sqrt(dx * dx + dy * dy + dz * dz)
+    if distance <= length:
+        return (0.0, 0.0, 0.0)
+    ux, uy, uz = dx / distance, dy / distance, dz / distance
+    rate = -(ux * hook_velocity[0] + uy * hook_velocity[1] + uz * hook_velocity[2])  # d|d|/dt
+    tension = stiffness * (distance - length) + damping * rate
+    if tension <= 0.0:
+        return (0.0, 0.0, 0.0)
+    return (tension * ux, tension * uy, tension * uz)
+
+
+@jitable
+def appendage_damping_torque(omega: Sequence[float], linear: Sequence[float], quadratic: Sequence[float]) -> Vec3:
+    """tau_appendage = -(c_lin + c_quad |omega|) omega per body axis (N m): linear plus quadratic
+    rotational damping of the legs, housings and corners the inertia box leaves out (:mod:`.tank`)."""
+    return (-(linear[0] + quadratic[0] * abs(omega[0])) * omega[0],
+            -(linear[1] + quadratic[1] * abs(omega[1])) * omega[1],
+            -(linear[2] + quadratic[2] * abs(omega[2])) * omega[2])
+
+
+@jitable
+def rope_twist(R: Sequence[float], R0: Sequence[float]) -> float:
+    """Twist (rad, [-pi, pi]) of the rotation Q = R R0^T about the world vertical: the angle of the twist
+    part of its swing-twist decomposition, 2 atan2(q_z, q_w) = 2 atan2(Q_10 - Q_01, 1 + tr Q).
+    ``R``, ``R0``: row-major 3x3 (9 floats)."""
+    q10 = R[3] * R0[0] + R[4] * R0[1] + R[5] * R0[2]
+    q01 = R[0] * R0[3] + R[1] * R0[4] + R[2] * R0[5]
+    trace = 0.0
+    for k in range(9):
+        trace += R[k] * R0[k]
+    return 2.0 * math.atan2(q10 - q01, 1.0 + trace)
+
+
+@jitable
+def rope_torsion_torque(R: Sequence[float], R0: Sequence[float], omega: Sequence[float], stiffness: float,
+                        damping: float) -> Vec3:
+    """Body-axes torque (N m) of a rope twisted by :func:`rope_twist` from its untwisted attitude ``R0``:
+    T = -(k_t theta + c_t omega_z^W) about the world vertical, i.e. T R^T z_hat in body axes
+    (:mod:`.tank`). ``R``, ``R0`` row-major; ``omega`` body axes."""
+    ux, uy, uz = R[6], R[7], R[8]  # R^T z_hat
+    omega_z_world = ux * omega[0] + uy * omega[1] + uz * omega[2]
+    torque = -(stiffness * rope_twist(R, R0) + damping * omega_z_world)
+    return (torque * ux, torque * uy, torque * uz)
+
+
+# --------------------------------------------------------------------------------------------------
+# Mass matrix of a held step
+# --------------------------------------------------------------------------------------------------
+
+@jitable
+def leg_sums(feet: Sequence[Sequence[float]]) -> Tuple[Any, ...]:
+    """(sr, sc, S, P, rc) over the legs' rows (r_i, c_i): sr = sum r_i, sc = sum c_i, S = sum r_i r_i^T,
+    P = sum c_i r_i^T (row-major 9-tuples), rc = sum r_i . c_i: what the paws' added mass needs."""
+    sx = sy = sz = cx = cy = cz = rc = 0.0
+    s0 = s1 = s2 = s4 = s5 = s8 = 0.0
+    p0 = p1 = p2 = p3 = p4 = p5 = p6 = p7 = p8 = 0.0
+    for foot in feet:
+        x, y, z, u, v, w = foot[0], foot[1], foot[2], foot[3], foot[4], foot[5]
+        sx += x
+        sy += y
+        sz += z
+        cx += u
+        cy += v
+        cz += w
+        s0 += x * x
+        s1 += x * y
+        s2 += x * z
+        s4 += y * y
+        s5 += y * z
+        s8 += z * z
+        p0 += u * x
+        p1 += u * y
+        p2 += u * z
+        p3 += v * x
+        p4 += v * y
+        p5 += v * z
+        p6 += w * x
+        p7 += w * y
+        p8 += w * z
+        rc += x * u + y * v + z * w
+    return ((sx, sy, sz), (cx, cy, cz), (s0, s1, s2, s1, s4, s5, s2, s5, s8), (p0, p1, p2, p3, p4, p5, p6, p7, p8), rc)
+
+
+@jitable
+def _inverse3(m: Sequence[float]) -> Tuple[float, ...]:
+    """Inverse of a row-major 3x3 matrix by cofactors (nan where it is singular)."""
+    a, b, c, d, e, f, g, h, i = m[0], m[1], m[2], m[3], m[4], m[5], m[6], m[7], m[8]
+    A, B, C = e * i - f * h, f * g - d * i, d * h - e * g
+    det = a * A + b * B + c * C
+    k = 1.0 / det if det != 0.0 else math.nan
+    return (A * k, (c * h - b * i) * k, (b * f - c * e) * k,
+            B * k, (a * i - c * g) * k, (c * d - a * f) * k,
+            C * k, (b * g - a * h) * k, (a * e - b * d) * k)
+
+
+@jitable
+def mass_solver(body_m: Sequence[float], ma: float, sr: Sequence[float], S: Sequence[float]) -> Tuple[Any, ...]:
+    """(diag A^-1, B, S^-1) of :func:`solve_mass` for M = M_RB + M_A + sum_i M_paw(r_i): the paws add
+    m_a [[4 I, -hat(sr)], [hat(sr), tr(S) I - S]] (sr = sum r_i, S = sum r_i r_i^T) to ``body_m``
+    (M_RB + M_A, row-major 6x6, its translational block diagonal: checked by the model). nan if singular."""
+    a0, a1, a2 = 1.0 / (body_m[0] + 4.0 * ma), 1.0 / (body_m[7] + 4.0 * ma), 1.0 / (body_m[14] + 4.0 * ma)
+    x, y, z = sr[0], sr[1], sr[2]
+    B = (0.0, ma * z, -ma * y, -ma * z, 0.0, ma * x, ma * y, -ma * x, 0.0)  # -m_a hat(sr)
+    trace = S[0] + S[4] + S[8]
+    D = (body_m[21] + ma * (trace - S[0]), body_m[22] - ma * S[1], body_m[23] - ma * S[2],
+         body_m[27] - ma * S[3], body_m[28] + ma * (trace - S[4]), body_m[29] - ma * S[5],
+         body_m[33] - ma * S[6], body_m[34] - ma * S[7], body_m[35] + ma * (trace - S[8]))
+    # S = D - B^T A^-1 B
+    schur = (D[0] - (B[0] * a0 * B[0] + B[3] * a1 * B[3] + B[6] * a2 * B[6]),
+             D[1] - (B[0] * a0 * B[1] + B[3] * a1 * B[4] + B[6] * a2 * B[7]),
+             D[2] - (B[0] * a0 * B[2] + B[3] * a1 * B[5] + B[6] * a2 * B[8]),
+             D[3] - (B[1] * a0 * B[0] + B[4] * a1 * B[3] + B[7] * a2 * B[6]),
+             D[4] - (B[1] * a0 * B[1] + B[4] * a1 * B[4] + B[7] * a2 * B[7]),
+             D[5] - (B[1] * a0 * B[2] + B[4] * a1 * B[5] + B[7] * a2 * B[8]),
+             D[6] - (B[2] * a0 * B[0] + B[5] * a1 * B[3] + B[8] * a2 * B[6]),
+             D[7] - (B[2] * a0 * B[1] + B[5] * a1 * B[4] + B[8] * a2 * B[7]),
+             D[8] - (B[2] * a0 * B[2] + B[5] * a1 * B[5] + B[8] * a2 * B[8]))
+    return (a0, a1, a2), B, _inverse3(schur)
+
+
+@jitable
+def solve_mass(solver: Tuple[Any, ...], g0: float, g1: float, g2: float, g3: float, g4: float,
+               g5: float) -> Tuple[float, ...]:
+    """nu_dot = M^-1 g for M = [[A, B], [B^T, D]] with A diagonal, by the Schur complement
+    S = D - B^T A^-1 B: x2 = S^-1 (g2 - B^T A^-1 g1), x1 = A^-1 (g1 - B x2). ``solver`` is
+    (diag A^-1, B, S^-1) from :func:`mass_solver`; tested against numpy.linalg.solve."""
+    (a0, a1, a2), B, Si = solver
+    y0, y1, y2 = a0 * g0, a1 * g1, a2 * g2  # A^-1 g1
+    h0 = g3 - (B[0] * y0 + B[3] * y1 + B[6] * y2)  # g2 - B^T A^-1 g1
+    h1 = g4 - (B[1] * y0 + B[4] * y1 + B[7] * y2)
+    h2 = g5 - (B[2] * y0 + B[5] * y1 + B[8] * y2)
+    x3 = Si[0] * h0 + Si[1] * h1 + Si[2] * h2
+    x4 = Si[3] * h0 + Si[4] * h1 + Si[5] * h2
+    x5 = Si[6] * h0 + Si[7] * h1 + Si[8] * h2
+    return (a0 * (g0 - (B[0] * x3 + B[1] * x4 + B[2] * x5)),
+            a1 * (g1 - (B[3] * x3 + B[4] * x4 + B[5] * x5)),
+            a2 * (g2 - (B[6] * x3 + B[7] * x4 + B[8] * x5)), x3, x4, x5)
+
+
+# --------------------------------------------------------------------------------------------------
+# Equations of motion
+# --------------------------------------------------------------------------------------------------
+
+@jitable
+def tank_forces(k: TankConstants, feet: Sequence[Sequence[float]], lift: float, up_torque: Sequence[float],
+                sums: Tuple[Any, ...], px: float, py: float, pz: float, vx: float, vy: float, vz: float, R: Mat3,
+                wx: float, wy: float, wz: float) -> Tuple[float, ...]:
+    """Right-hand side of eq. (tank): the 6 body-axes generalised forces minus C(nu) nu and f_paw, for
+    the constants ``k`` (:data:`TankConstants`), the step's legs (``feet`` rows, paw buoyancy ``lift`` and
+    torque matrix ``up_torque`` with the torso's buoyancy moment, :func:`leg_sums` ``sums``) and the state
+    p, v (world), R (row-major), omega (body)."""
+    (drag_constant, drag, extra_lift, suspension, hook, anchor, rope, torsion, untwisted, linear, quadratic,
+     body_m, ma) = k
+    r0, r1, r2, r3, r4, r5, r6, r7, r8 = R
+    bx, by, bz = r0 * vx + r3 * vy + r6 * vz, r1 * vx + r4 * vy + r7 * vz, r2 * vx + r5 * vy + r8 * vz
+    fx, fy, fz, tx, ty, tz = body_wrench_f(feet, drag_constant, drag, up_torque, bx, by, bz, R, wx, wy, wz)
+    # world-up forces: paw buoyancy, then torso hydrostatics (its moment is in up_torque); R^T z_hat = (r6, r7, r8)
+    up_force = lift + extra_lift
+    fx, fy, fz = fx + up_force * r6, fy + up_force * r7, fz + up_force * r8
+    if suspension:
+        hx, hy, hz = hook[0], hook[1], hook[2]
+        Rhx, Rhy, Rhz = r0 * hx + r1 * hy + r2 * hz, r3 * hx + r4 * hy + r5 * hz, r6 * hx + r7 * hy + r8 * hz
+        ax, ay, az = _cross(wx, wy, wz, hx, hy, hz)
+        Rax, Ray, Raz = r0 * ax + r1 * ay + r2 * az, r3 * ax + r4 * ay + r5 * az, r6 * ax + r7 * ay + r8 * az
+        Fx, Fy, Fz = rope_force((px + Rhx, py + Rhy, pz + Rhz), (vx + Rax, vy + Ray, vz + Raz), anchor,
+                                rope[0], rope[1], rope[2])
+        Fbx, Fby, Fbz = r0 * Fx + r3 * Fy + r6 * Fz, r1 * Fx + r4 * Fy + r7 * Fz, r2 * Fx + r5 * Fy + r8 * Fz
+        mx, my, mz = _cross(hx, hy, hz, Fbx, Fby, Fbz)
+        fx, fy, fz, tx, ty, tz = fx + Fbx, fy + Fby, fz + Fbz, tx + mx, ty + my, tz + mz
+        if torsion[0] > 0.0 or torsion[1] > 0.0:
+            mx, my, mz = rope_torsion_torque(R, untwisted, (wx, wy, wz), torsion[0], torsion[1])
+            tx, ty, tz = tx + mx, ty + my, tz + mz
+    if linear[0] > 0.0 or linear[1] > 0.0 or linear[2] > 0.0 or quadratic[0] > 0.0 or quadratic[1] > 0.0 \
+            or quadratic[2] > 0.0:
+        mx, my, mz = appendage_damping_torque((wx, wy, wz), linear, quadratic)
+        tx, ty, tz = tx + mx, ty + my, tz + mz
+    # Kirchhoff terms of M_RB + M_A: [omega x p; v x p + omega x h], [p; h] = M nu.
+    m = body_m
+    lx = m[0] * bx + m[1] * by + m[2] * bz + m[3] * wx + m[4] * wy + m[5] * wz
+    ly = m[6] * bx + m[7] * by + m[8] * bz + m[9] * wx + m[10] * wy + m[11] * wz
+    lz = m[12] * bx + m[13] * by + m[14] * bz + m[15] * wx + m[16] * wy + m[17] * wz
+    ax_ = m[18] * bx + m[19] * by + m[20] * bz + m[21] * wx + m[22] * wy + m[23] * wz
+    ay_ = m[24] * bx + m[25] * by + m[26] * bz + m[27] * wx + m[28] * wy + m[29] * wz
+    az_ = m[30] * bx + m[31] * by + m[32] * bz + m[33] * wx + m[34] * wy + m[35] * wz
+    c0x, c0y, c0z = _cross(wx, wy, wz, lx, ly, lz)
+    c1x, c1y, c1z = _cross(bx, by, bz, lx, ly, lz)
+    c2x, c2y, c2z = _cross(wx, wy, wz, ax_, ay_, az_)
+    fx, fy, fz = fx - c0x, fy - c0y, fz - c0z
+    tx, ty, tz = tx - c1x - c2x, ty - c1y - c2y, tz - c1z - c2z
+    if ma > 0.0:
+        # Paw added mass, summed over the legs: f_i = -m_a (omega x v + omega x (omega x r_i)
+        # + 2 omega x c_i), moments r_i x f_i; with sr = sum r_i, sc = sum c_i, S = sum r_i r_i^T,
+        # P = sum c_i r_i^T, rc = sum r_i . c_i:
+        #   sum f_i = -m_a (4 omega x v + omega x (omega x sr) + 2 omega x sc)
+        #   sum r_i x f_i = -m_a (sr x (omega x v) + (S omega) x omega + 2 (omega rc - P omega))
+        sr, sc, S, P, rc = sums
+        wvx, wvy, wvz = _cross(wx, wy, wz, bx, by, bz)
+        qx, qy, qz = _cross(wx, wy, wz, sr[0], sr[1], sr[2])
+        wwrx, wwry, wwrz = _cross(wx, wy, wz, qx, qy, qz)
+        wcx, wcy, wcz = _cross(wx, wy, wz, sc[0], sc[1], sc[2])
+        fx -= ma * (4.0 * wvx + wwrx + 2.0 * wcx)
+        fy -= ma * (4.0 * wvy + wwry + 2.0 * wcy)
+        fz -= ma * (4.0 * wvz + wwrz + 2.0 * wcz)
+        rwvx, rwvy, rwvz = _cross(sr[0], sr[1], sr[2], wvx, wvy, wvz)
+        Swx, Swy, Swz = (S[0] * wx + S[1] * wy + S[2] * wz, S[3] * wx + S[4] * wy + S[5] * wz,
+                         S[6] * wx + S[7] * wy + S[8] * wz)
+        Pwx, Pwy, Pwz = (P[0] * wx + P[1] * wy + P[2] * wz, P[3] * wx + P[4] * wy + P[5] * wz,
+                         P[6] * wx + P[7] * wy + P[8] * wz)
+        swwx, swwy, swwz = _cross(Swx, Swy, Swz, wx, wy, wz)
+        tx -= ma * (rwvx + swwx + 2.0 * (wx * rc - Pwx))
+        ty -= ma * (rwvy + swwy + 2.0 * (wy * rc - Pwy))
+        tz -= ma * (rwvz + swwz + 2.0 * (wz * rc - Pwz))
+    return fx, fy, fz, tx, ty, tz
+
+
+@jitable
+def tank_chart_derivative(k: TankConstants, feet: Sequence[Sequence[float]], lift: float,
+                          up_torque: Sequence[float], sums: Tuple[Any, ...], solver: Tuple[Any, ...], R0: Mat3,
+                          y: Sequence[float]) -> Tuple[float, ...]:
+    """d/dt of the chart state y = (p, v, xi, omega) (12 floats) under eq. (tank), R = R0 exp(hat(xi))."""
+    px, py, pz, vx, vy, vz, x, y_, z, wx, wy, wz = y
+    R, (rx, ry, rz) = chart_point(R0, x, y_, z, wx, wy, wz)
+    g0, g1, g2, g3, g4, g5 = tank_forces(k, feet, lift, up_torque, sums, px, py, pz, vx, vy, vz, R, wx, wy, wz)
+    n0, n1, n2, n3, n4, n5 = solve_mass(solver, g0, g1, g2, g3, g4, g5)
+    r0, r1, r2, r3, r4, r5, r6, r7, r8 = R
+    bx, by, bz = r0 * vx + r3 * vy + r6 * vz, r1 * vx + r4 * vy + r7 * vz, r2 * vx + r5 * vy + r8 * vz
+    cx, cy, cz = _cross(wx, wy, wz, bx, by, bz)
+    ax, ay, az = n0 + cx, n1 + cy, n2 + cz
+    return (vx, vy, vz, r0 * ax + r1 * ay + r2 * az, r3 * ax + r4 * ay + r5 * az, r6 * ax + r7 * ay + r8 * az,
+            rx, ry, rz, n3, n4, n5)
+
+
+@jitable
+def _axpy12(y: Sequence[float], a: float, k: Sequence[float]) -> Tuple[float, ...]:
+    """y + a k for 12-float chart states."""
+    return (y[0] + a * k[0], y[1] + a * k[1], y[2] + a * k[2], y[3] + a * k[3], y[4] + a * k[4], y[5] + a * k[5],
+            y[6] + a * k[6], y[7] + a * k[7], y[8] + a * k[8], y[9] + a * k[9], y[10] + a * k[10],
+            y[11] + a * k[11])
+
+
+@jitable
+def tank_rk4(k: TankConstants, feet: Sequence[Sequence[float]], lift: float, up_torque: Sequence[float],
+             sums: Tuple[Any, ...], solver: Tuple[Any, ...], R0: Mat3, y0: Sequence[float],
+             dt: float) -> Tuple[float, ...]:
+    """One classic RK4 step of :func:`tank_chart_derivative` in the chart around R0 from the chart state
+    y0 = (p, v, 0, omega), the legs held over it: the chart state at its end (12 floats; the caller maps
+    it back with :func:`~.rigid_body.chart_step_end`)."""
+    h = 0.5 * dt
+    k1 = tank_chart_derivative(k, feet, lift, up_torque, sums, solver, R0, y0)
+    k2 = tank_chart_derivative(k, feet, lift, up_torque, sums, solver, R0, _axpy12(y0, h, k1))
+    k3 = tank_chart_derivative(k, feet, lift, up_torque, sums, solver, R0, _axpy12(y0, h, k2))
+    k4 = tank_chart_derivative(k, feet, lift, up_torque, sums, solver, R0, _axpy12(y0, dt, k3))
+    s = dt / 6.0
+    return (y0[0] + s * (k1[0] + 2.0 * (k2[0] + k3[0]) + k4[0]), y0[1] + s * (k1[1] + 2.0 * (k2[1] + k3[1]) + k4[1]),
+            y0[2] + s * (k1[2] + 2.0 * (k2[2] + k3[2]) + k4[2]), y0[3] + s * (k1[3] + 2.0 * (k2[3] + k3[3]) + k4[3]),
+            y0[4] + s * (k1[4] + 2.0 * (k2[4] + k3[4]) + k4[4]), y0[5] + s * (k1[5] + 2.0 * (k2[5] + k3[5]) + k4[5]),
+            y0[6] + s * (k1[6] + 2.0 * (k2[6] + k3[6]) + k4[6]), y0[7] + s * (k1[7] + 2.0 * (k2[7] + k3[7]) + k4[7]),
+            y0[8] + s * (k1[8] + 2.0 * (k2[8] + k3[8]) + k4[8]), y0[9] + s * (k1[9] + 2.0 * (k2[9] + k3[9]) + k4[9]),
+            y0[10] + s * (k1[10] + 2.0 * (k2[10] + k3[10]) + k4[10]),
+            y0[11] + s * (k1[11] + 2.0 * (k2[11] + k3[11]) + k4[11]))
