@@ -1,6 +1,7 @@
 """Whole-trial agreement of the batched simulator with the per-trial engine (docs/batch_simulation.md).
 
 Run: .venv/bin/python benchmarks/batch_agreement.py [--plant paper|tank] [--duration 160] [--jobs 2]
+     .venv/bin/python benchmarks/batch_agreement.py --study paper-sim
      .venv/bin/python benchmarks/batch_agreement.py --sensitivity "roll 45" "pitch 30"
 
 The first form runs the 15 trials of Table 1 (experiment gains, rate-limited servos) on both engines and
@@ -20,8 +21,9 @@ sys.path.insert(0, os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
 
 from quadruped_common.so3 import exp_so3, rpy_to_rot  # noqa: E402
 from quadruped_control.sim.servo_model import make_servo_model  # noqa: E402
-from quadruped_control.sim.simulation import ClosedLoopSimulation  # noqa: E402
+from quadruped_control.sim.simulation import ClosedLoopSimulation, load_simulation_tree  # noqa: E402
 from quadruped_control.studies.paper_experiments import experiment_specs  # noqa: E402
+from quadruped_control.studies.paper_sim import paper_sim_specs  # noqa: E402
 from quadruped_control.studies.trial import run_batch, run_trial, trial_setup  # noqa: E402
 
 
@@ -44,9 +46,18 @@ def main():
     parser.add_argument("--duration", type=float, default=160.0)
     parser.add_argument("--jobs", type=int, default=2)
     parser.add_argument("--sensitivity", nargs="+", metavar="LABEL", default=None)
+    parser.add_argument("--study", choices=("table1", "paper-sim"), default="table1",
+                        help="Table 1's 15 trials (default) or the paper's simulation study (3 trials, 120 s, "
+                             "simulation gains, ideal servos; --plant and --duration are ignored)")
     args = parser.parse_args()
     study = argparse.Namespace(seed=0, tank_yaml=None, robot_yaml=None)
-    specs, _ = experiment_specs(study, args.plant, "experiment", "rate-limited", args.duration, keep_trace=False)
+    if args.study == "paper-sim":
+        study.duration_given, study.restoring_offset = False, None
+        specs = paper_sim_specs(study, load_simulation_tree(), None, keep_trace=False)
+        args.plant = "paper"
+    else:
+        specs, _ = experiment_specs(study, args.plant, "experiment", "rate-limited", args.duration,
+                                    keep_trace=False)
     if args.sensitivity:
         specs = [spec for spec in specs if spec.label in args.sensitivity]
         batch = run_batch(specs)
