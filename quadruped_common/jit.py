@@ -26,10 +26,11 @@ costs about a minute of compilation on first use (the two plants' kernels).
 from __future__ import annotations
 
 import hashlib
+import math
 import os
 from typing import Callable, Optional, Sequence, TypeVar
 
-__all__ = ["AVAILABLE", "KERNEL_SOURCES", "jitable", "kernel", "source_fingerprint"]
+__all__ = ["AVAILABLE", "KERNEL_SOURCES", "hypot3", "jitable", "kernel", "source_fingerprint"]
 
 F = TypeVar("F", bound=Callable)
 
@@ -47,7 +48,7 @@ AVAILABLE = numba is not None
 
 #: The folders whose code a kernel can reach (the floors below the simulator, and the simulator).
 KERNEL_SOURCES = ("quadruped_common", os.path.join("quadruped_control", "model"),
-                  os.path.join("quadruped_control", "sim"))
+                  os.path.join("quadruped_control", "control"), os.path.join("quadruped_control", "sim"))
 
 
 def source_fingerprint(folders: Sequence[str] = KERNEL_SOURCES, root: Optional[str] = None) -> str:
@@ -77,6 +78,23 @@ def _cache_dir() -> str:
 if numba is not None:  # pragma: no branch
     # Read by numba when a cached dispatcher is created (at decoration), so set before any kernel.
     numba.config.CACHE_DIR = _cache_dir()
+
+
+def hypot3(x: float, y: float, z: float) -> float:
+    """sqrt(x^2 + y^2 + z^2) without overflow or underflow: ``math.hypot(x, y, z)`` in Python (the robot's
+    path keeps its exact rounding); compiled code, whose ``math.hypot`` takes two arguments, uses
+    hypot(hypot(x, y), z), equal to within an ulp."""
+    return math.hypot(x, y, z)
+
+
+if numba is not None:  # pragma: no branch
+    from numba.extending import overload
+
+    @overload(hypot3)
+    def _hypot3_compiled(x, y, z):  # noqa: ARG001 (numba passes the argument types)
+        def implementation(x, y, z):
+            return math.hypot(math.hypot(x, y), z)
+        return implementation
 
 
 def jitable(function: F) -> F:

@@ -35,7 +35,7 @@ from typing import Optional, Sequence, Tuple, Union
 
 import numpy as np
 
-from quadruped_common.so3 import cross_rows
+from quadruped_common.jit import hypot3, jitable
 
 from quadruped_control.model.hydrodynamics import paw_drag_wrench_f
 from quadruped_control.model.kinematics import leg_kinematics
@@ -52,7 +52,6 @@ __all__ = [
     "estimate_body_torque",
     "foot_speed",
     "foot_velocity_command",
-    "foot_velocity_commands_batch",
     "force_direction",
     "leg_torques",
 ]
@@ -75,9 +74,10 @@ def _floats3(value: ArrayLike, name: str) -> Vec3:
     return x, y, z
 
 
+@jitable
 def _norm(x: float, y: float, z: float) -> float:
     # math.hypot with three arguments needs Python 3.8; it avoids overflow and underflow.
-    return math.hypot(x, y, z)
+    return hypot3(x, y, z)
 
 
 def _check_drag_constant(drag_constant: float) -> float:
@@ -91,6 +91,7 @@ def _check_drag_constant(drag_constant: float) -> float:
 # Float kernels (no validation; used by the controller's hot path and by the public wrappers)
 # --------------------------------------------------------------------------------------------------
 
+@jitable
 def force_direction_f(tx: float, ty: float, tz: float, rx: float, ry: float, rz: float,
                       normalize: bool) -> Vec3:
     """f = tau_hat x r_hat (optionally normalised) on floats; zero in the degenerate cases."""
@@ -109,6 +110,7 @@ def force_direction_f(tx: float, ty: float, tz: float, rx: float, ry: float, rz:
     return fx, fy, fz
 
 
+@jitable
 def foot_speed_f(torque_norm: float, arm: float, drag_constant: float) -> float:
     """eq. (foot_speed) on floats: sqrt(|tau_i| / (k |r_i|)); 0 for zero torque or zero arm."""
     if torque_norm < MIN_TORQUE or arm < MIN_ARM:
@@ -116,6 +118,7 @@ def foot_speed_f(torque_norm: float, arm: float, drag_constant: float) -> float:
     return math.sqrt(torque_norm / (drag_constant * arm))
 
 
+@jitable
 def foot_velocity_command_f(tau: Vec3, r: Vec3, omega: Vec3, drag_constant: float, normalize: bool) -> Vec3:
     """eq. (foot_vel) on floats: -f v - omega x r (leg torque ``tau`` already divided among the legs)."""
     tx, ty, tz = tau
@@ -129,27 +132,6 @@ def foot_velocity_command_f(tau: Vec3, r: Vec3, omega: Vec3, drag_constant: floa
     return (-fx * speed - (wy * rz - wz * ry),
             -fy * speed - (wz * rx - wx * rz),
             -fz * speed - (wx * ry - wy * rx))
-
-
-def foot_velocity_commands_batch(tau: np.ndarray, r: np.ndarray, omega: np.ndarray, drag_constant: float,
-                                 normalize: np.ndarray) -> np.ndarray:
-    """eq. (foot_vel) vectorised: :func:`foot_velocity_command_f` for leg torques ``tau`` (..., 3), foot
-    positions ``r`` (..., 3), body rates ``omega`` (..., 3) and ``normalize`` flags (...) that broadcast
-    together; returns v^cmd (..., 3). The same formulas and degenerate cases (zero torque, zero arm, foot
-    on the torque axis: no stroke), for the batched simulator (:mod:`quadruped_control.control.batch`);
-    the tests compare the two."""
-    nt = np.sqrt(np.sum(tau * tau, axis=-1))
-    nr = np.sqrt(np.sum(r * r, axis=-1))
-    usable = (nt >= MIN_TORQUE) & (nr >= MIN_ARM)
-    with np.errstate(divide="ignore", invalid="ignore"):
-        f = cross_rows(tau / np.where(usable, nt, 1.0)[..., None], r / np.where(usable, nr, 1.0)[..., None])
-        sin_angle = np.sqrt(np.sum(f * f, axis=-1))
-        usable &= sin_angle >= MIN_SIN
-        f = np.where(np.asarray(normalize)[..., None], f / np.where(usable, sin_angle, 1.0)[..., None], f)
-        speed = np.sqrt(nt / (drag_constant * np.where(usable, nr, 1.0)))
-    f = np.where(usable[..., None], f, 0.0)
-    speed = np.where(usable, speed, 0.0)
-    return -f * speed[..., None] - cross_rows(omega, r)
 
 
 # --------------------------------------------------------------------------------------------------

@@ -1,26 +1,25 @@
-"""The attitude controller vectorised over trials: many closed-loop trials share one step of numpy.
+"""The attitude controller for N trials at once: the robot's own control law in a loop over trials.
 
-:class:`BatchController` is :class:`~quadruped_control.control.controller.AttitudeController` for N
-trials at once, each with its own gains, torque limit, stroke timing, force-direction option and
-setpoint, the robot (kinematics, inertia, drag constant, paw buoyancy) and the leg pairs shared. One
-:meth:`BatchController.step` is the controller's step on arrays with a leading trial axis:
+:class:`BatchController` is :class:`~quadruped_control.control.controller.AttitudeController` with the
+paper's stroke scheme for N trials, each with its own gains, torque limit, stroke timing, force-direction
+option and setpoint; the robot (kinematics, inertia, drag constant, paw buoyancy) and the leg pairs are
+shared. One :meth:`BatchController.step` runs :func:`controller_batch_step`, a loop over the trials
+(compiled by numba when it is installed, :mod:`quadruped_common.jit`) that calls the robot's own float
+functions per trial:
 
-1. eq. (error): E = R_d^T R, e_R = vee(1/2 (E - E^T)), and the geodesic angle of E;
-2. eq. (pid) with the feedforward omega x (I omega) - tau_buoyancy^B at the commanded feet, the
-   integral z = int(e_R + K_aw Delta_sat) in the controller's two discretisations (forward in the
-   anti-windup excess while g = h K_aw K_i <= 1, backward Euler beyond, then the clip to
-   ``integral_limit``: see the controller's module docstring), eq. (sat);
-3. the paper's power/recovery stroke cycle (:class:`~quadruped_control.control.strokes.paper.StrokeCycle`)
+1. eq. (error), (pid) with both anti-windup discretisations, (sat):
+   :func:`~quadruped_control.control.controller.control_law_f`, the function the robot's controller runs;
+2. the paper's power/recovery stroke cycle (:class:`~quadruped_control.control.strokes.paper.StrokeCycle`)
    with the allocation of eq. (foot_speed), (foot_vel) latched at each power start
-   (:func:`~quadruped_control.control.allocation.foot_velocity_commands_batch`), eq. (foot_integration)
-   and the leg IK (:func:`~quadruped_control.model.kinematics_batch.joint_angles_batch`).
+   (:func:`~quadruped_control.control.allocation.foot_velocity_command_f`), eq. (foot_integration), the
+   cubic retrace (:func:`~quadruped_control.control.strokes.base.cubic_time_profile`) and the leg IK
+   (:func:`~quadruped_control.model.kinematics.ik_row`, the core of the robot's ``joint_angles_floats``).
 
-The robot runs the float path (:class:`~quadruped_control.control.controller.AttitudeController`,
-unrolled on Python floats for its 100 Hz deadline); this is its array form, for the batched simulator
-(:mod:`quadruped_control.sim.batch`), and the tests step both side by side and compare every state
-to 1e-9. What the batch leaves out, because no simulated trial reaches it: the hold (safe state, scheme
-switches; a trial whose measurement the float controller would refuse is reported as ``refused`` and
-stops being trusted), the coordinated stroke scheme, and timing changes during a trial.
+The stroke cycle's phase logic is written here once more, on per-trial state arrays instead of the
+robot's objects (pairs, recorded paths); the tests step both side by side and compare every state to
+1e-9. What the batch leaves out, because no simulated trial reaches it: the hold (safe state, scheme
+switches; a trial whose measurement the float controller would refuse is reported as ``refused``, frozen
+and stops being trusted), the coordinated stroke scheme, and timing changes during a trial.
 
 The paper's power strokes are straight lines (a constant velocity from the stroke's start), so the
 recorded stroke of :class:`~quadruped_control.control.strokes.base.StrokePath` is the segment from its
@@ -31,24 +30,167 @@ and counts the event in ``ik_fallbacks``.
 """
 from __future__ import annotations
 
+import math
 from typing import Optional, Sequence
 
 import numpy as np
 
-from quadruped_common.so3 import cross_rows
+from quadruped_common.jit import jitable, kernel
 from quadruped_common.robot import LEGS
-from quadruped_control.control.allocation import foot_velocity_commands_batch
+from quadruped_control.control.allocation import foot_velocity_command_f
+from quadruped_control.control.controller import control_law_f
 from quadruped_control.control.controller_config import ControllerConfig
-from quadruped_control.control.strokes.base import TIME_EPS
-from quadruped_control.model.kinematics_batch import LegGeometry, joint_angles_batch
+from quadruped_control.control.strokes.base import TIME_EPS, cubic_time_profile
+from quadruped_control.model.kinematics import _geometry, ik_row, joint_angles_floats
 from quadruped_control.model.params import RobotParams
 
-__all__ = ["BatchController", "cubic_time_profile_batch"]
+__all__ = ["BatchController", "controller_batch_step"]
 
 
-def cubic_time_profile_batch(u: np.ndarray) -> np.ndarray:
-    """:func:`~quadruped_control.control.strokes.base.cubic_time_profile` on arrays: 3 u^2 - 2 u^3 on [0, 1]."""
-    return np.where(u <= 0.0, 0.0, np.where(u >= 1.0, 1.0, u * u * (3.0 - 2.0 * u)))
+@jitable
+def _clamped_ik(x, y, z, frame, g):
+    """ik_row of the target (x, y, z), the angles clamped exactly into the servo ranges as
+    :meth:`StrokeCycle.ik` clamps them: (reached, theta1, theta2, theta3)."""
+    ok, t1, t2, t3 = ik_row(x, y, z, frame, g[0], g[1], g[2], g[3], g[4], g[5], g[6], g[7], g[8], g[9], g[10],
+                            g[11], g[12])
+    t1 = g[7] if g[7] > t1 else t1
+    t2 = g[9] if g[9] > t2 else t2
+    t3 = g[11] if g[11] > t3 else t3
+    return ok, (g[8] if g[8] < t1 else t1), (g[10] if g[10] < t2 else t2), (g[12] if g[12] < t3 else t3)
+
+
+@jitable
+def _start_power(i, pair, legs, frames, k_drag, t_pow_max, normalize, tau_sat, omega, positions, joints, velocities,
+                 path_start, path_start_joints, path_end, power, phase_time, t_pow):
+    """:meth:`StrokeCycle._start_power`: latch eq. (foot_vel) with each leg's share tau_sat / 4."""
+    power[i, pair] = True
+    phase_time[i, pair] = 0.0
+    t_pow[i, pair] = t_pow_max[i]
+    tau = (0.25 * tau_sat[i, 0], 0.25 * tau_sat[i, 1], 0.25 * tau_sat[i, 2])
+    w = (omega[i, 0], omega[i, 1], omega[i, 2])
+    for slot in range(2):
+        leg = legs[pair, slot]
+        start = (positions[i, leg, 0], positions[i, leg, 1], positions[i, leg, 2])
+        vx, vy, vz = foot_velocity_command_f(tau, start, w, k_drag, normalize[i])
+        if not (math.isfinite(vx) and math.isfinite(vy) and math.isfinite(vz)):
+            vx = vy = vz = 0.0  # defensive, as the float path: a non-finite command means no stroke
+        velocities[i, leg, 0], velocities[i, leg, 1], velocities[i, leg, 2] = vx, vy, vz
+        for k in range(3):
+            path_start[i, leg, k] = positions[i, leg, k]
+            path_start_joints[i, leg, k] = joints[i, leg, k]
+            path_end[i, leg, k] = positions[i, leg, k]
+
+
+@jitable
+def _power_step(i, pair, legs, h, frames, g, t_rec, positions, joints, velocities, path_end, power, phase_time,
+                t_move, t_total, t_pow):
+    """:meth:`StrokeCycle._power_step`: eq. (foot_integration) and IK; the phase ends at the workspace
+    boundary or after t_pow (then :meth:`StrokeCycle._start_recovery`)."""
+    phase_time[i, pair] += h
+    boundary = False
+    for slot in range(2):
+        leg = legs[pair, slot]
+        x, y, z = positions[i, leg, 0], positions[i, leg, 1], positions[i, leg, 2]
+        tx, ty, tz = x + velocities[i, leg, 0] * h, y + velocities[i, leg, 1] * h, z + velocities[i, leg, 2] * h
+        if tx == x and ty == y and tz == z:
+            continue
+        ok, t1, t2, t3 = _clamped_ik(tx, ty, tz, frames[leg], g)
+        if not ok:
+            boundary = True  # workspace boundary: keep the last reachable point
+            continue
+        positions[i, leg, 0], positions[i, leg, 1], positions[i, leg, 2] = tx, ty, tz
+        joints[i, leg, 0], joints[i, leg, 1], joints[i, leg, 2] = t1, t2, t3
+    if boundary or phase_time[i, pair] >= t_pow[i, pair] - TIME_EPS:
+        power[i, pair] = False
+        phase_time[i, pair] = 0.0
+        t_move[i, pair] = t_rec[i]
+        t_total[i, pair] = t_rec[i]
+        for slot in range(2):
+            leg = legs[pair, slot]
+            for k in range(3):
+                velocities[i, leg, k] = 0.0
+                path_end[i, leg, k] = positions[i, leg, k]
+
+
+@jitable
+def _recovery_step(i, pair, legs, h, frames, g, positions, joints, path_start, path_start_joints, path_end,
+                   phase_time, t_move, t_total, ik_fallbacks) -> bool:
+    """:meth:`StrokeCycle._recovery_step`: the cubic retrace of the straight stroke; True when the phase
+    is over (the caller starts the power phase)."""
+    time = phase_time[i, pair] + h
+    phase_time[i, pair] = time
+    s = cubic_time_profile(time / t_move[i, pair]) if t_move[i, pair] > 0.0 else 1.0
+    done = time >= t_total[i, pair] - TIME_EPS
+    for slot in range(2):
+        leg = legs[pair, slot]
+        if done or s >= 1.0:
+            for k in range(3):
+                positions[i, leg, k] = path_start[i, leg, k]
+                joints[i, leg, k] = path_start_joints[i, leg, k]
+            continue
+        # StrokePath.at_arc_length(length (1 - s)) on the straight stroke: start + (1 - s) (end - start)
+        px = path_start[i, leg, 0] + (1.0 - s) * (path_end[i, leg, 0] - path_start[i, leg, 0])
+        py = path_start[i, leg, 1] + (1.0 - s) * (path_end[i, leg, 1] - path_start[i, leg, 1])
+        pz = path_start[i, leg, 2] + (1.0 - s) * (path_end[i, leg, 2] - path_start[i, leg, 2])
+        if px == positions[i, leg, 0] and py == positions[i, leg, 1] and pz == positions[i, leg, 2]:
+            continue
+        ok, t1, t2, t3 = _clamped_ik(px, py, pz, frames[leg], g)
+        if not ok:
+            ik_fallbacks[i] += 1
+            continue
+        positions[i, leg, 0], positions[i, leg, 1], positions[i, leg, 2] = px, py, pz
+        joints[i, leg, 0], joints[i, leg, 1], joints[i, leg, 2] = t1, t2, t3
+    return done
+
+
+@kernel
+def controller_batch_step(h, R, omega_measured, R_d, gains, limits, t_rec, t_pow_max, normalize, inertia, gyroscopic,
+                          buoyancy, net_buoyancy, k_drag, max_angular_rate, legs, frames, g, integral, delta_sat,
+                          tau_sat, omega, e_R, geodesic, tau_cmd, saturated, positions, joints, velocities,
+                          path_start, path_start_joints, path_end, power, phase_time, t_move, t_total, t_pow,
+                          refused, ik_fallbacks):
+    """One control step of every trial not yet ``refused``, in place on the state arrays (N leading).
+
+    ``R`` (N, 3, 3), ``omega_measured`` (N, 3): the measurement; ``R_d`` (N, 9) the setpoints; ``gains``
+    (N, 4) K_p, K_i, K_d, K_aw; ``limits`` (N, 2) tau_max, integral_limit; ``legs`` (2, 2) the pairs'
+    legs (0-based); ``frames`` (4, 6) and ``g`` (13 floats) the IK geometry of
+    :func:`~quadruped_control.model.kinematics.ik_row` (a1 .. l_z, then the servo ranges)."""
+    for i in range(R.shape[0]):
+        if refused[i]:
+            continue
+        wx, wy, wz = omega_measured[i, 0], omega_measured[i, 1], omega_measured[i, 2]
+        if not (abs(wx) <= max_angular_rate and abs(wy) <= max_angular_rate and abs(wz) <= max_angular_rate):
+            refused[i] = True  # the float controller raises (the robot would hold): not trusted from here
+            continue
+        sx = sy = sz = 0.0
+        if buoyancy:
+            for leg in range(4):
+                sx += positions[i, leg, 0]
+                sy += positions[i, leg, 1]
+                sz += positions[i, leg, 2]
+        Ri = (R[i, 0, 0], R[i, 0, 1], R[i, 0, 2], R[i, 1, 0], R[i, 1, 1], R[i, 1, 2], R[i, 2, 0], R[i, 2, 1],
+              R[i, 2, 2])
+        law = control_law_f(R_d[i], Ri, wx, wy, wz, integral[i], delta_sat[i], h, gains[i, 0], gains[i, 1],
+                            gains[i, 2], gains[i, 3], limits[i, 0], limits[i, 1], inertia, gyroscopic, buoyancy,
+                            (sx, sy, sz), net_buoyancy)
+        e_R[i, 0], e_R[i, 1], e_R[i, 2], geodesic[i] = law[0], law[1], law[2], law[3]
+        integral[i, 0], integral[i, 1], integral[i, 2] = law[4], law[5], law[6]
+        tau_cmd[i, 0], tau_cmd[i, 1], tau_cmd[i, 2] = law[7], law[8], law[9]
+        tau_sat[i, 0], tau_sat[i, 1], tau_sat[i, 2] = law[10], law[11], law[12]
+        saturated[i] = law[13]
+        delta_sat[i, 0], delta_sat[i, 1], delta_sat[i, 2] = law[7] - law[10], law[8] - law[11], law[9] - law[12]
+        omega[i, 0], omega[i, 1], omega[i, 2] = wx, wy, wz
+        # StrokeCycle.advance: pair 0 then pair 1, each its power or its recovery step
+        for pair in range(2):
+            in_power = power[i, pair]  # the phase at the step's start: a power step may end it
+            if in_power:
+                if h > 0.0:
+                    _power_step(i, pair, legs, h, frames, g, t_rec, positions, joints, velocities, path_end, power,
+                                phase_time, t_move, t_total, t_pow)
+            elif _recovery_step(i, pair, legs, h, frames, g, positions, joints, path_start, path_start_joints,
+                                path_end, phase_time, t_move, t_total, ik_fallbacks):
+                _start_power(i, pair, legs, frames, k_drag, t_pow_max, normalize, tau_sat, omega, positions, joints,
+                             velocities, path_start, path_start_joints, path_end, power, phase_time, t_pow)
 
 
 def _per_trial(configs: Sequence[ControllerConfig], name: str) -> np.ndarray:
@@ -84,32 +226,29 @@ class BatchController:
         self.max_angular_rate = float(first.max_angular_rate)
         self.gyroscopic = bool(first.gyroscopic_feedforward)
         self.buoyancy = bool(first.buoyancy_feedforward)
-        self.k_p = np.array([c.gains.k_p for c in configs], dtype=float)
-        self.k_i = np.array([c.gains.k_i for c in configs], dtype=float)
-        self.k_d = np.array([c.gains.k_d for c in configs], dtype=float)
-        self.k_aw = np.array([c.gains.k_aw for c in configs], dtype=float)
-        self.tau_max = _per_trial(configs, "tau_max")
-        self.integral_limit = _per_trial(configs, "integral_limit")
+        self.gains = np.array([[c.gains.k_p, c.gains.k_i, c.gains.k_d, c.gains.k_aw] for c in configs], dtype=float)
+        self.limits = np.stack((_per_trial(configs, "tau_max"), _per_trial(configs, "integral_limit")), axis=1)
         self.t_rec = _per_trial(configs, "t_rec")
         self.t_pow_max = _per_trial(configs, "t_pow_max")
         self.normalize = np.array([bool(c.normalize_force_direction) for c in configs])
         self.R_d = np.array(setpoints, dtype=float).reshape(n, 3, 3)
-        self.inertia = np.asarray(robot.inertia, dtype=float)
+        self._R_d_rows = np.ascontiguousarray(self.R_d.reshape(n, 9))
+        self.inertia = tuple(float(x) for x in np.asarray(robot.inertia, dtype=float).ravel())
         self.k_drag = float(robot.drag_constant)
         self.net_buoyancy = float(robot.paw_net_buoyancy)
-        self.geometry = LegGeometry.from_params(robot)
-        # legs of each pair (pair index per leg), in config order
+        geometry = _geometry(robot)
+        self.frames = np.array(geometry[1], dtype=float)
+        self.ik_constants = tuple(float(x) for x in geometry[2:15])
         self.pairs = first.pairs
-        self.pair_of_leg = np.zeros(4, dtype=int)
-        for index, pair in enumerate(self.pairs):
-            for leg in pair:
-                self.pair_of_leg[leg - 1] = index
+        self.legs = np.array([[leg - 1 for leg in pair] for pair in self.pairs], dtype=np.int64)
         nominal = np.array([robot.nominal_foot_body(leg) for leg in LEGS], dtype=float)
-        nominal_joints, ok = joint_angles_batch(nominal, self.geometry)
-        if not ok.all():
-            raise ValueError("a nominal foot position is unreachable")
+        low, high = np.array(geometry[9:15:2]), np.array(geometry[10:15:2])
+        try:
+            angles = [joint_angles_floats(*nominal[k].tolist(), leg, robot) for k, leg in enumerate(LEGS)]
+        except ValueError as exc:
+            raise ValueError("a nominal foot position is unreachable: %s" % exc) from None
         self.nominal = nominal
-        self.nominal_joints = np.clip(nominal_joints, self.geometry.low, self.geometry.high)
+        self.nominal_joints = np.clip(np.array(angles, dtype=float), low, high)
         self.reset()
 
     # ---- state -------------------------------------------------------------------------------
@@ -121,6 +260,10 @@ class BatchController:
         self.delta_sat = np.zeros((n, 3))
         self.tau_sat = np.zeros((n, 3))
         self.omega = np.zeros((n, 3))
+        self.e_R = np.zeros((n, 3))
+        self.geodesic = np.zeros(n)
+        self.tau_cmd = np.zeros((n, 3))
+        self.saturated = np.zeros(n, dtype=bool)
         self.t_prev: Optional[float] = None
         self.positions = np.tile(self.nominal, (n, 1, 1))
         self.joints = np.tile(self.nominal_joints, (n, 1, 1))
@@ -136,7 +279,7 @@ class BatchController:
         self.t_pow = np.zeros((n, 2))
         #: trials whose measurement the float controller would have refused (it would hold)
         self.refused = np.zeros(n, dtype=bool)
-        self.ik_fallbacks = np.zeros(n, dtype=int)
+        self.ik_fallbacks = np.zeros(n, dtype=np.int64)
 
     # ---- step --------------------------------------------------------------------------------
 
@@ -147,126 +290,15 @@ class BatchController:
 
     def step(self, t: float, R: np.ndarray, omega: np.ndarray) -> np.ndarray:
         """One control step of every trial at time ``t`` with measured R (N, 3, 3) and omega (N, 3);
-        returns the joint targets (N, 4, 3). Fills ``e_R``, ``geodesic``, ``tau_cmd``, ``saturated``."""
+        returns the joint targets (N, 4, 3), the controller's own array (updated in place by the next
+        step). Fills ``e_R``, ``geodesic``, ``tau_cmd``, ``saturated``."""
         h = self._elapsed(float(t))
-        self.refused |= ~(np.isfinite(omega).all(axis=1) & (np.abs(omega) <= self.max_angular_rate).all(axis=1))
-        # eq. (error): E = R_d^T R
-        E = np.einsum("nji,njk->nik", self.R_d, R)
-        e = 0.5 * np.stack((E[:, 2, 1] - E[:, 1, 2], E[:, 0, 2] - E[:, 2, 0], E[:, 1, 0] - E[:, 0, 1]), axis=1)
-        self.e_R = e
-        self.geodesic = np.arctan2(np.sqrt(np.sum(e * e, axis=1)), 0.5 * (np.trace(E, axis1=1, axis2=2) - 1.0))
-        w = omega
-        # feedforward omega x (I omega) - tau_buoyancy^B, eq. (pid), (buoy_torque)
-        feedforward = np.zeros((self.n, 3))
-        if self.gyroscopic:
-            feedforward = feedforward + cross_rows(w, w @ self.inertia.T)
-        if self.buoyancy:
-            feedforward = feedforward - cross_rows(self.positions.sum(axis=1), self.net_buoyancy * R[:, 2, :])
-        k_p, k_i, k_d, k_aw = self.k_p[:, None], self.k_i[:, None], self.k_d[:, None], self.k_aw[:, None]
-        tau_max = self.tau_max
-        z = self.integral
-        g = h * self.k_aw * self.k_i
-        forward = z + h * (e + k_aw * self.delta_sat)
-        predictor = z + h * e
-        u = -k_p * e - k_i * predictor - k_d * w + feedforward
-        norm_u = np.sqrt(np.sum(u * u, axis=1))
-        with np.errstate(divide="ignore", invalid="ignore"):
-            excess = np.where(norm_u > tau_max, h * self.k_aw * (norm_u - tau_max) / ((1.0 + g) * norm_u), 0.0)
-        backward = predictor + excess[:, None] * u
-        z = np.where((g <= 1.0)[:, None], forward, backward)
-        norm_z = np.sqrt(np.sum(z * z, axis=1))
-        over = norm_z > self.integral_limit
-        z = np.where(over[:, None], z * (self.integral_limit / np.where(over, norm_z, 1.0))[:, None], z)
-        self.integral = z
-        c = -k_p * e - k_i * z - k_d * w + feedforward
-        norm_c = np.sqrt(np.sum(c * c, axis=1))
-        saturated = norm_c > tau_max
-        tau_sat = np.where(saturated[:, None], c * (tau_max / np.where(saturated, norm_c, 1.0))[:, None], c)  # eq. (sat)
-        self.tau_cmd = c
-        self.saturated = saturated
-        self.delta_sat = c - tau_sat
-        self.tau_sat = tau_sat
-        self.omega = w
-        self._advance_strokes(h)
+        controller_batch_step(h, np.ascontiguousarray(R, dtype=float), np.ascontiguousarray(omega, dtype=float),
+                              self._R_d_rows, self.gains, self.limits, self.t_rec, self.t_pow_max, self.normalize,
+                              self.inertia, self.gyroscopic, self.buoyancy, self.net_buoyancy, self.k_drag,
+                              self.max_angular_rate, self.legs, self.frames, self.ik_constants, self.integral,
+                              self.delta_sat, self.tau_sat, self.omega, self.e_R, self.geodesic, self.tau_cmd,
+                              self.saturated, self.positions, self.joints, self.velocities, self.path_start,
+                              self.path_start_joints, self.path_end, self.power, self.phase_time, self.t_move,
+                              self.t_total, self.t_pow, self.refused, self.ik_fallbacks)
         return self.joints
-
-    # ---- the paper's stroke cycle ------------------------------------------------------------
-
-    def _ik(self, points: np.ndarray, legs: Sequence[int]):
-        angles, ok = joint_angles_batch(points, self.geometry, legs)
-        return np.clip(angles, self.geometry.low, self.geometry.high), ok
-
-    def _advance_strokes(self, h: float) -> None:
-        """:meth:`StrokeCycle.advance` of every trial: pair 0 then pair 1, each its power or recovery step."""
-        for pair in (0, 1):
-            legs = [leg - 1 for leg in self.pairs[pair]]
-            power = self.power[:, pair].copy()  # the phase at the step's start: a power step may end it
-            if h > 0.0:
-                self._power_step(pair, legs, power, h)
-            self._recovery_step(pair, legs, ~power, h)
-
-    def _power_step(self, pair: int, legs: Sequence[int], active: np.ndarray, h: float) -> None:
-        if not active.any():
-            return
-        self.phase_time[:, pair] = np.where(active, self.phase_time[:, pair] + h, self.phase_time[:, pair])
-        position = self.positions[:, legs]
-        target = position + self.velocities[:, legs] * h  # eq. (foot_integration)
-        moving = active[:, None] & (target != position).any(axis=2)
-        joints, ok = self._ik(target, legs)
-        move = moving & ok
-        boundary = (moving & ~ok).any(axis=1)
-        self.positions[:, legs] = np.where(move[..., None], target, position)
-        self.joints[:, legs] = np.where(move[..., None], joints, self.joints[:, legs])
-        end = active & (boundary | (self.phase_time[:, pair] >= self.t_pow[:, pair] - TIME_EPS))
-        if end.any():
-            self._start_recovery(pair, legs, end)
-
-    def _start_recovery(self, pair: int, legs: Sequence[int], which: np.ndarray) -> None:
-        self.power[:, pair] &= ~which
-        self.phase_time[:, pair] = np.where(which, 0.0, self.phase_time[:, pair])
-        self.t_move[:, pair] = np.where(which, self.t_rec, self.t_move[:, pair])
-        self.t_total[:, pair] = np.where(which, self.t_rec, self.t_total[:, pair])
-        mask = which[:, None, None]
-        self.velocities[:, legs] = np.where(mask, 0.0, self.velocities[:, legs])
-        self.path_end[:, legs] = np.where(mask, self.positions[:, legs], self.path_end[:, legs])
-
-    def _recovery_step(self, pair: int, legs: Sequence[int], active: np.ndarray, h: float) -> None:
-        if not active.any():
-            return
-        time = np.where(active, self.phase_time[:, pair] + h, self.phase_time[:, pair])
-        self.phase_time[:, pair] = time
-        t_move = self.t_move[:, pair]
-        with np.errstate(divide="ignore", invalid="ignore"):
-            s = np.where(t_move > 0.0, cubic_time_profile_batch(time / np.where(t_move > 0.0, t_move, 1.0)), 1.0)
-        done = active & (time >= self.t_total[:, pair] - TIME_EPS)
-        at_start = (done | (s >= 1.0))[:, None] & active[:, None]
-        start, start_joints = self.path_start[:, legs], self.path_start_joints[:, legs]
-        end = self.path_end[:, legs]
-        # StrokePath.at_arc_length(length (1 - s)) on the straight stroke: start + (1 - s) (end - start)
-        point = start + (1.0 - s)[:, None, None] * (end - start)
-        position = self.positions[:, legs]
-        moving = active[:, None] & ~at_start & (point != position).any(axis=2)
-        joints, ok = self._ik(point, legs)
-        move = moving & ok
-        self.ik_fallbacks += (moving & ~ok).sum(axis=1)
-        new_position = np.where(move[..., None], point, position)
-        new_joints = np.where(move[..., None], joints, self.joints[:, legs])
-        self.positions[:, legs] = np.where(at_start[..., None], start, new_position)
-        self.joints[:, legs] = np.where(at_start[..., None], start_joints, new_joints)
-        if done.any():
-            self._start_power(pair, legs, done)
-
-    def _start_power(self, pair: int, legs: Sequence[int], which: np.ndarray) -> None:
-        self.power[:, pair] |= which
-        self.phase_time[:, pair] = np.where(which, 0.0, self.phase_time[:, pair])
-        self.t_pow[:, pair] = np.where(which, self.t_pow_max, self.t_pow[:, pair])
-        start = self.positions[:, legs]
-        # eq. (foot_vel) with the leg's share tau_sat / 4, from the torque and rate of this step
-        velocity = foot_velocity_commands_batch(0.25 * self.tau_sat[:, None, :], start, self.omega[:, None, :],
-                                                self.k_drag, self.normalize[:, None])
-        velocity = np.where(np.isfinite(velocity).all(axis=2, keepdims=True), velocity, 0.0)
-        mask = which[:, None, None]
-        self.velocities[:, legs] = np.where(mask, velocity, self.velocities[:, legs])
-        self.path_start[:, legs] = np.where(mask, start, self.path_start[:, legs])
-        self.path_start_joints[:, legs] = np.where(mask, self.joints[:, legs], self.path_start_joints[:, legs])
-        self.path_end[:, legs] = np.where(mask, start, self.path_end[:, legs])

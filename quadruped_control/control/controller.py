@@ -76,6 +76,7 @@ import numpy as np
 
 # estimate_body_torque (eq. (torque_leg) from measured joint motion) lives in allocation; re-exported here.
 from quadruped_common.config import ParameterError
+from quadruped_common.jit import hypot3, jitable
 from quadruped_common.so3 import rpy_to_rot
 from quadruped_control.control.allocation import estimate_body_torque, foot_velocity_command_f
 from quadruped_control.control.controller_config import ControllerConfig, Gains
@@ -89,6 +90,7 @@ __all__ = [
     "AttitudeController",
     "ControllerOutput",
     "ControllerStateRecord",
+    "control_law_f",
     "control_torque",
     "estimate_body_torque",
     "saturate",
@@ -127,12 +129,91 @@ def saturate(tau_cmd: ArrayLike, tau_max: float) -> Tuple[np.ndarray, bool]:
     return np.array([sx, sy, sz]), saturated
 
 
+@jitable
 def _saturate_f(x: float, y: float, z: float, tau_max: float) -> Tuple[float, float, float, bool]:
-    norm = math.hypot(x, y, z)
+    norm = hypot3(x, y, z)
     if norm <= tau_max:
         return x, y, z, False
     scale = tau_max / norm
     return x * scale, y * scale, z * scale, True
+
+
+@jitable
+def control_law_f(R_d: Sequence[float], R: Sequence[float], wx: float, wy: float, wz: float, z: Sequence[float],
+                  delta_sat: Sequence[float], h: float, k_p: float, k_i: float, k_d: float, k_aw: float,
+                  tau_max: float, integral_limit: float, inertia: Sequence[float], gyroscopic: bool,
+                  buoyancy: bool, feet_sum: Sequence[float], net_buoyancy: float) -> Tuple[float, ...]:
+    """One step of eq. (error), (pid) and (sat) on floats: the controller's law, the one implementation
+    (:meth:`AttitudeController.step` calls it from Python, the batched controller from compiled code).
+
+    ``R_d``, ``R``: setpoint and measured attitude, row-major; omega = (wx, wy, wz); ``z``: the integral
+    z_(k-1); ``delta_sat``: Delta_sat of the last command (the forward form's anti-windup term); ``h``:
+    the step; ``inertia`` row-major I for the gyroscopic feedforward; ``feet_sum``: sum of the commanded
+    foot positions for the buoyancy feedforward, ``net_buoyancy`` B of one paw. The integral's two
+    discretisations are those of the module docstring. Returns the 17 floats (e_R (3), geodesic angle,
+    z_k (3), tau_cmd (3), tau_sat (3), saturated, feedforward (3)).
+    """
+    r00, r01, r02, r10, r11, r12, r20, r21, r22 = R[0], R[1], R[2], R[3], R[4], R[5], R[6], R[7], R[8]
+    d00, d01, d02, d10, d11, d12, d20, d21, d22 = R_d[0], R_d[1], R_d[2], R_d[3], R_d[4], R_d[5], R_d[6], R_d[7], \
+        R_d[8]
+    # eq. (error): E = R_d^T R, e_R = vee(1/2 (E - E^T)).
+    e01 = d00 * r01 + d10 * r11 + d20 * r21
+    e02 = d00 * r02 + d10 * r12 + d20 * r22
+    e10 = d01 * r00 + d11 * r10 + d21 * r20
+    e12 = d01 * r02 + d11 * r12 + d21 * r22
+    e20 = d02 * r00 + d12 * r10 + d22 * r20
+    e21 = d02 * r01 + d12 * r11 + d22 * r21
+    ex, ey, ez = 0.5 * (e21 - e12), 0.5 * (e02 - e20), 0.5 * (e10 - e01)
+    trace = (d00 * r00 + d10 * r10 + d20 * r20) + (d01 * r01 + d11 * r11 + d21 * r21) \
+        + (d02 * r02 + d12 * r12 + d22 * r22)
+    geodesic = math.atan2(hypot3(ex, ey, ez), 0.5 * (trace - 1.0))
+
+    # Feedforward: omega x (I omega) and -tau_buoyancy^B, eq. (pid), (buoy_torque).
+    fx = fy = fz = 0.0
+    if gyroscopic:
+        i0, i1, i2, i3, i4, i5, i6, i7, i8 = inertia[0], inertia[1], inertia[2], inertia[3], inertia[4], \
+            inertia[5], inertia[6], inertia[7], inertia[8]
+        hx, hy, hz = i0 * wx + i1 * wy + i2 * wz, i3 * wx + i4 * wy + i5 * wz, i6 * wx + i7 * wy + i8 * wz
+        fx += wy * hz - wz * hy
+        fy += wz * hx - wx * hz
+        fz += wx * hy - wy * hx
+    if buoyancy:
+        # tau_b = sum_i r_i x (R^T B z_hat) = (sum_i r_i) x (B * third row of R), at the commanded feet.
+        sx, sy, sz = feet_sum[0], feet_sum[1], feet_sum[2]
+        ux, uy, uz = net_buoyancy * r20, net_buoyancy * r21, net_buoyancy * r22
+        fx -= sy * uz - sz * uy
+        fy -= sz * ux - sx * uz
+        fz -= sx * uy - sy * ux
+
+    # Integral of eq. (pid) (module docstring): forward in the anti-windup excess while the loop gain
+    # g = h K_aw K_i of one step is at most 1 (the first release's form), backward Euler beyond.
+    g = h * k_aw * k_i
+    if g <= 1.0:
+        zx = z[0] + h * (ex + k_aw * delta_sat[0])
+        zy = z[1] + h * (ey + k_aw * delta_sat[1])
+        zz = z[2] + h * (ez + k_aw * delta_sat[2])
+    else:
+        # Predictor z + h e_R and its command u; in saturation add h K_aw Delta_sat in closed form.
+        zx, zy, zz = z[0] + h * ex, z[1] + h * ey, z[2] + h * ez
+        ux = -k_p * ex - k_i * zx - k_d * wx + fx
+        uy = -k_p * ey - k_i * zy - k_d * wy + fy
+        uz = -k_p * ez - k_i * zz - k_d * wz + fz
+        norm_u = hypot3(ux, uy, uz)
+        if norm_u > tau_max:
+            step = h * k_aw * (norm_u - tau_max) / ((1.0 + g) * norm_u)  # h K_aw |Delta_sat| / |u|
+            zx, zy, zz = zx + step * ux, zy + step * uy, zz + step * uz
+    norm_z = hypot3(zx, zy, zz)
+    if norm_z > integral_limit:
+        scale = integral_limit / norm_z
+        zx, zy, zz = zx * scale, zy * scale, zz * scale
+
+    # Summed in the order of eq. (pid) as the first release did: the paper-sim limit cycles are
+    # sensitive to the last bit, and their published numbers are kept.
+    cx = -k_p * ex - k_i * zx - k_d * wx + fx
+    cy = -k_p * ey - k_i * zy - k_d * wy + fy
+    cz = -k_p * ez - k_i * zz - k_d * wz + fz
+    sx_, sy_, sz_, saturated = _saturate_f(cx, cy, cz, tau_max)  # eq. (sat)
+    return ex, ey, ez, geodesic, zx, zy, zz, cx, cy, cz, sx_, sy_, sz_, saturated, fx, fy, fz
 
 
 # --------------------------------------------------------------------------------------------------
@@ -413,76 +494,19 @@ class AttitudeController:
         if self._stroke.holding:
             self._hold_reason = ""
         gains = config.gains
-
-        # eq. (error): E = R_d^T R, e_R = vee(1/2 (E - E^T)).
-        d00, d01, d02, d10, d11, d12, d20, d21, d22 = self._R_d
-        e01 = d00 * r01 + d10 * r11 + d20 * r21
-        e02 = d00 * r02 + d10 * r12 + d20 * r22
-        e10 = d01 * r00 + d11 * r10 + d21 * r20
-        e12 = d01 * r02 + d11 * r12 + d21 * r22
-        e20 = d02 * r00 + d12 * r10 + d22 * r20
-        e21 = d02 * r01 + d12 * r11 + d22 * r21
-        ex, ey, ez = 0.5 * (e21 - e12), 0.5 * (e02 - e20), 0.5 * (e10 - e01)
-        trace = (d00 * r00 + d10 * r10 + d20 * r20) + (d01 * r01 + d11 * r11 + d21 * r21) \
-            + (d02 * r02 + d12 * r12 + d22 * r22)
-        self._e_R = (ex, ey, ez)
-        self._geodesic = math.atan2(math.hypot(ex, ey, ez), 0.5 * (trace - 1.0))
-
-        # Feedforward: omega x (I omega) and -tau_buoyancy^B, eq. (pid), (buoy_torque).
-        fx = fy = fz = 0.0
-        if config.gyroscopic_feedforward:
-            i0, i1, i2, i3, i4, i5, i6, i7, i8 = self._inertia
-            hx, hy, hz = i0 * wx + i1 * wy + i2 * wz, i3 * wx + i4 * wy + i5 * wz, i6 * wx + i7 * wy + i8 * wz
-            fx += wy * hz - wz * hy
-            fy += wz * hx - wx * hz
-            fz += wx * hy - wy * hx
+        sx = sy = sz = 0.0
         if config.buoyancy_feedforward:
-            # tau_b = sum_i r_i x (R^T B z_hat) = (sum_i r_i) x (B * third row of R), at the commanded feet.
-            sx = sy = sz = 0.0
             for px, py, pz in self._stroke.positions:
                 sx += px
                 sy += py
                 sz += pz
-            b = self._net_buoyancy
-            ux, uy, uz = b * r20, b * r21, b * r22
-            fx -= sy * uz - sz * uy
-            fy -= sz * ux - sx * uz
-            fz -= sx * uy - sy * ux
-
-        k_p, k_i, k_d, k_aw = gains.k_p, gains.k_i, gains.k_d, gains.k_aw
-        tau_max = config.tau_max
-        # Integral of eq. (pid) (module docstring): forward in the anti-windup excess while the loop gain
-        # g = h K_aw K_i of one step is at most 1 (the first release's form), backward Euler beyond.
         z = self._integral
-        g = h * k_aw * k_i
-        if g <= 1.0:
-            ax, ay, az = self._delta_sat
-            zx = z[0] + h * (ex + k_aw * ax)
-            zy = z[1] + h * (ey + k_aw * ay)
-            zz = z[2] + h * (ez + k_aw * az)
-        else:
-            # Predictor z + h e_R and its command u; in saturation add h K_aw Delta_sat in closed form.
-            zx, zy, zz = z[0] + h * ex, z[1] + h * ey, z[2] + h * ez
-            ux = -k_p * ex - k_i * zx - k_d * wx + fx
-            uy = -k_p * ey - k_i * zy - k_d * wy + fy
-            uz = -k_p * ez - k_i * zz - k_d * wz + fz
-            norm_u = math.hypot(ux, uy, uz)
-            if norm_u > tau_max:
-                step = h * k_aw * (norm_u - tau_max) / ((1.0 + g) * norm_u)  # h K_aw |Delta_sat| / |u|
-                zx, zy, zz = zx + step * ux, zy + step * uy, zz + step * uz
-        norm_z = math.hypot(zx, zy, zz)
-        limit = config.integral_limit
-        if norm_z > limit:
-            scale = limit / norm_z
-            zx, zy, zz = zx * scale, zy * scale, zz * scale
-        z[0], z[1], z[2] = zx, zy, zz
-
-        # Summed in the order of eq. (pid) as the first release did: the paper-sim limit cycles are
-        # sensitive to the last bit, and their published numbers are kept.
-        cx = -k_p * ex - k_i * zx - k_d * wx + fx
-        cy = -k_p * ey - k_i * zy - k_d * wy + fy
-        cz = -k_p * ez - k_i * zz - k_d * wz + fz
-        sx_, sy_, sz_, saturated = _saturate_f(cx, cy, cz, tau_max)  # eq. (sat)
+        (ex, ey, ez, self._geodesic, z[0], z[1], z[2], cx, cy, cz, sx_, sy_, sz_, saturated, fx, fy,
+         fz) = control_law_f(self._R_d, (r00, r01, r02, r10, r11, r12, r20, r21, r22), wx, wy, wz, z,
+                             self._delta_sat, h, gains.k_p, gains.k_i, gains.k_d, gains.k_aw, config.tau_max,
+                             config.integral_limit, self._inertia, config.gyroscopic_feedforward,
+                             config.buoyancy_feedforward, (sx, sy, sz), self._net_buoyancy)
+        self._e_R = (ex, ey, ez)
         self._delta_sat = (cx - sx_, cy - sy_, cz - sz_)
         self._tau_sat = (sx_, sy_, sz_)
         self._omega = (wx, wy, wz)

@@ -141,7 +141,7 @@ def _closure_error(theta1: float, theta2: float, disc: float, g: float, a1: floa
 def _closure_terms(c1: Any, s1: Any, c2: Any, s2: Any, c21: Any, a1: float, a3: float, c: float) -> Tuple[Any, ...]:
     """E, F, G of eq. (fk_EFG) and the discriminant E^2 + F^2 - G^2, from the cosines and sines of theta1,
     theta2 and cos(theta2 - theta1); valid for the symmetric mechanism a1 = a2, a3 = a4 (enforced by
-    params). Plain arithmetic: floats here, arrays in :mod:`quadruped_control.model.kinematics_batch`."""
+    params). Plain arithmetic on floats (compiled too, :mod:`quadruped_common.jit`)."""
     e = 2.0 * a3 * (c + a1 * (c2 - c1))
     f = 2.0 * a1 * a3 * (s2 - s1)
     g = c * c + 2.0 * a1 * a1 + 2.0 * c * a1 * c2 - 2.0 * c * a1 * c1 - 2.0 * a1 * a1 * c21
@@ -473,36 +473,51 @@ def joint_angles_floats(rx: float, ry: float, rz: float, leg: int, params: Robot
     """
     last = _GEOMETRY_LAST
     constants = last[1] if last[0] is params else _geometry(params)
-    frames, _, a1, a2, a3, a4, c, l_y, l_z, low1, high1, low2, high2, low3, high3 = constants
-    frame = frames.get(leg)
+    frame = constants[0].get(leg)
     if frame is not None:
-        ox, oy, oz, mx, my, mz = frame
-        x_d, y_d, z_d = mx * (rx - ox), my * (ry - oy), mz * (rz - oz)
-        radius = math.hypot(y_d, z_d)
-        if radius >= l_z and math.isfinite(x_d + radius):  # also rejects NaN
-            # eq. (ik_theta3), then wrap_into_range into the hip servo range
-            theta3 = math.atan2(z_d, y_d) - math.acos(min(l_z / radius, 1.0)) - 0.5 * math.pi
-            theta3 = theta3 + math.ceil((low3 - _ANGLE_TOL - theta3) / TWO_PI) * TWO_PI
-            if theta3 <= high3 + _ANGLE_TOL:
-                y_prime = y_d * math.cos(theta3) + z_d * math.sin(theta3) - l_y
-                # five_bar_ik without theta4, theta5 (their arccos arguments are only range-checked)
-                d13 = math.hypot(x_d, y_prime)
-                d24 = math.hypot(x_d - c, y_prime)
-                if d13 >= _ROUND_TOL and d24 >= _ROUND_TOL:
-                    k1 = (d13 * d13 + a1 * a1 - a3 * a3) / (2.0 * a1 * d13)
-                    k2 = (d24 * d24 + a2 * a2 - a4 * a4) / (2.0 * a2 * d24)
-                    k4 = (d13 * d13 - a1 * a1 - a3 * a3) / (2.0 * a1 * a3)
-                    k5 = (d24 * d24 - a2 * a2 - a4 * a4) / (2.0 * a2 * a4)
-                    if -1.0 <= k1 <= 1.0 and -1.0 <= k2 <= 1.0 and abs(k4) <= 1.0 + _ROUND_TOL \
-                            and abs(k5) <= 1.0 + _ROUND_TOL:
-                        theta1 = math.atan2(y_prime, x_d) - math.acos(k1)
-                        theta2 = math.atan2(y_prime, x_d - c) + math.acos(k2)
-                        theta1 = theta1 + math.ceil((low1 - _ANGLE_TOL - theta1) / TWO_PI) * TWO_PI
-                        theta2 = theta2 + math.ceil((low2 - _ANGLE_TOL - theta2) / TWO_PI) * TWO_PI
-                        if theta1 <= high1 + _ANGLE_TOL and theta2 <= high2 + _ANGLE_TOL:
-                            return theta1, theta2, theta3
+        reached, theta1, theta2, theta3 = ik_row(rx, ry, rz, frame, *constants[2:15])
+        if reached:
+            return theta1, theta2, theta3
     t1, t2, t3 = joint_angles_full((rx, ry, rz), leg, params)[:3].tolist()
     return t1, t2, t3
+
+
+@jitable
+def ik_row(rx: float, ry: float, rz: float, frame: Sequence[float], a1: float, a2: float, a3: float, a4: float,
+           c: float, l_y: float, l_z: float, low1: float, high1: float, low2: float, high2: float, low3: float,
+           high3: float) -> Tuple[bool, float, float, float]:
+    """The one implementation of the leg IK on floats, without raising (compiled code calls it too):
+    (reached, theta1, theta2, theta3) for the body-frame target (rx, ry, rz) of the leg ``frame``
+    (o_x, o_y, o_z, m_x, m_y, m_z), eq. (ee_body) inverted, eq. (ik_theta3), (ik_dists), (ik_alphas),
+    (ik_theta1245), wrapped into the servo ranges [low, high]. ``reached`` False where the target is not
+    plainly reachable (the angles are then 0); :func:`joint_angles_floats` then asks
+    :func:`joint_angles_full` for the proper error (or its result for the rare rounding-boundary cases)."""
+    ox, oy, oz, mx, my, mz = frame[0], frame[1], frame[2], frame[3], frame[4], frame[5]
+    x_d, y_d, z_d = mx * (rx - ox), my * (ry - oy), mz * (rz - oz)
+    radius = math.hypot(y_d, z_d)
+    if radius >= l_z and math.isfinite(x_d + radius):  # also rejects NaN
+        # eq. (ik_theta3), then wrap_into_range into the hip servo range
+        theta3 = math.atan2(z_d, y_d) - math.acos(min(l_z / radius, 1.0)) - 0.5 * math.pi
+        theta3 = theta3 + math.ceil((low3 - _ANGLE_TOL - theta3) / TWO_PI) * TWO_PI
+        if theta3 <= high3 + _ANGLE_TOL:
+            y_prime = y_d * math.cos(theta3) + z_d * math.sin(theta3) - l_y
+            # five_bar_ik without theta4, theta5 (their arccos arguments are only range-checked)
+            d13 = math.hypot(x_d, y_prime)
+            d24 = math.hypot(x_d - c, y_prime)
+            if d13 >= _ROUND_TOL and d24 >= _ROUND_TOL:
+                k1 = (d13 * d13 + a1 * a1 - a3 * a3) / (2.0 * a1 * d13)
+                k2 = (d24 * d24 + a2 * a2 - a4 * a4) / (2.0 * a2 * d24)
+                k4 = (d13 * d13 - a1 * a1 - a3 * a3) / (2.0 * a1 * a3)
+                k5 = (d24 * d24 - a2 * a2 - a4 * a4) / (2.0 * a2 * a4)
+                if -1.0 <= k1 <= 1.0 and -1.0 <= k2 <= 1.0 and abs(k4) <= 1.0 + _ROUND_TOL \
+                        and abs(k5) <= 1.0 + _ROUND_TOL:
+                    theta1 = math.atan2(y_prime, x_d) - math.acos(k1)
+                    theta2 = math.atan2(y_prime, x_d - c) + math.acos(k2)
+                    theta1 = theta1 + math.ceil((low1 - _ANGLE_TOL - theta1) / TWO_PI) * TWO_PI
+                    theta2 = theta2 + math.ceil((low2 - _ANGLE_TOL - theta2) / TWO_PI) * TWO_PI
+                    if theta1 <= high1 + _ANGLE_TOL and theta2 <= high2 + _ANGLE_TOL:
+                        return True, theta1, theta2, theta3
+    return False, 0.0, 0.0, 0.0
 
 
 def foot_jacobian(q: ArrayLike, leg: int, params: RobotParams) -> np.ndarray:

@@ -3,7 +3,7 @@
 :class:`BatchSimulation` is :class:`~quadruped_control.sim.simulation.ClosedLoopSimulation` for N trials
 at once, on arrays with a leading trial axis: the controller of
 :class:`~quadruped_control.control.batch.BatchController`, each trial's servo model (the paper's ideal
-servo or the rate-limited lag, :func:`~quadruped_control.sim.servo_model.rate_limited_lag_step_batch`,
+servo or the rate-limited lag, :func:`~quadruped_control.sim.servo_model.servo_batch_step`,
 with its own speed and time constant), the joint hold of
 :class:`~quadruped_control.sim.simulation.PlantSimulator` (midpoint and finite-difference rate) and the
 plant (:class:`~quadruped_control.sim.plants.paper_batch.PaperPlantBatch` or
@@ -37,7 +37,7 @@ from quadruped_control.model.params import RobotParams
 from quadruped_control.sim.plants.paper_batch import PaperPlantBatch
 from quadruped_control.sim.plants.tank import TankParams
 from quadruped_control.sim.plants.tank_batch import TankPlantBatch
-from quadruped_control.sim.servo_model import ServoParams, rate_limited_lag_step_batch
+from quadruped_control.sim.servo_model import ServoParams, servo_batch_step
 
 __all__ = ["BatchResult", "BatchSimulation", "BatchTrial"]
 
@@ -128,9 +128,9 @@ class BatchSimulation:
                 raise ValueError("a rate-limited servo needs servo_params")
         self.ideal = np.array([t.servo_model == "ideal" for t in trials])
         self.max_speed = np.array([t.servo_params.max_speed if t.servo_params else math.inf
-                                   for t in trials])[:, None, None]
+                                   for t in trials])
         self.time_constant = np.array([t.servo_params.time_constant if t.servo_params else 0.0
-                                       for t in trials])[:, None, None]
+                                       for t in trials])
         self.position = np.zeros((n, 3))
         self.velocity = np.zeros((n, 3))
         self.rotation = np.array([np.asarray(t.initial, dtype=float) for t in trials])
@@ -141,10 +141,10 @@ class BatchSimulation:
             self.plant.attach(self.position, self.rotation)
 
     def _servo(self, command: np.ndarray, h: float) -> np.ndarray:
-        if self.ideal.all():
-            return command.copy()  # the controller updates its joint targets in place
-        lag = rate_limited_lag_step_batch(self.q, command, self.max_speed, self.time_constant, h)
-        return np.where(self.ideal[:, None, None], command, lag)
+        # A new array: the controller updates its joint targets in place, and q is the servos' own state.
+        out = np.empty_like(self.q)
+        servo_batch_step(self.q, command, self.ideal, self.max_speed, self.time_constant, h, out)
+        return out
 
     def step(self) -> None:
         """One control period of every trial: measure at t_k, control, hold the joint targets to t_k+1."""

@@ -26,6 +26,7 @@ from typing import Any, Mapping, Optional, Sequence, Union
 import numpy as np
 
 from quadruped_common.config import ParameterError, check_keys, load_config, lookup, number
+from quadruped_common.jit import jitable, kernel
 from quadruped_control.sim.plants.rigid_body import check_dt
 
 ArrayLike = Union[Sequence[float], Sequence[Sequence[float]], np.ndarray]
@@ -41,7 +42,7 @@ __all__ = [
     "ServoParams",
     "load_servo_params",
     "rate_limited_lag_step",
-    "rate_limited_lag_step_batch",
+    "servo_batch_step",
     "make_servo_model",
 ]
 
@@ -143,6 +144,7 @@ class RateLimitedServo(ServoModel):
                          for x, c in zip(q.ravel().tolist(), command.ravel().tolist())]).reshape(q.shape)
 
 
+@jitable
 def rate_limited_lag_step(q: float, command: float, max_speed: float, time_constant: float, dt: float) -> float:
     """One joint of :class:`RateLimitedServo` after ``dt`` s with ``command`` held: the exact solution of
     dq/dt = clip((q_cmd - q) / T, -w_max, w_max).
@@ -176,23 +178,19 @@ def rate_limited_lag_step(q: float, command: float, max_speed: float, time_const
     return command
 
 
-def rate_limited_lag_step_batch(q: np.ndarray, command: np.ndarray, max_speed: np.ndarray,
-                                time_constant: np.ndarray, dt: float) -> np.ndarray:
-    """:func:`rate_limited_lag_step` on arrays (any shape; ``max_speed`` and ``time_constant`` broadcast
-    against it, e.g. one per trial with shape (N, 1, 1) for (N, 4, 3) joints): the same exact solution,
-    for the batched simulator. The tests compare the two."""
-    error = command - q
-    magnitude = np.abs(error)
-    with np.errstate(divide="ignore", invalid="ignore", over="ignore"):
-        pure = time_constant <= 1e-9 * dt
-        step = max_speed * dt
-        limited = q + np.sign(error) * np.minimum(magnitude, step)
-        knee = max_speed * time_constant
-        t_saturated = np.where(magnitude > knee, (magnitude - knee) / max_speed, 0.0)
-        decayed = np.minimum(magnitude, knee) * np.exp(-(dt - t_saturated) / np.where(pure, 1.0, time_constant))
-        new_magnitude = np.where(t_saturated >= dt, magnitude - step, decayed)
-        lag = command - np.sign(error) * new_magnitude
-    return np.where(pure, limited, lag)
+@kernel
+def servo_batch_step(q, command, ideal, max_speed, time_constant, dt, out):
+    """Every trial's servos after ``dt`` s with ``command`` held, into ``out`` (N, 4, 3): the command itself
+    for an ``ideal`` trial, else :func:`rate_limited_lag_step` per joint with the trial's ``max_speed``
+    and ``time_constant`` (N,): the per-trial function in a compiled loop (:mod:`quadruped_common.jit`)."""
+    for i in range(q.shape[0]):
+        for leg in range(q.shape[1]):
+            for joint in range(q.shape[2]):
+                if ideal[i]:
+                    out[i, leg, joint] = command[i, leg, joint]
+                else:
+                    out[i, leg, joint] = rate_limited_lag_step(q[i, leg, joint], command[i, leg, joint],
+                                                               max_speed[i], time_constant[i], dt)
 
 
 def servo_params_from_dict(tree: Mapping[str, Any], robot_yaml: Optional[str] = None) -> ServoParams:

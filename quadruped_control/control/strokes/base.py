@@ -21,6 +21,7 @@ import math
 from typing import Callable, List, Optional, Sequence, Tuple
 
 from quadruped_common.config import ParameterError
+from quadruped_common.jit import jitable
 from quadruped_common.robot import LEGS
 from quadruped_control.model.kinematics import UnreachableError
 from quadruped_control.model.params import RobotParams
@@ -45,6 +46,7 @@ VelocityCommand = Callable[..., Vec3]
 TIME_EPS = 1e-9
 
 
+@jitable
 def cubic_time_profile(u: float) -> float:
     """s(u) = 3 u^2 - 2 u^3 for u clipped into [0, 1]: s(0) = 0, s(1) = 1, s'(0) = s'(1) = 0."""
     if u <= 0.0:

@@ -190,7 +190,10 @@ def test_estimate_body_torque_matches_the_dynamics_model():
         estimate_body_torque(q, q_dot * math.nan, R, omega, PARAMS)
 
 
-def test_allocation_batch_matches_float_path_including_degenerate_cases():
+def test_allocation_compiles_to_the_float_path_including_degenerate_cases():
+    """foot_velocity_command_f, which the batched controller runs compiled, against itself in Python."""
+    from quadruped_common import jit
+
     rng = np.random.default_rng(5)
     tau = rng.normal(0.0, 1.0, (300, 3))
     r = rng.normal(0.0, 0.2, (300, 3))
@@ -199,7 +202,18 @@ def test_allocation_batch_matches_float_path_including_degenerate_cases():
     r[20:30] = 0.3 * tau[20:30]         # foot on the torque axis
     omega = rng.normal(0.0, 0.5, (300, 3))
     normalize = rng.random(300) < 0.5
-    out = allocation.foot_velocity_commands_batch(tau, r, omega, 3.3, normalize)
-    for i in range(300):
-        expected = allocation.foot_velocity_command_f(tuple(tau[i]), tuple(r[i]), tuple(omega[i]), 3.3, bool(normalize[i]))
-        np.testing.assert_allclose(out[i], expected, rtol=1e-12, atol=1e-15)
+
+    def commands(tau, r, omega, normalize, out):
+        for i in range(tau.shape[0]):
+            out[i, 0], out[i, 1], out[i, 2] = allocation.foot_velocity_command_f(
+                (tau[i, 0], tau[i, 1], tau[i, 2]), (r[i, 0], r[i, 1], r[i, 2]), (omega[i, 0], omega[i, 1], omega[i, 2]),
+                3.3, normalize[i])
+
+    plain = np.zeros((300, 3))
+    commands(tau, r, omega, normalize, plain)
+    np.testing.assert_array_equal(plain[:30], -np.cross(omega[:30], r[:30]))  # no stroke: v = -omega x r
+    if jit.AVAILABLE:
+        compiled = np.zeros((300, 3))
+        jit.kernel(commands)(tau, r, omega, normalize, compiled)
+        np.testing.assert_allclose(compiled, plain, rtol=1e-12, atol=1e-15)
+

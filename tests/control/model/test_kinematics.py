@@ -9,12 +9,13 @@ from hypothesis import strategies as st
 
 from quadruped_common.robot import LEGS, JointLimits
 from quadruped_common.so3 import exp_so3, hat, quat_to_rot
-from quadruped_control.model.kinematics import (UnreachableError, body_to_leg, clamp_to_limits, five_bar_fk,
+from quadruped_control.model.kinematics import (UnreachableError, _five_bar_closure, _five_bar_rates, body_to_leg, clamp_to_limits, five_bar_fk,
                                                 five_bar_ik, five_bar_jacobian, floating_base_jacobian,
                                                 foot_jacobian, foot_position, joint_angles, joint_angles_floats,
                                                 joint_angles_full, leg_fk, leg_ik_full, leg_kinematics,
-                                                leg_kinematics_flat, within_limits, wrap_into_range)
+                                                leg_kinematics_flat, leg_row, within_limits, wrap_into_range)
 from quadruped_control.model.params import load_robot_params
+from quadruped_control.sim.simulation import nominal_joint_angles
 
 PARAMS = load_robot_params()
 GEOM = PARAMS.five_bar
@@ -489,3 +490,75 @@ def test_joint_angles_floats_rejects_non_finite_targets(target) -> None:
 def test_joint_angles_floats_rejects_bad_leg() -> None:
     with pytest.raises(ValueError):
         joint_angles_floats(0.1, 0.1, -0.1, 5, PARAMS)
+
+
+def test_ik_row_is_joint_angles_floats_and_compiles_to_the_same_angles():
+    """ik_row (the float IK core the robot and the compiled batch controller share) against the raising
+    float path inside and outside the workspace, and compiled against plain Python."""
+    from quadruped_common import jit
+    from quadruped_control.model.kinematics import _geometry, ik_row
+
+    robot = PARAMS
+    geometry = _geometry(robot)
+    frames = np.array(geometry[1])
+    constants = tuple(geometry[2:15])
+    rng = np.random.default_rng(3)
+    nominal = np.array([robot.nominal_foot_body(leg) for leg in (1, 2, 3, 4)])
+    targets = nominal + rng.normal(0.0, 0.04, (300, 4, 3))  # many beyond reach
+
+    def all_rows(targets, frames, constants, out):
+        for n in range(targets.shape[0]):
+            for leg in range(4):
+                ok, t1, t2, t3 = ik_row(targets[n, leg, 0], targets[n, leg, 1], targets[n, leg, 2], frames[leg],
+                                        *constants)
+                out[n, leg, 0], out[n, leg, 1], out[n, leg, 2], out[n, leg, 3] = ok, t1, t2, t3
+
+    plain = np.zeros((300, 4, 4))
+    all_rows(targets, frames, constants, plain)
+    reached = 0
+    for n in range(300):
+        for leg in range(4):
+            try:
+                expected = joint_angles_floats(*targets[n, leg].tolist(), leg + 1, robot)
+            except UnreachableError:
+                assert not plain[n, leg, 0]
+                continue
+            if plain[n, leg, 0]:
+                reached += 1
+                assert tuple(plain[n, leg, 1:]) == expected
+    assert 100 < reached < 1200  # both cases exercised
+    if jit.AVAILABLE:
+        compiled = np.zeros((300, 4, 4))
+        jit.kernel(all_rows)(targets, frames, constants, compiled)
+        np.testing.assert_array_equal(compiled[..., 0], plain[..., 0])
+        np.testing.assert_allclose(compiled[..., 1:], plain[..., 1:], rtol=0, atol=1e-12)
+
+
+def test_leg_row_flags_five_bars_that_cannot_close_where_the_float_cores_raise():
+    """leg_row (the compiled plants' per-leg kinematics) says ok exactly where the raising cores of
+    leg_kinematics_flat succeed; with short passive links many motor angles cannot close the five-bar."""
+    fb = PARAMS.five_bar
+    a1, a2, a3, a4, c = fb.a1, fb.a2, 0.6 * fb.a3, 0.6 * fb.a4, fb.c
+    frame = (0.1, 0.2, 0.0, 1.0, 1.0, 1.0)
+    rng = np.random.default_rng(7)
+    outcomes = set()
+    for t1, t2, t3 in rng.uniform(-math.pi, math.pi, (300, 3)):
+        ok = leg_row(t1, t2, t3, 0.1, -0.2, 0.3, frame, a1, a2, a3, a4, c, PARAMS.l_y, PARAMS.l_z)[0]
+        try:
+            _, _, phi, psi = _five_bar_closure(t1, t2, a1, a2, a3, a4, c)
+            _five_bar_rates(t1, t2, phi, psi, a1, a2)  # the singularity check
+            closes = True
+        except UnreachableError:
+            closes = False
+        assert ok == closes
+        outcomes.add(ok)
+    assert outcomes == {True, False}
+
+
+def test_leg_kinematics_flat_says_why_a_leg_cannot_close():
+    """Where leg_row says no, the float path raises the raising cores' error (here: a NaN angle; the
+    robot's own five-bar closes at every motor angle)."""
+    q = nominal_joint_angles(PARAMS).tolist()
+    q[2] = [math.nan, q[2][1], q[2][2]]
+    with pytest.raises(UnreachableError, match="finite"):
+        leg_kinematics_flat(q, np.zeros((4, 3)).tolist(), PARAMS)

@@ -136,25 +136,36 @@ def test_tank_batch_agrees_with_the_per_trial_tank_plant_to_1e_9_over_10_s(robot
 
 
 @pytest.mark.skipif(not jit.AVAILABLE, reason="numba is not installed: the batch already runs the plain functions")
-@pytest.mark.parametrize("plant", ["paper", "tank"])
-def test_the_compiled_plant_kernel_computes_what_its_plain_python_computes(robot, plant, monkeypatch):
-    """The numba-compiled loop over trials against the same source run as plain Python (``py_func``, whose
-    callees are the plain functions), from a mid-manoeuvre state of three trials: 20 steps to 1e-12."""
+@pytest.mark.parametrize("plant, plain", [("paper", "plant"), ("tank", "plant"), ("paper", "controller and servos")])
+def test_compiled_loops_compute_what_their_plain_python_computes(robot, plant, plain, monkeypatch):
+    """Each numba-compiled loop over trials against the same source run as plain Python (``py_func``,
+    whose callees are the plain functions), from a mid-manoeuvre state of three trials: 150 steps of
+    states and joint targets to 1e-12."""
+    from quadruped_control.control import batch as control_batch
+    from quadruped_control.sim import batch as sim_batch
     from quadruped_control.sim.plants import paper_batch, tank_batch
     from quadruped_control.sim.plants.tank import load_tank_params
+    from quadruped_control.sim.servo_model import load_servo_params
 
     config = load_controller_config(None, "experiment")
     tank = load_tank_params() if plant == "tank" else None
-    trials = [BatchTrial(config=config, setpoint=rpy_to_rot(*np.radians(rpy)), tank=tank)
-              for rpy in ((45.0, 0.0, 0.0), (0.0, 30.0, 20.0), (10.0, -20.0, 60.0))]
+    trials = [BatchTrial(config=config, setpoint=rpy_to_rot(*np.radians(rpy)), tank=tank, servo_model=servo,
+                         servo_params=load_servo_params())
+              for rpy, servo in (((45.0, 0.0, 0.0), "ideal"), ((0.0, 30.0, 20.0), "rate-limited"),
+                                 ((10.0, -20.0, 60.0), "rate-limited"))]
+    if plain == "plant":
+        patched = [(paper_batch, "paper_batch_step")] if plant == "paper" else [(tank_batch, "tank_batch_step")]
+    else:
+        patched = [(control_batch, "controller_batch_step"), (sim_batch, "servo_batch_step")]
     runs = []
     for compiled in (True, False):
         if not compiled:
-            module, name = (paper_batch, "paper_batch_step") if plant == "paper" else (tank_batch, "tank_batch_step")
-            monkeypatch.setattr(module, name, getattr(module, name).py_func)
+            for module, name in patched:
+                monkeypatch.setattr(module, name, getattr(module, name).py_func)
         sim = BatchSimulation(robot, trials)
         for _ in range(150):
             sim.step()
-        runs.append(np.concatenate((sim.position, sim.velocity, sim.rotation.reshape(-1, 9), sim.omega), axis=1))
+        runs.append(np.concatenate((sim.position, sim.velocity, sim.rotation.reshape(-1, 9), sim.omega,
+                                    sim.q.reshape(-1, 12)), axis=1))
     assert np.abs(runs[0]).max() > 0.0
     np.testing.assert_allclose(runs[0], runs[1], rtol=0, atol=1e-12)

@@ -175,13 +175,19 @@ def test_exact_step_keeps_nan_and_a_joint_at_its_command() -> None:
     assert rate_limited_lag_step(0.25, 0.25, 10.0, 0.03, 0.01) == 0.25
 
 
-def test_rate_limited_servo_batch_matches_the_exact_float_step():
+def test_the_batch_servo_step_is_the_exact_float_step_per_joint_compiled_or_not():
     rng = np.random.default_rng(6)
-    q = rng.uniform(-1.0, 1.0, 500)
-    command = q + rng.normal(0.0, 0.2, 500)
-    command[:20] = q[:20]               # no error
-    speed = rng.uniform(1.0, 12.0, 500)
-    lag = rng.choice([0.0, 1e-13, 0.01, 0.03], 500)  # pure rate limiter included
-    out = servo_model.rate_limited_lag_step_batch(q, command, speed, lag, 0.01)
-    expected = [servo_model.rate_limited_lag_step(a, b, c, d, 0.01) for a, b, c, d in zip(q, command, speed, lag)]
-    np.testing.assert_allclose(out, expected, rtol=0, atol=1e-15)
+    q = rng.uniform(-1.0, 1.0, (50, 4, 3))
+    command = q + rng.normal(0.0, 0.2, (50, 4, 3))
+    command[:5] = q[:5]                 # no error
+    command[5, 0, 0] = math.nan         # NaN passes through
+    speed = rng.uniform(1.0, 12.0, 50)
+    lag = rng.choice([0.0, 1e-13, 0.01, 0.03], 50)  # pure rate limiter included
+    ideal = rng.random(50) < 0.2
+    expected = np.array([[[command[i, leg, j] if ideal[i] else
+                           servo_model.rate_limited_lag_step(q[i, leg, j], command[i, leg, j], speed[i], lag[i], 0.01)
+                           for j in range(3)] for leg in range(4)] for i in range(50)])
+    for step in (servo_model.servo_batch_step, servo_model.servo_batch_step.py_func):
+        out = np.empty_like(q)
+        step(q, command, ideal, speed, lag, 0.01, out)
+        np.testing.assert_allclose(out, expected, rtol=0, atol=1e-15)
