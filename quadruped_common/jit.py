@@ -8,10 +8,11 @@ of Python that both CPython and numba's nopython mode run (floats, tuples, small
 
 - :func:`jitable` marks such a function. It returns the function unchanged, so every Python caller
   (the robot's controller, the per-trial simulator) runs exactly the code it ran before; compiled code
-  that calls it compiles it inline (numba's ``register_jitable``).
-- :func:`kernel` compiles a function for Python callers (``numba.njit``), with numpy's floating-point
-  error model (a division by zero in a diverging trial gives inf or nan, which the caller flags, instead
-  of raising inside the loop) and the compiled code cached on disk.
+  that calls it compiles it inline (numba's ``register_jitable``, applied when numba is first loaded).
+- :func:`kernel` compiles a function for Python callers (``numba.njit``) on its first call, with numpy's
+  floating-point error model (a division by zero in a diverging trial gives inf or nan, which the
+  caller flags, instead of raising inside the loop) and the compiled code cached on disk. numba is
+  imported then and not before, so the robot's nodes, which import the model, never load it.
 
 Without numba (the robot's Python 3.8 environment, which never runs the batch) both return the function
 unchanged and everything runs as plain Python, slowly but with the same results; ``UQ_NO_JIT=1``
@@ -21,30 +22,52 @@ numba's on-disk cache is invalidated by the modification time of the kernel's ow
 the functions it inlines from other files, so a stale kernel could survive a change in, say, the drag
 law. The cache therefore lives in a folder named by a hash of every source file a kernel can reach
 (:func:`source_fingerprint` of :data:`KERNEL_SOURCES`): any change there starts a fresh cache, which
-costs about a minute of compilation on first use (the two plants' kernels).
+costs about two minutes of compilation on first use (the plants', the controller's and the servos'
+loops).
 """
 from __future__ import annotations
 
 import hashlib
+import importlib.util
 import math
 import os
-from typing import Callable, Optional, Sequence, TypeVar
+from typing import Any, Callable, List, Optional, Sequence, TypeVar
 
 __all__ = ["AVAILABLE", "KERNEL_SOURCES", "hypot3", "jitable", "kernel", "source_fingerprint"]
 
 F = TypeVar("F", bound=Callable)
 
-try:  # pragma: no cover - depends on the environment
-    if os.environ.get("UQ_NO_JIT", "") == "1":
-        raise ImportError("UQ_NO_JIT=1")
-    import numba
-    from numba.extending import register_jitable
-except ImportError:  # pragma: no cover - the robot's environment
-    numba = None
-    register_jitable = None
+#: True when :func:`kernel` compiles (numba installed and UQ_NO_JIT unset). numba itself is imported
+#: only when a kernel is first called: the robot's nodes, which import the model through this module,
+#: never load it (about 0.5 s and tens of MB per process).
+AVAILABLE = os.environ.get("UQ_NO_JIT", "") != "1" and importlib.util.find_spec("numba") is not None
 
-#: True when :func:`kernel` compiles (numba importable and UQ_NO_JIT unset).
-AVAILABLE = numba is not None
+#: The functions marked :func:`jitable`, registered with numba when it is first loaded.
+_JITABLE: List[Callable] = []
+_numba: Any = None
+
+
+def _load_numba() -> Any:
+    """numba, imported once, with the cache folder set and every :func:`jitable` function registered."""
+    global _numba
+    if _numba is None:
+        import numba
+        from numba.extending import overload, register_jitable
+
+        # Read by numba when a cached dispatcher is created, so set before any kernel.
+        numba.config.CACHE_DIR = _cache_dir()
+
+        @overload(hypot3)
+        def _hypot3_compiled(x, y, z):  # noqa: ARG001 (numba passes the argument types)
+            def implementation(x, y, z):
+                return math.hypot(math.hypot(x, y), z)
+            return implementation
+
+        for function in _JITABLE:
+            register_jitable(function)
+        _numba = numba
+    return _numba
+
 
 #: The folders whose code a kernel can reach (the floors below the simulator, and the simulator).
 KERNEL_SOURCES = ("quadruped_common", os.path.join("quadruped_control", "model"),
@@ -75,11 +98,6 @@ def _cache_dir() -> str:
     return os.path.join(base, source_fingerprint())
 
 
-if numba is not None:  # pragma: no branch
-    # Read by numba when a cached dispatcher is created (at decoration), so set before any kernel.
-    numba.config.CACHE_DIR = _cache_dir()
-
-
 def hypot3(x: float, y: float, z: float) -> float:
     """sqrt(x^2 + y^2 + z^2) without overflow or underflow: ``math.hypot(x, y, z)`` in Python (the robot's
     path keeps its exact rounding); compiled code, whose ``math.hypot`` takes two arguments, uses
@@ -87,27 +105,32 @@ def hypot3(x: float, y: float, z: float) -> float:
     return math.hypot(x, y, z)
 
 
-if numba is not None:  # pragma: no branch
-    from numba.extending import overload
-
-    @overload(hypot3)
-    def _hypot3_compiled(x, y, z):  # noqa: ARG001 (numba passes the argument types)
-        def implementation(x, y, z):
-            return math.hypot(math.hypot(x, y), z)
-        return implementation
-
-
 def jitable(function: F) -> F:
     """``function`` unchanged; callable from compiled code too (module docstring)."""
-    if register_jitable is None:
-        return function
-    return register_jitable(function)
+    _JITABLE.append(function)
+    return function
+
+
+class _Kernel:
+    """A function compiled on its first call (module docstring); ``py_func`` is the plain function."""
+
+    def __init__(self, function: Callable) -> None:
+        self.py_func = function
+        self._compiled: Optional[Callable] = None
+        self.__doc__ = function.__doc__
+        self.__name__ = getattr(function, "__name__", "kernel")
+
+    def __call__(self, *args: Any) -> Any:
+        compiled = self._compiled
+        if compiled is None:
+            compiled = self._compiled = _load_numba().njit(cache=True, error_model="numpy")(self.py_func)
+        return compiled(*args)
 
 
 def kernel(function: F) -> F:
-    """``function`` compiled for Python callers (module docstring); unchanged without numba. The
-    plain function stays reachable as ``.py_func`` either way (the tests run both)."""
-    if numba is None:
+    """``function`` compiled for Python callers on its first call (module docstring); unchanged without
+    numba. The plain function stays reachable as ``.py_func`` either way (the tests run both)."""
+    if not AVAILABLE:
         function.py_func = function  # type: ignore[attr-defined]
         return function
-    return numba.njit(cache=True, error_model="numpy")(function)
+    return _Kernel(function)  # type: ignore[return-value]

@@ -18,6 +18,8 @@ from typing import Sequence, Tuple, Union
 
 import numpy as np
 
+from quadruped_common.jit import hypot3, jitable
+
 ArrayLike = Union[Sequence[float], np.ndarray]
 
 #: Below this rotation angle (rad) the series expansions of sin(t)/t etc. are used.
@@ -202,18 +204,25 @@ def rot_to_rpy(R: ArrayLike) -> Tuple[float, float, float]:
     whole rotation about the vertical is put into roll, so rpy_to_rot(rot_to_rpy(R)) == R still holds.
     """
     M = _mat3(R, "rotation")
+    return rpy_f(M[0, 0], M[0, 1], M[0, 2], M[1, 0], M[2, 0], M[2, 1], M[2, 2])
+
+
+@jitable
+def rpy_f(r00: float, r01: float, r02: float, r10: float, r20: float, r21: float,
+          r22: float) -> Tuple[float, float, float]:
+    """:func:`rot_to_rpy` on the elements of R it needs, as floats (compiled code calls it too)."""
     # cos(pitch) from the first column is accurate near gimbal lock, unlike asin(-R20).
-    cp = math.hypot(M[0, 0], M[1, 0])
-    pitch = math.atan2(-M[2, 0], cp)
+    cp = math.hypot(r00, r10)
+    pitch = math.atan2(-r20, cp)
     if cp > 1e-9:
-        roll = math.atan2(M[2, 1], M[2, 2])
-        yaw = math.atan2(M[1, 0], M[0, 0])
+        roll = math.atan2(r21, r22)
+        yaw = math.atan2(r10, r00)
     else:
         yaw = 0.0
-        if M[2, 0] < 0.0:  # pitch = +pi/2: R01 = sin(roll - yaw), R02 = cos(roll - yaw)
-            roll = math.atan2(M[0, 1], M[0, 2])
+        if r20 < 0.0:  # pitch = +pi/2: R01 = sin(roll - yaw), R02 = cos(roll - yaw)
+            roll = math.atan2(r01, r02)
         else:  # pitch = -pi/2: R01 = -sin(roll + yaw), R02 = -cos(roll + yaw)
-            roll = math.atan2(-M[0, 1], -M[0, 2])
+            roll = math.atan2(-r01, -r02)
     return roll, pitch, yaw
 
 
@@ -286,12 +295,26 @@ def geodesic_angle(R_d: ArrayLike, R: ArrayLike) -> float:
     Computed as atan2(|vee(skew part)|, (tr - 1)/2), which keeps full precision near 0 and pi where
     arccos loses it. Symmetric in its arguments.
     """
-    E = _mat3(R_d, "R_d").T @ _mat3(R, "R")
-    # |sin t| and cos t both carry an absolute error of ~eps, so atan2 is accurate to ~eps everywhere,
-    # while arccos(c) has an error of ~sqrt(eps) near 0 and pi.
-    s = float(np.linalg.norm(vee(E)))
-    c = 0.5 * (E[0, 0] + E[1, 1] + E[2, 2] - 1.0)
-    return math.atan2(s, c)
+    return geodesic_f(tuple(_mat3(R_d, "R_d").ravel().tolist()), tuple(_mat3(R, "R").ravel().tolist()))
+
+
+@jitable
+def geodesic_f(R_d: Sequence[float], R: Sequence[float]) -> float:
+    """:func:`geodesic_angle` of row-major 3x3 rotations (9 floats each; compiled code calls it too)."""
+    # E = R_d^T R; |sin t| = |vee(skew part of E)| and cos t = (tr E - 1) / 2 both carry an absolute
+    # error of ~eps, so atan2 is accurate to ~eps everywhere, while arccos(c) has an error of ~sqrt(eps)
+    # near 0 and pi.
+    e01 = R_d[0] * R[1] + R_d[3] * R[4] + R_d[6] * R[7]
+    e02 = R_d[0] * R[2] + R_d[3] * R[5] + R_d[6] * R[8]
+    e10 = R_d[1] * R[0] + R_d[4] * R[3] + R_d[7] * R[6]
+    e12 = R_d[1] * R[2] + R_d[4] * R[5] + R_d[7] * R[8]
+    e20 = R_d[2] * R[0] + R_d[5] * R[3] + R_d[8] * R[6]
+    e21 = R_d[2] * R[1] + R_d[5] * R[4] + R_d[8] * R[7]
+    trace = 0.0
+    for k in range(3):
+        trace += R_d[k] * R[k] + R_d[3 + k] * R[3 + k] + R_d[6 + k] * R[6 + k]
+    s = 0.5 * hypot3(e21 - e12, e02 - e20, e10 - e01)
+    return math.atan2(s, 0.5 * (trace - 1.0))
 
 
 def orthonormalize(R: ArrayLike) -> np.ndarray:

@@ -29,7 +29,8 @@ from typing import Any, Dict, List, Optional, Sequence
 
 import numpy as np
 
-from quadruped_common.so3 import geodesic_angles, rotations_to_rpy
+from quadruped_common.jit import kernel
+from quadruped_common.so3 import geodesic_f, rotations_to_rpy, rpy_f
 from quadruped_control.analysis.metrics import compute_metrics
 from quadruped_control.control.batch import BatchController
 from quadruped_control.control.controller_config import ControllerConfig
@@ -93,6 +94,19 @@ class BatchResult:
         """Simulated seconds of all trials per wall-clock second."""
         duration = float(self.t[-1] - self.t[0]) + (self.t[1] - self.t[0] if self.t.size > 1 else 0.0)
         return self.n * duration / self.wall_time if self.wall_time > 0 else math.inf
+
+
+@kernel
+def record_attitude(R, setpoints, k, rpy, geodesic):
+    """Sample ``k`` of every trial: roll, pitch, yaw (:func:`~quadruped_common.so3.rpy_f`) of R (N, 3, 3)
+    into ``rpy`` (N, T, 3) and the geodesic angle to its setpoint (N, 9) rows
+    (:func:`~quadruped_common.so3.geodesic_f`) into ``geodesic`` (N, T)."""
+    for i in range(R.shape[0]):
+        rpy[i, k, 0], rpy[i, k, 1], rpy[i, k, 2] = rpy_f(R[i, 0, 0], R[i, 0, 1], R[i, 0, 2], R[i, 1, 0], R[i, 2, 0],
+                                                        R[i, 2, 1], R[i, 2, 2])
+        Ri = (R[i, 0, 0], R[i, 0, 1], R[i, 0, 2], R[i, 1, 0], R[i, 1, 1], R[i, 1, 2], R[i, 2, 0], R[i, 2, 1],
+              R[i, 2, 2])
+        geodesic[i, k] = geodesic_f(setpoints[i], Ri)
 
 
 class BatchSimulation:
@@ -187,10 +201,10 @@ class BatchSimulation:
 
     def _record_loop(self, samples: int, steps: int, kept: int, times: np.ndarray, rpy: np.ndarray,
                      geodesic: np.ndarray, states: Dict[str, List[np.ndarray]], setpoints: np.ndarray) -> None:
+        setpoint_rows = np.ascontiguousarray(setpoints.reshape(-1, 9))
         for i in range(samples):
             times[i] = self.k * self.dt
-            rpy[:, i] = rotations_to_rpy(self.rotation)
-            geodesic[:, i] = geodesic_angles(setpoints, self.rotation)
+            record_attitude(self.rotation, setpoint_rows, i, rpy, geodesic)
             if i < kept:
                 for key, value in (("position", self.position), ("velocity", self.velocity),
                                    ("rotation", self.rotation), ("omega", self.omega), ("joints", self.q)):
