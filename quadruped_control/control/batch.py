@@ -51,8 +51,7 @@ __all__ = ["BatchController", "controller_batch_step"]
 def _clamped_ik(x, y, z, frame, g):
     """ik_row of the target (x, y, z), the angles clamped exactly into the servo ranges as
     :meth:`StrokeCycle.ik` clamps them: (reached, theta1, theta2, theta3)."""
-    ok, t1, t2, t3 = ik_row(x, y, z, frame, g[0], g[1], g[2], g[3], g[4], g[5], g[6], g[7], g[8], g[9], g[10],
-                            g[11], g[12])
+    ok, t1, t2, t3 = ik_row(x, y, z, frame, g)
     t1 = g[7] if g[7] > t1 else t1
     t2 = g[9] if g[9] > t2 else t2
     t3 = g[11] if g[11] > t3 else t3

@@ -438,9 +438,10 @@ _GEOMETRY_LAST: "Tuple[Optional[RobotParams], tuple]" = (None, ())
 
 
 def _geometry(params: RobotParams) -> tuple:
-    """(frames, frame rows, a1, a2, a3, a4, c, l_y, l_z, low1, high1, low2, high2, low3, high3) as floats:
-    ``frames[leg]`` = (o_x, o_y, o_z, m_x, m_y, m_z) of eq. (ee_body), ``frame rows`` the same in the
-    order of LEGS, then the five-bar, hip and servo-range constants."""
+    """(frames, frame rows, a1, a2, a3, a4, c, l_y, l_z, low1, high1, low2, high2, low3, high3, the same 13
+    constants as one tuple) as floats: ``frames[leg]`` = (o_x, o_y, o_z, m_x, m_y, m_z) of eq. (ee_body),
+    ``frame rows`` the same in the order of LEGS, then the five-bar, hip and servo-range constants (the
+    last item is :func:`ik_row`'s ``constants``)."""
     global _GEOMETRY_LAST
     last = _GEOMETRY_LAST
     if last[0] is params:
@@ -455,6 +456,7 @@ def _geometry(params: RobotParams) -> tuple:
     values = (frames, tuple(frames[leg] for leg in LEGS), float(fb.a1), float(fb.a2), float(fb.a3), float(fb.a4),
               float(fb.c), float(params.l_y), float(params.l_z)) \
         + tuple(float(x) for x in limits.theta1 + limits.theta2 + limits.theta3)
+    values += (values[2:15],)
     if len(_GEOMETRY_CACHE) > 64:
         _GEOMETRY_CACHE.clear()
     _GEOMETRY_CACHE[id(params)] = _GEOMETRY_LAST = (params, values)
@@ -475,7 +477,7 @@ def joint_angles_floats(rx: float, ry: float, rz: float, leg: int, params: Robot
     constants = last[1] if last[0] is params else _geometry(params)
     frame = constants[0].get(leg)
     if frame is not None:
-        reached, theta1, theta2, theta3 = ik_row(rx, ry, rz, frame, *constants[2:15])
+        reached, theta1, theta2, theta3 = ik_row(rx, ry, rz, frame, constants[15])
         if reached:
             return theta1, theta2, theta3
     t1, t2, t3 = joint_angles_full((rx, ry, rz), leg, params)[:3].tolist()
@@ -483,16 +485,17 @@ def joint_angles_floats(rx: float, ry: float, rz: float, leg: int, params: Robot
 
 
 @jitable
-def ik_row(rx: float, ry: float, rz: float, frame: Sequence[float], a1: float, a2: float, a3: float, a4: float,
-           c: float, l_y: float, l_z: float, low1: float, high1: float, low2: float, high2: float, low3: float,
-           high3: float) -> Tuple[bool, float, float, float]:
+def ik_row(rx: float, ry: float, rz: float, frame: Sequence[float],
+           constants: Sequence[float]) -> Tuple[bool, float, float, float]:
     """The one implementation of the leg IK on floats, without raising (compiled code calls it too):
     (reached, theta1, theta2, theta3) for the body-frame target (rx, ry, rz) of the leg ``frame``
-    (o_x, o_y, o_z, m_x, m_y, m_z), eq. (ee_body) inverted, eq. (ik_theta3), (ik_dists), (ik_alphas),
-    (ik_theta1245), wrapped into the servo ranges [low, high]. ``reached`` False where the target is not
+    (o_x, o_y, o_z, m_x, m_y, m_z) and the ``constants`` (a1, a2, a3, a4, c, l_y, l_z, low1, high1, low2,
+    high2, low3, high3) of :func:`_geometry`, eq. (ee_body) inverted, eq. (ik_theta3), (ik_dists),
+    (ik_alphas), (ik_theta1245), wrapped into the servo ranges [low, high]. ``reached`` False where the target is not
     plainly reachable (the angles are then 0); :func:`joint_angles_floats` then asks
     :func:`joint_angles_full` for the proper error (or its result for the rare rounding-boundary cases)."""
     ox, oy, oz, mx, my, mz = frame[0], frame[1], frame[2], frame[3], frame[4], frame[5]
+    a1, a2, a3, a4, c, l_y, l_z, low1, high1, low2, high2, low3, high3 = constants
     x_d, y_d, z_d = mx * (rx - ox), my * (ry - oy), mz * (rz - oz)
     radius = math.hypot(y_d, z_d)
     if radius >= l_z and math.isfinite(x_d + radius):  # also rejects NaN

@@ -510,7 +510,7 @@ def test_ik_row_is_joint_angles_floats_and_compiles_to_the_same_angles():
         for n in range(targets.shape[0]):
             for leg in range(4):
                 ok, t1, t2, t3 = ik_row(targets[n, leg, 0], targets[n, leg, 1], targets[n, leg, 2], frames[leg],
-                                        *constants)
+                                        constants)
                 out[n, leg, 0], out[n, leg, 1], out[n, leg, 2], out[n, leg, 3] = ok, t1, t2, t3
 
     plain = np.zeros((300, 4, 4))
