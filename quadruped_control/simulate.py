@@ -89,11 +89,16 @@ def build_parser() -> argparse.ArgumentParser:
                              "config/robot.yaml); the robustness study varies its estimates around this file")
     parser.add_argument("--scheme", choices=SCHEMES, default=None,
                         help="stroke scheme (default: stroke.scheme of config/controller.yaml, 'paper')")
-    parser.add_argument("--points", type=int, default=12, help="identify: Latin hypercube size (default 12)")
-    parser.add_argument("--refine", type=int, default=2,
-                        help="identify: parameters refined around the best point (default 2)")
-    parser.add_argument("--write-config", action="store_true",
-                        help="identify: write the identified values into the package's config/tank.yaml")
+    parser.add_argument("--screen", type=int, default=8,
+                        help="identify: Morris screening trajectories, >= 2 (default 8: 8 x (parameters + 1) sets)")
+    parser.add_argument("--evaluations", type=int, default=1000,
+                        help="identify: CMA-ES budget of the full fit, parameter sets (default 1000)")
+    parser.add_argument("--cv-evaluations", type=int, default=300,
+                        help="identify: CMA-ES budget of each cross-validation fold (default 300)")
+    parser.add_argument("--popsize", type=int, default=16,
+                        help="identify: CMA-ES population, also the baseline's grid size (default 16)")
+    parser.add_argument("--ensemble", type=int, default=8,
+                        help="identify: parameter sets kept as the ensemble (default 8)")
     parser.add_argument("--study", choices=tuple(STUDIES),
                         default=None,
                         help="run a study (paper-experiments: Table 1's 15 experiments, default on the tank plant "
@@ -156,8 +161,10 @@ def main(argv: Optional[Sequence[str]] = None) -> int:
         gyro_noise = settings.gyro_noise if args.gyro_noise is None else args.gyro_noise
         if attitude_noise < 0.0 or gyro_noise < 0.0 or not (math.isfinite(attitude_noise) and math.isfinite(gyro_noise)):
             parser.error("noise levels must be finite and non-negative")
-        if args.study == "identify" and (args.points < 2 or args.refine < 0):
-            parser.error("--points must be >= 2 and --refine >= 0")
+        if args.study == "identify" and (args.screen < 2 or args.evaluations < 2 or args.cv_evaluations < 2
+                                         or args.popsize < 2 or args.ensemble < 1):
+            parser.error("identify needs --screen, --evaluations, --cv-evaluations and --popsize >= 2 and "
+                         "--ensemble >= 1")
         if args.study is not None:
             return STUDIES[args.study].main_study(args)
         spec = TrialSpec(label="setpoint %s deg" % " ".join("%g" % v for v in args.rpy),

@@ -1,102 +1,138 @@
-"""Identification of the tank plant's uncertain parameters against the paper's Table 1.
+"""Identification of the tank plant against the paper's Table 1: screening, fit, cross-validation.
 
-Parameters and physically plausible bounds (:data:`PARAMETERS`; reasoning in docs/identification.md):
-centre-of-buoyancy height z_cb, hook height, torso net weight, rope length, torso added-mass scale, servo
-speed scale, paw drag scale.
+Parameters and their physically plausible bounds (:data:`PARAMETERS`; the reasons in
+docs/identification.md): the tank's uncertain estimates (centre of buoyancy, hook, net weight, rope
+length, torso added mass, servo speed, paw drag) and the candidate effects of
+:mod:`quadruped_control.sim.plants.tank` (appendage damping, linear and quadratic, roll/pitch and yaw;
+rope torsion). Every set is run on the batched simulator (:mod:`quadruped_control.sim.batch`), the 15
+experiments of Table 1 with the experiment gains and rate-limited servos, 160 s each.
 
-Objective (lower is better), summed over the 15 experiments with the experiment gains
-(:func:`case_cost`):
+Objective (lower is better), summed over the experiments with the weights of :data:`WEIGHTS`
+(:func:`case_cost`): on the commanded axis (coupled cases: the worse of roll and pitch, as the paper
+reports) 1 if the settled / not-settled outcome differs, |ln(t_s ratio)| if both settled, |ln(t_r
+ratio)| (0.5 s floor; 1 if the simulation never rose), |e_ss difference| / 5 deg and |M_p difference|
+/ 50 %; on yaw the same t_s and t_r terms (where the paper reports them) with weight 1/2: yaw has no
+restoring torque and starts from each experiment's own heading error, so it weighs less.
 
-    1                          if the settled / not-settled outcome differs from the paper's,
-    |ln(t_s,sim / t_s,paper)|  if both settled,
-    |ln(t_r,sim / t_r,paper)|  if both rose (0.5 s floor on each),
-    |e_ss,sim - e_ss,paper| / 5 deg,
-    |M_p,sim - M_p,paper| / 50 %,
+Design (:func:`main_study`):
 
-on the commanded axis (coupled cases: the worst of roll and pitch, as the paper reports). The first term
-weighs most: it is the issue's target (same outcome in >= 12 of 15 cases).
-
-Design, sized for a shared 2-core machine: a Latin hypercube of ``points`` parameter sets (seeded),
-then one round of local refinement of the best set along the ``refine`` parameters whose value correlates
-most with the objective (Spearman rank correlation over the hypercube), one step of 1/8 of the range up
-and down each. Sensitivity per parameter: that rank correlation and the refinement's objective change.
+1. Screening: Morris elementary effects (SALib) over all parameters, ``--screen`` trajectories; the
+   parameters whose mu* reaches a tenth of the largest are identified, the others stay at their
+   config/tank.yaml values (the data cannot pin them down).
+2. Fit: CMA-ES (the ``cma`` package) over the identified parameters scaled to [0, 1], ``--evaluations``
+   parameter sets, seeded.
+3. Cross-validation: for each group of experiments (roll, pitch, coupled), the same fit on the other
+   two groups (``--cv-evaluations`` sets) predicts the held-out group; the baseline is config/tank.yaml
+   with one factor that slows everything, the paw drag scale (the stroke's thrust), fitted by a grid on
+   the same training groups.
+4. Ensemble: the best distinct sets of the full fit (``--ensemble``), written as tank.yaml files.
 """
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import json
 import math
 import os
 import time
-from typing import Any, Dict, List, Sequence, Tuple
+from typing import Any, Callable, Dict, List, Optional, Sequence, Tuple
 
 import numpy as np
 
 from quadruped_common.config import config_path
+from quadruped_control.sim.plants.tank import TankParams, load_tank_params
 from quadruped_control.studies import paper_experiments as pe
 from quadruped_control.studies.paper_experiments import experiment_specs
-from quadruped_control.studies.trial import TrialSpec, run_many
+from quadruped_control.studies.trial import TrialSpec, run_batch, run_many
 
-__all__ = ["PARAMETERS", "case_cost", "latin_hypercube", "objective", "spearman", "tank_overrides"]
+__all__ = ["GROUPS", "PARAMETERS", "WEIGHTS", "case_cost", "nominal_values", "objective", "targets",
+           "tank_overrides", "update_tank_yaml"]
 
-#: (name, TankParams field or "hook_z"/"cob_z", low, high)
-PARAMETERS: Tuple[Tuple[str, str, float, float], ...] = (
-    ("cob_z", "center_of_buoyancy", -0.004, 0.004),     # m: trimmed by foam, within a few mm
-    ("hook_z", "hook", 0.05, 0.10),                      # m: on the enclosure top, 5-10 cm above the CoM
-    ("net_weight", "net_weight", 0.2, 3.0),              # N: "slightly negatively buoyant"
-    ("rope_length", "rope_length", 0.2, 1.0),            # m: robot fully under water below the block
-    ("added_mass_scale", "added_mass_scale", 0.5, 2.0),  # open frame: half to twice the 4.9 L ellipsoid
-    ("servo_speed_scale", "servo_speed_scale", 0.5, 1.0),  # loaded in water: half to full no-load speed
-    ("paw_drag_scale", "paw_drag_scale", 0.6, 1.6),      # C_D 0.38..1.0 around the paper's CFD 0.64
+#: (name, low, high): bounds with their physical reason in docs/identification.md
+PARAMETERS: Tuple[Tuple[str, float, float], ...] = (
+    ("cob_z", -0.004, 0.004),              # m: trimmed by foam, within a few mm of the centre of mass
+    ("hook_z", 0.05, 0.10),                # m: on the enclosure top, 5-10 cm above the centre of mass
+    ("net_weight", 0.2, 3.0),              # N: "slightly negatively buoyant"
+    ("rope_length", 0.2, 1.0),             # m: robot fully under water below the floating block
+    ("added_mass_scale", 0.5, 2.0),        # open frame: half to twice the 4.9 L ellipsoid
+    ("servo_speed_scale", 0.5, 1.0),       # loaded in water: half to full no-load speed
+    ("paw_drag_scale", 0.6, 1.6),          # C_D 0.38..1.0 around the paper's CFD 0.64
+    ("appendage_linear_xy", 0.0, 0.2),     # N m s/rad: skin friction of legs and housings, roll/pitch
+    ("appendage_linear_z", 0.0, 0.2),      # N m s/rad: the same about yaw
+    ("appendage_quadratic_xy", 0.0, 0.5),  # N m s^2/rad^2: form drag, ~0.05 for the links, x10 housings
+    ("appendage_quadratic_z", 0.0, 0.5),   # N m s^2/rad^2: the same about yaw
+    ("torsion_stiffness", 0.0, 0.1),       # N m/rad: a braided rope and a foam block resist little
+    ("torsion_damping", 0.0, 0.2),         # N m s/rad: the block turning in the water
 )
+
+#: Weights of the objective's terms (module docstring).
+WEIGHTS: Dict[str, float] = {"outcome": 1.0, "t_s": 1.0, "t_r": 1.0, "e_ss": 1.0, "M_p": 1.0,
+                             "yaw_t_s": 0.5, "yaw_t_r": 0.5}
+
+#: The three groups of Table 1 (the folds of the cross-validation).
+GROUPS = ("roll", "pitch", "roll+pitch")
 
 
 def tank_overrides(values: Dict[str, float]) -> Tuple[Tuple[str, Any], ...]:
-    """TankParams overrides of a parameter set."""
+    """TankParams overrides of a (possibly partial) parameter set."""
     out: List[Tuple[str, Any]] = []
-    for name, field, _, _ in PARAMETERS:
-        if name not in values:
-            continue
-        value = float(values[name])
-        if name == "cob_z":
-            out.append((field, (0.0, 0.0, value)))
-        elif name == "hook_z":
-            out.append((field, (0.0, 0.0, value)))
-        else:
-            out.append((field, value))
+    simple = ("net_weight", "rope_length", "added_mass_scale", "servo_speed_scale", "paw_drag_scale")
+    for name in simple:
+        if name in values:
+            out.append((name, float(values[name])))
+    if "cob_z" in values:
+        out.append(("center_of_buoyancy", (0.0, 0.0, float(values["cob_z"]))))
+    if "hook_z" in values:
+        out.append(("hook", (0.0, 0.0, float(values["hook_z"]))))
+    for kind in ("linear", "quadratic"):
+        xy, z = values.get("appendage_%s_xy" % kind), values.get("appendage_%s_z" % kind)
+        if xy is not None or z is not None:
+            out.append(("appendage_damping_" + kind, (float(xy or 0.0), float(xy or 0.0), float(z or 0.0))))
+    for name in ("torsion_stiffness", "torsion_damping"):
+        if name in values:
+            out.append(("rope_" + name, float(values[name])))
     return tuple(out)
 
 
-def latin_hypercube(points: int, seed: int = 0) -> List[Dict[str, float]]:
-    """``points`` parameter sets, one per stratum of every parameter's range (seeded)."""
-    rng = np.random.default_rng(seed)
-    columns = []
-    for _, _, low, high in PARAMETERS:
-        strata = (rng.permutation(points) + rng.uniform(0.0, 1.0, points)) / points
-        columns.append(low + strata * (high - low))
-    return [{name: float(columns[j][i]) for j, (name, _, _, _) in enumerate(PARAMETERS)} for i in range(points)]
+def nominal_values(tank: TankParams) -> Dict[str, float]:
+    """The parameters' values in ``tank`` (config/tank.yaml), clipped into their bounds."""
+    raw = {"cob_z": tank.center_of_buoyancy[2], "hook_z": tank.hook[2], "net_weight": tank.net_weight,
+           "rope_length": tank.rope_length, "added_mass_scale": tank.added_mass_scale,
+           "servo_speed_scale": tank.servo_speed_scale, "paw_drag_scale": tank.paw_drag_scale,
+           "appendage_linear_xy": tank.appendage_damping_linear[0], "appendage_linear_z": tank.appendage_damping_linear[2],
+           "appendage_quadratic_xy": tank.appendage_damping_quadratic[0],
+           "appendage_quadratic_z": tank.appendage_damping_quadratic[2],
+           "torsion_stiffness": tank.rope_torsion_stiffness, "torsion_damping": tank.rope_torsion_damping}
+    return {name: float(min(high, max(low, raw[name]))) for name, low, high in PARAMETERS}
 
 
 def _log_ratio(a: float, b: float) -> float:
     return abs(math.log(max(a, 0.5) / max(b, 0.5)))
 
 
-def case_cost(row: Dict[str, Any]) -> float:
-    """Cost of one experiment (a row of :func:`paper_experiments.comparison_rows`)."""
+def case_cost(row: Dict[str, Any], weights: Optional[Dict[str, float]] = None) -> float:
+    """Cost of one experiment (a row of :func:`paper_experiments.comparison_rows`; module docstring)."""
+    w = WEIGHTS if weights is None else weights
     p, s = row["paper"], row["sim"]
     cost = 0.0
     if row["settled_paper"] != row["settled_sim"]:
-        cost += 1.0
+        cost += w["outcome"]
     elif p["t_s"] is not None and s["t_s"] is not None:
-        cost += _log_ratio(s["t_s"], p["t_s"])
+        cost += w["t_s"] * _log_ratio(s["t_s"], p["t_s"])
     if p["t_r"] is not None and s["t_r"] is not None:
-        cost += _log_ratio(s["t_r"], p["t_r"])
+        cost += w["t_r"] * _log_ratio(s["t_r"], p["t_r"])
     elif p["t_r"] is not None:
-        cost += 1.0  # never rose
+        cost += w["t_r"]  # never rose
     if s["e_ss"] is not None:
-        cost += abs(s["e_ss"] - p["e_ss"]) / 5.0
+        cost += w["e_ss"] * abs(s["e_ss"] - p["e_ss"]) / 5.0
     if s["M_p"] is not None and p["M_p"] is not None:
-        cost += abs(s["M_p"] - p["M_p"]) / 50.0
+        cost += w["M_p"] * abs(s["M_p"] - p["M_p"]) / 50.0
+    py, sy = p.get("yaw"), s.get("yaw")
+    if py is not None and sy is not None:
+        if py["t_s"] is not None:
+            cost += w["yaw_t_s"] * (_log_ratio(sy["t_s"], py["t_s"]) if sy["t_s"] is not None else 1.0)
+        if py["t_r"] is not None:
+            cost += w["yaw_t_r"] * (_log_ratio(sy["t_r"], py["t_r"]) if sy["t_r"] is not None else 1.0)
     return cost
 
 
@@ -104,14 +140,19 @@ def objective(rows: Sequence[Dict[str, Any]]) -> float:
     return float(sum(case_cost(r) for r in rows))
 
 
-def spearman(x: Sequence[float], y: Sequence[float]) -> float:
-    """Spearman rank correlation (no ties expected); 0 for fewer than 3 points."""
-    if len(x) < 3:
-        return 0.0
-    rx = np.argsort(np.argsort(np.asarray(x)))
-    ry = np.argsort(np.argsort(np.asarray(y)))
-    c = np.corrcoef(rx, ry)[0, 1]
-    return float(c) if math.isfinite(c) else 0.0
+def _within_2x(a: Optional[float], b: Optional[float]) -> bool:
+    return a is not None and b is not None and b > 0.0 and 0.5 <= a / b <= 2.0
+
+
+def targets(rows: Sequence[Dict[str, Any]]) -> Dict[str, int]:
+    """The issue's counts: same settled outcome; t_s, t_r and yaw t_s within a factor 2 of the paper's
+    (yaw over the cases where the paper reports one)."""
+    return {"cases": len(rows),
+            "same_outcome": sum(r["settled_paper"] == r["settled_sim"] for r in rows),
+            "t_s_within_2x": sum(_within_2x(r["sim"]["t_s"], r["paper"]["t_s"]) for r in rows),
+            "t_r_within_2x": sum(_within_2x(r["sim"]["t_r"], r["paper"]["t_r"]) for r in rows),
+            "yaw_t_s_within_2x": sum(_within_2x(r["sim"]["yaw"]["t_s"], r["paper"]["yaw"]["t_s"]) for r in rows),
+            "yaw_t_s_reported": sum(r["paper"]["yaw"]["t_s"] is not None for r in rows)}
 
 
 #: parameter -> (config/tank.yaml section, key, format)
@@ -123,7 +164,12 @@ _YAML_KEYS = {
     "added_mass_scale": ("added_mass", "scale", "%.3f"),
     "servo_speed_scale": ("servos", "speed_scale", "%.3f"),
     "paw_drag_scale": ("paw_drag", "scale", "%.3f"),
+    "torsion_stiffness": ("suspension", "torsion_stiffness", "%.4f"),
+    "torsion_damping": ("suspension", "torsion_damping", "%.4f"),
 }
+#: appendage damping: one line per kind, (xy, xy, z)
+_APPENDAGE_KEYS = {"linear": ("appendage_linear_xy", "appendage_linear_z"),
+                   "quadratic": ("appendage_quadratic_xy", "appendage_quadratic_z")}
 
 
 def update_tank_yaml(text: str, values: Dict[str, float], note: str) -> str:
@@ -137,90 +183,207 @@ def update_tank_yaml(text: str, values: Dict[str, float], note: str) -> str:
         if line and not line[0].isspace() and stripped.endswith(":"):
             section = stripped[:-1]
             continue
+        indent = line[:len(line) - len(line.lstrip())]
         for name, (sec, key, fmt) in _YAML_KEYS.items():
             if name in values and sec == section and stripped.startswith(key + ":"):
-                indent = line[:len(line) - len(line.lstrip())]
                 lines[i] = "%s%s: %s  # [identified] %s" % (indent, key, fmt % values[name], note)
                 done.add(name)
-    missing = [n for n in values if n in _YAML_KEYS and n not in done]
+        for kind, (xy, z) in _APPENDAGE_KEYS.items():
+            if section == "appendage_damping" and stripped.startswith(kind + ":") and (xy in values or z in values):
+                a, b = values.get(xy, 0.0), values.get(z, 0.0)
+                lines[i] = "%s%s: [%.4f, %.4f, %.4f]  # [identified] %s" % (indent, kind, a, a, b, note)
+                done.update(n for n in (xy, z) if n in values)
+    missing = [n for n in values if n not in done]
     if missing:
         raise ValueError("tank.yaml has no line for %s" % ", ".join(missing))
     return "\n".join(lines) + "\n"
 
 
-def main_study(args: argparse.Namespace) -> int:
-    """Fit the tank plant's uncertain parameters to Table 1 (:mod:`quadruped_control.studies.identify`)."""
+# --------------------------------------------------------------------------------------------------
+# The study
+# --------------------------------------------------------------------------------------------------
 
-    os.makedirs(args.out, exist_ok=True)
-    duration = args.duration if args.duration_given else 160.0  # longest paper t_s 128.6 s + 30 s hold
-    servo = args.servo_model_given or "rate-limited"
-    rows = list(pe.PAPER_TABLE)
-    start = time.perf_counter()
+class _Evaluator:
+    """Runs parameter sets on chosen experiments of Table 1 and keeps every result."""
 
-    def evaluate(points: List[Dict[str, float]], tag: str) -> List[Dict[str, Any]]:
+    def __init__(self, args: argparse.Namespace, duration: float, servo: str) -> None:
+        self.args, self.duration, self.servo = args, duration, servo
+        self.count = 0
+        self.trials = 0
+        # the 15 specs once (their initial attitudes take a search); each set replaces label and overrides
+        self.base = experiment_specs(args, "tank", "experiment", servo, duration, keep_trace=False)[0]
+        # Compile (or load) the batch's loops here once: the worker processes forked for each generation
+        # then start with them in memory instead of loading them again.
+        run_batch([dataclasses.replace(self.base[0], duration=0.05)])
+
+    def __call__(self, sets: Sequence[Dict[str, float]], cases: Sequence[int], tag: str) -> List[Dict[str, Any]]:
         specs: List[TrialSpec] = []
-        for i, values in enumerate(points):
-            specs += experiment_specs(args, "tank", "experiment", servo, duration, "%s%02d" % (tag, i),
-                                       tank_overrides(values), keep_trace=False)[0]
-        results = run_many(specs, args, "identify (%s)" % tag)
+        for values in sets:
+            self.count += 1
+            overrides = tank_overrides(values)
+            specs += [dataclasses.replace(self.base[k], label="%s%05d %s" % (tag, self.count, self.base[k].label),
+                                          tank_overrides=overrides) for k in cases]
+        self.trials += len(specs)
+        results = run_many(specs, self.args, "identify (%s)" % tag)
+        rows = [pe.PAPER_TABLE[k] for k in cases]
         out = []
-        for i, values in enumerate(points):
-            table = pe.comparison_rows(rows, results[15 * i:15 * (i + 1)])
-            out.append({"values": values, "objective": objective(table), "agreement": pe.agreement(table),
+        for i, values in enumerate(sets):
+            table = pe.comparison_rows(rows, results[len(cases) * i:len(cases) * (i + 1)])
+            out.append({"values": dict(values), "objective": objective(table), "targets": targets(table),
                         "rows": table})
         return out
 
-    hypercube = evaluate(latin_hypercube(args.points, args.seed), "lhs")
-    costs = [e["objective"] for e in hypercube]
-    sensitivity = {name: spearman([e["values"][name] for e in hypercube], costs)
-                   for name, _, _, _ in PARAMETERS}
-    best = min(hypercube, key=lambda e: e["objective"])
-    ranked = sorted(sensitivity, key=lambda n: -abs(sensitivity[n]))[:args.refine]
-    refine_points = []
-    for name, _, low, high in PARAMETERS:
-        if name in ranked:
-            for sign in (-1.0, 1.0):
-                values = dict(best["values"])
-                values[name] = min(high, max(low, values[name] + sign * (high - low) / 8.0))
-                refine_points.append(values)
-    refined = evaluate(refine_points, "ref") if refine_points else []
-    steps = {}
-    for e in refined:
-        changed = [n for n in e["values"] if e["values"][n] != best["values"][n]]
-        if changed:
-            steps.setdefault(changed[0], []).append((e["values"][changed[0]], e["objective"] - best["objective"]))
-    final = min([best] + refined, key=lambda e: e["objective"])
-    wall = time.perf_counter() - start
-    trials = 15 * (len(hypercube) + len(refined))
-    note = "simulate --study identify (%d trials)" % trials
-    with open(config_path("tank.yaml")) as stream:
-        identified = update_tank_yaml(stream.read(), final["values"], note)
-    with open(os.path.join(args.out, "tank_identified.yaml"), "w") as stream:
-        stream.write(identified)
-    if args.write_config:
-        with open(config_path("tank.yaml"), "w") as stream:
-            stream.write(identified)
-    report = {"study": "identify", "duration": duration, "servo_model": servo, "points": args.points,
-              "refine": ranked, "trials": trials, "wall_time": wall, "best": final, "sensitivity_rank": sensitivity,
-              "refinement_steps": steps, "hypercube": [{k: e[k] for k in ("values", "objective", "agreement")}
-                                                       for e in hypercube]}
+
+def _cases(groups: Sequence[str]) -> List[int]:
+    return [k for k, row in enumerate(pe.PAPER_TABLE) if row["set"] in groups]
+
+
+def _to_values(x: Sequence[float], names: Sequence[str], fixed: Dict[str, float]) -> Dict[str, float]:
+    values = dict(fixed)
+    bounds = {name: (low, high) for name, low, high in PARAMETERS}
+    for name, u in zip(names, x):
+        low, high = bounds[name]
+        values[name] = low + min(1.0, max(0.0, float(u))) * (high - low)
+    return values
+
+
+def screen(evaluate: Callable, nominal: Dict[str, float], trajectories: int, seed: int,
+           cases: Sequence[int]) -> Dict[str, Any]:
+    """Morris elementary effects of every parameter on the objective (SALib, 4 levels)."""
+    from SALib.analyze import morris as morris_analyze
+    from SALib.sample import morris as morris_sample
+
+    names = [name for name, _, _ in PARAMETERS]
+    problem = {"num_vars": len(names), "names": names, "bounds": [[low, high] for _, low, high in PARAMETERS]}
+    X = morris_sample.sample(problem, trajectories, num_levels=4, seed=seed)
+    sets = [dict(zip(names, map(float, row))) for row in X]
+    results = evaluate(sets, cases, "scr")
+    Y = np.array([r["objective"] for r in results])
+    analysis = morris_analyze.analyze(problem, X, Y, num_levels=4, seed=seed)
+    finite = [float(v) if math.isfinite(v) else None for v in analysis["sigma"]]  # one trajectory: no spread
+    return {"names": names, "mu_star": [float(v) for v in analysis["mu_star"]], "sigma": finite, "sets": len(sets),
+            "best": min(results, key=lambda r: r["objective"])}
+
+
+def fit(evaluate: Callable, names: Sequence[str], fixed: Dict[str, float], start: Dict[str, float], budget: int,
+        popsize: int, seed: int, cases: Sequence[int], tag: str) -> List[Dict[str, Any]]:
+    """CMA-ES over ``names`` (scaled to [0, 1]) from ``start``, the others at ``fixed``: every evaluated
+    set, best first."""
+    import cma
+
+    bounds = {name: (low, high) for name, low, high in PARAMETERS}
+    x0 = [(start[n] - bounds[n][0]) / (bounds[n][1] - bounds[n][0]) for n in names]
+    es = cma.CMAEvolutionStrategy(x0, 0.25, {"bounds": [0.0, 1.0], "popsize": popsize, "seed": seed,
+                                             "maxfevals": budget, "verbose": -9})
+    evaluated: List[Dict[str, Any]] = []
+    while not es.stop() and len(evaluated) < budget:
+        X = es.ask()
+        results = evaluate([_to_values(x, names, fixed) for x in X], cases, tag)
+        es.tell(X, [r["objective"] for r in results])
+        evaluated += results
+    return sorted(evaluated, key=lambda r: r["objective"])
+
+
+def baseline(evaluate: Callable, nominal: Dict[str, float], cases: Sequence[int], points: int,
+             tag: str) -> Dict[str, Any]:
+    """config/tank.yaml with the paw drag scale, one factor that slows everything, fitted on a grid over
+    [0.05, 1.6] (wider than its plausible bounds: a slow-down factor, not a physical estimate)."""
+    sets = [dict(nominal, paw_drag_scale=float(v)) for v in np.geomspace(0.05, 1.6, points)]
+    return min(evaluate(sets, cases, tag), key=lambda r: r["objective"])
+
+
+def _without_rows(result: Dict[str, Any]) -> Dict[str, Any]:
+    return {k: v for k, v in result.items() if k != "rows"}
+
+
+def main_study(args: argparse.Namespace) -> int:
+    """Screen, fit and cross-validate the tank plant against Table 1 (module docstring)."""
+    os.makedirs(args.out, exist_ok=True)
+    duration = args.duration if args.duration_given else 160.0  # longest paper t_s 128.6 s + 30 s hold
+    servo = args.servo_model_given or "rate-limited"
+    start_time = time.perf_counter()
+    evaluate = _Evaluator(args, duration, servo)
+    tank = load_tank_params(args.tank_yaml)
+    nominal = nominal_values(tank)
+    everything = _cases(GROUPS)
+
+    screening = screen(evaluate, nominal, args.screen, args.seed, everything)
+    largest = max(screening["mu_star"]) or 1.0
+    chosen = [n for n, m in zip(screening["names"], screening["mu_star"]) if m >= 0.1 * largest]
+    start = screening["best"]["values"]
+    fixed = {n: (start[n] if n in chosen else nominal[n]) for n in nominal}
+    full = fit(evaluate, chosen, fixed, start, args.evaluations, args.popsize, args.seed, everything, "fit")
+    best = full[0]
+    folds = []
+    for group in GROUPS:
+        train = _cases([g for g in GROUPS if g != group])
+        held = _cases([group])
+        fold_fit = fit(evaluate, chosen, fixed, start, args.cv_evaluations, args.popsize, args.seed + 1, train,
+                       "cv-" + group)[0]
+        slow = baseline(evaluate, nominal, train, args.popsize, "base-" + group)
+        predicted, slow_predicted = evaluate([fold_fit["values"], slow["values"]], held, "held-" + group)
+        folds.append({"held_out": group, "fit": _without_rows(fold_fit), "prediction": predicted,
+                      "baseline_fit": _without_rows(slow), "baseline_prediction": slow_predicted})
+    ensemble, seen = [], set()
+    for result in full:
+        key = tuple(round(result["values"][n], 4) for n in chosen)
+        if key not in seen:
+            seen.add(key)
+            ensemble.append(result)
+        if len(ensemble) >= args.ensemble:
+            break
+    wall = time.perf_counter() - start_time
+    note = "simulate --study identify (%d trials)" % evaluate.trials
+    with open(args.tank_yaml or config_path("tank.yaml")) as stream:
+        template = stream.read()
+    paths = []
+    for i, result in enumerate(ensemble):
+        path = os.path.join(args.out, "tank_ensemble_%02d.yaml" % i)
+        with open(path, "w") as stream:
+            stream.write(update_tank_yaml(template, result["values"], "%s, ensemble member %d, objective %.2f"
+                                          % (note, i, result["objective"])))
+        paths.append(path)
+    report = {"study": "identify", "duration": duration, "servo_model": servo, "seed": args.seed,
+              "weights": WEIGHTS, "parameters": [list(p) for p in PARAMETERS], "nominal": nominal,
+              "screening": {k: v for k, v in screening.items() if k != "best"}, "identified": chosen,
+              "fit": {"evaluations": len(full), "best": best, "ensemble": [_without_rows(r) for r in ensemble]},
+              "cross_validation": folds, "trials": evaluate.trials, "wall_time": wall, "ensemble_files": paths}
     with open(os.path.join(args.out, "identify.json"), "w") as stream:
-        json.dump(report, stream, indent=2, allow_nan=False)
-    lines = ["## Identification: %d trials (%d parameter sets x 15 experiments, %g s each), %.0f s wall"
-             % (trials, len(hypercube) + len(refined), duration, wall), "",
-             "Best objective %.2f: same settled outcome %d of 15, t_s within 2x %d of 15." % (
-                 final["objective"], final["agreement"]["same_settled_outcome"], final["agreement"]["t_s_within_2x"]),
-             "", "| parameter | low | high | best | rank correlation with the objective (hypercube) "
-             "| objective change, refinement step down / up |", "|---|---|---|---|---|---|"]
-    for name, _, low, high in PARAMETERS:
-        step = steps.get(name, [])
-        lines.append("| %s | %g | %g | %.4g | %+.2f | %s |" % (
-            name, low, high, final["values"][name], sensitivity[name],
-            " / ".join("%+.2f" % d for _, d in sorted(step)) if step else "--"))
-    lines += ["", pe.format_table(final["rows"], "Best parameter set: tank plant, experiment gains, %s servos" % servo)]
+        json.dump(report, stream, indent=1, allow_nan=False)
+    text = _report_text(report, best)
     with open(os.path.join(args.out, "identify.md"), "w") as stream:
-        stream.write("\n".join(lines))
-    print("\n".join(lines))
-    print("results: %s; identified parameters: %s%s" % (args.out, os.path.join(args.out, "tank_identified.yaml"),
-                                                        " (written to config/tank.yaml)" if args.write_config else ""))
+        stream.write(text)
+    print(text)
     return 0
+
+
+def _report_text(report: Dict[str, Any], best: Dict[str, Any]) -> str:
+    bounds = {name: (low, high) for name, low, high in PARAMETERS}
+    screening = report["screening"]
+    lines = ["## Identification: %d trials, %.0f s wall" % (report["trials"], report["wall_time"]), "",
+             "Screening (Morris, %d sets): mu* (sigma) of each parameter; identified: %s." % (
+                 screening["sets"], ", ".join(report["identified"])), "",
+             "| parameter | low | high | mu* | sigma | best (full fit) |", "|---|---|---|---|---|---|"]
+    for name, mu, sigma in zip(screening["names"], screening["mu_star"], screening["sigma"]):
+        low, high = bounds[name]
+        lines.append("| %s | %g | %g | %.2f | %s | %.4g |" % (name, low, high, mu, "--" if sigma is None else
+                                                                "%.2f" % sigma, best["values"][name]))
+    t = best["targets"]
+    lines += ["", "Full fit (CMA-ES, %d sets): objective %.2f; same outcome %d of 15, t_s within 2x %d, t_r "
+              "within 2x %d, yaw t_s within 2x %d of %d." % (report["fit"]["evaluations"], best["objective"],
+                                                              t["same_outcome"], t["t_s_within_2x"],
+                                                              t["t_r_within_2x"], t["yaw_t_s_within_2x"],
+                                                              t["yaw_t_s_reported"]), "",
+              "Cross-validation (fit on two groups, predict the third):", "",
+              "| held out | objective (fit / baseline) | same outcome | t_s within 2x | t_r within 2x | "
+              "yaw t_s within 2x |", "|---|---|---|---|---|---|"]
+    for fold in report["cross_validation"]:
+        p, b = fold["prediction"], fold["baseline_prediction"]
+        tp, tb = p["targets"], b["targets"]
+        lines.append("| %s | %.2f / %.2f | %d / %d of %d | %d / %d | %d / %d | %d / %d of %d |" % (
+            fold["held_out"], p["objective"], b["objective"], tp["same_outcome"], tb["same_outcome"], tp["cases"],
+            tp["t_s_within_2x"], tb["t_s_within_2x"], tp["t_r_within_2x"], tb["t_r_within_2x"],
+            tp["yaw_t_s_within_2x"], tb["yaw_t_s_within_2x"], tp["yaw_t_s_reported"]))
+    lines += ["", pe.format_table(best["rows"], "Best parameter set of the full fit: tank plant, experiment gains, "
+                                  "%s servos" % report["servo_model"])]
+    return "\n".join(lines) + "\n"

@@ -1,10 +1,11 @@
-"""Identification helpers: design, objective, config update, and a tiny end-to-end run."""
+"""Identification: parameters and bounds, objective and targets, tank.yaml output, and a tiny end-to-end run
+(screening, CMA-ES fit, cross-validation with the baseline, ensemble files)."""
 from __future__ import annotations
 
 import json
+import math
 import os
 
-import numpy as np
 import pytest
 
 from quadruped_common.config import config_path
@@ -13,59 +14,84 @@ from quadruped_control.sim.plants import TankParams, load_tank_params
 from quadruped_control.studies import identify as idf
 
 
-def test_latin_hypercube_has_one_point_per_stratum_within_bounds() -> None:
-    points = idf.latin_hypercube(8, seed=3)
-    for name, _, low, high in idf.PARAMETERS:
-        values = np.array([p[name] for p in points])
-        assert np.all((values >= low) & (values <= high))
-        strata = np.floor((values - low) / (high - low) * 8).astype(int)
-        assert sorted(strata.tolist()) == list(range(8))
-    assert idf.latin_hypercube(8, seed=3) == points  # seeded
+def _row(paper_ts=50.0, sim_ts=50.0, yaw=True):
+    metrics = {"t_s": paper_ts, "t_r": 20.0, "e_ss": 1.0, "M_p": 10.0}
+    row = {"settled_paper": paper_ts is not None, "settled_sim": sim_ts is not None,
+           "paper": dict(metrics, yaw={"t_s": 30.0, "t_r": 10.0, "e_ss": 0.0, "M_p": 5.0} if yaw else None),
+           "sim": dict(metrics, t_s=sim_ts, yaw={"t_s": 30.0, "t_r": 10.0, "e_ss": 0.0, "M_p": 5.0})}
+    if not yaw:
+        row["paper"]["yaw"] = None
+    return row
 
 
-def test_case_cost_terms() -> None:
-    row = {"settled_paper": True, "settled_sim": True,
-           "paper": {"t_s": 50.0, "t_r": 20.0, "e_ss": 1.0, "M_p": 10.0},
-           "sim": {"t_s": 50.0, "t_r": 20.0, "e_ss": 1.0, "M_p": 10.0}}
+def test_case_cost_weighs_every_metric_yaw_included() -> None:
+    row = _row()
     assert idf.case_cost(row) == 0.0
-    row["sim"] = {"t_s": 100.0, "t_r": 10.0, "e_ss": 6.0, "M_p": 60.0}
-    assert idf.case_cost(row) == pytest.approx(2 * np.log(2.0) + 1.0 + 1.0)
-    row["settled_sim"] = False
-    row["sim"]["t_s"] = None
-    assert idf.case_cost(row) == pytest.approx(1.0 + np.log(2.0) + 2.0)
+    row["sim"].update(t_s=100.0, t_r=10.0, e_ss=6.0, M_p=60.0)
+    assert idf.case_cost(row) == pytest.approx(2 * math.log(2.0) + 1.0 + 1.0)
+    row["sim"]["yaw"] = {"t_s": 60.0, "t_r": None, "e_ss": 0.0, "M_p": 0.0}  # yaw twice as slow, never rose
+    assert idf.case_cost(row) == pytest.approx(2 * math.log(2.0) + 2.0 + 0.5 * math.log(2.0) + 0.5)
+    row["settled_sim"], row["sim"]["t_s"] = False, None  # outcome differs: 1 instead of the t_s term
+    assert idf.case_cost(row) == pytest.approx(1.0 + math.log(2.0) + 2.0 + 0.5 * math.log(2.0) + 0.5)
+    assert idf.objective([row, _row()]) == pytest.approx(idf.case_cost(row))
 
 
-def test_spearman() -> None:
-    assert idf.spearman([1, 2, 3, 4], [10, 20, 30, 40]) == pytest.approx(1.0)
-    assert idf.spearman([1, 2, 3, 4], [4, 3, 2, 1]) == pytest.approx(-1.0)
-    assert idf.spearman([1, 2], [1, 2]) == 0.0
+def test_targets_count_the_issue_figures() -> None:
+    rows = [_row(), _row(sim_ts=120.0), _row(paper_ts=None, sim_ts=None), _row(sim_ts=None)]
+    rows[1]["sim"]["yaw"]["t_s"] = None
+    counts = idf.targets(rows)
+    assert counts == {"cases": 4, "same_outcome": 3, "t_s_within_2x": 1, "t_r_within_2x": 4,
+                      "yaw_t_s_within_2x": 3, "yaw_t_s_reported": 4}
 
 
-def test_update_tank_yaml_round_trips_through_the_loader(tmp_path) -> None:
-    values = {"cob_z": -0.0012, "hook_z": 0.06, "net_weight": 0.5, "rope_length": 0.8, "added_mass_scale": 1.5,
-              "servo_speed_scale": 0.7, "paw_drag_scale": 1.1}
+def _values():
+    return {"cob_z": -0.0012, "hook_z": 0.06, "net_weight": 0.5, "rope_length": 0.8, "added_mass_scale": 1.5,
+            "servo_speed_scale": 0.7, "paw_drag_scale": 1.1, "appendage_linear_xy": 0.01, "appendage_linear_z": 0.02,
+            "appendage_quadratic_xy": 0.1, "appendage_quadratic_z": 0.2, "torsion_stiffness": 0.03,
+            "torsion_damping": 0.04}
+
+
+def test_every_parameter_reaches_the_tank_plant_and_its_yaml_round_trips(tmp_path) -> None:
+    values = _values()
+    assert [name for name, _, _ in idf.PARAMETERS] == list(values)
     with open(config_path("tank.yaml")) as stream:
         text = idf.update_tank_yaml(stream.read(), values, "test")
     path = str(tmp_path / "tank.yaml")
     with open(path, "w") as stream:
         stream.write(text)
     tank = load_tank_params(path)
-    assert tank.center_of_buoyancy == (0.0, 0.0, -0.0012) and tank.hook == (0.0, 0.0, 0.06)
-    assert (tank.net_weight, tank.rope_length, tank.added_mass_scale, tank.servo_speed_scale,
-            tank.paw_drag_scale) == (0.5, 0.8, 1.5, 0.7, 1.1)
-    assert text.count("[identified] test") == 7
-    assert TankParams(**dict(idf.tank_overrides(values))) == tank.with_values(
-        suspension=True, hydrostatics=True, torso_added_mass=True, paw_added_mass=True, drag=True,
-        rope_stiffness=TankParams().rope_stiffness, rope_damping=TankParams().rope_damping,
-        paw_added_mass_scale=1.0)
+    assert tank == load_tank_params().with_values(**dict(idf.tank_overrides(values)))
+    assert tank.appendage_damping_quadratic == (0.1, 0.1, 0.2) and tank.rope_torsion_damping == 0.04
+    assert idf.nominal_values(tank) == pytest.approx(values)
+    assert text.count("[identified] test") == 11  # two appendage lines carry four parameters
+    with pytest.raises(ValueError, match="no line for net_weight"):
+        idf.update_tank_yaml("hydrostatics:\n  center_of_buoyancy: [0, 0, 0]\n", {"net_weight": 1.0}, "x")
+
+
+def test_nominal_values_lie_within_the_bounds() -> None:
+    nominal = idf.nominal_values(TankParams(net_weight=50.0))
+    for name, low, high in idf.PARAMETERS:
+        assert low <= nominal[name] <= high
+    assert nominal["net_weight"] == 3.0  # clipped to its plausible bound
 
 
 def test_identify_cli_tiny_run(tmp_path) -> None:
+    pytest.importorskip("cma")
+    pytest.importorskip("SALib")
     out = str(tmp_path / "id")
-    assert simulate.main(["--study", "identify", "--points", "2", "--refine", "1", "--duration", "0.5",
-                          "--out", out, "--quiet", "--jobs", "1"]) == 0
+    assert simulate.main(["--study", "identify", "--screen", "2", "--evaluations", "4", "--cv-evaluations", "2",
+                          "--popsize", "2", "--ensemble", "2", "--duration", "0.2", "--out", out, "--quiet",
+                          "--jobs", "1"]) == 0
     with open(os.path.join(out, "identify.json")) as stream:
         report = json.load(stream)
-    assert report["trials"] == 15 * 4
-    assert set(report["sensitivity_rank"]) == {p[0] for p in idf.PARAMETERS}
-    assert os.path.exists(os.path.join(out, "tank_identified.yaml"))
+    names = [p[0] for p in idf.PARAMETERS]
+    assert report["screening"]["names"] == names and report["screening"]["sets"] == 2 * (len(names) + 1)
+    assert set(report["identified"]) <= set(names) and report["identified"]
+    assert report["fit"]["evaluations"] >= 4
+    assert [f["held_out"] for f in report["cross_validation"]] == list(idf.GROUPS)
+    for fold, cases in zip(report["cross_validation"], (6, 6, 3)):
+        assert fold["prediction"]["targets"]["cases"] == cases == fold["baseline_prediction"]["targets"]["cases"]
+    assert len(report["ensemble_files"]) == 2
+    for path in report["ensemble_files"]:
+        load_tank_params(path)  # a valid tank.yaml
+    assert report["weights"] == idf.WEIGHTS
