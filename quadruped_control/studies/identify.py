@@ -45,7 +45,7 @@ from quadruped_control.studies import paper_experiments as pe
 from quadruped_control.studies.paper_experiments import experiment_specs
 from quadruped_control.studies.trial import TrialSpec, run_batch, run_many
 
-__all__ = ["GROUPS", "PARAMETERS", "WEIGHTS", "case_cost", "nominal_values", "objective", "targets",
+__all__ = ["GROUPS", "PARAMETERS", "WEIGHTS", "case_cost", "nominal_values", "objective", "plot_report", "targets",
            "tank_overrides", "update_tank_yaml"]
 
 #: (name, low, high): bounds with their physical reason in docs/identification.md
@@ -350,11 +350,47 @@ def main_study(args: argparse.Namespace) -> int:
               "cross_validation": folds, "trials": evaluate.trials, "wall_time": wall, "ensemble_files": paths}
     with open(os.path.join(args.out, "identify.json"), "w") as stream:
         json.dump(report, stream, indent=1, allow_nan=False)
+    plot_report(report, os.path.join(args.out, "identify.png"))
     text = _report_text(report, best)
     with open(os.path.join(args.out, "identify.md"), "w") as stream:
         stream.write(text)
     print(text)
     return 0
+
+
+def plot_report(report: Dict[str, Any], path: str) -> None:
+    """Simulated against the paper's t_r, t_s and yaw t_s (log-log, the factor-2 band shaded): the full
+    fit's best set on all 15 experiments, the cross-validation's predictions of the held-out groups, and
+    the one-factor baseline's predictions."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    series = [("full fit (all 15)", report["fit"]["best"]["rows"], "o", "tab:blue"),
+              ("cross-validation, held out", [r for f in report["cross_validation"] for r in f["prediction"]["rows"]],
+               "s", "tab:green"),
+              ("baseline (paw drag scale), held out",
+               [r for f in report["cross_validation"] for r in f["baseline_prediction"]["rows"]], "x", "tab:red")]
+    figure, axes = plt.subplots(1, 3, figsize=(15, 5))
+    for ax, (title, get) in zip(axes, (("rise time t_r [s]", lambda side: side["t_r"]),
+                                       ("settling time t_s [s]", lambda side: side["t_s"]),
+                                       ("yaw settling time [s]", lambda side: side["yaw"]["t_s"]))):
+        for label, rows, marker, colour in series:
+            pairs = [(get(r["paper"]), get(r["sim"])) for r in rows]
+            pairs = [(a, b) for a, b in pairs if a and b]
+            if pairs:
+                ax.scatter(*zip(*pairs), marker=marker, color=colour, label=label)
+        line = np.geomspace(0.1, 300.0, 10)
+        ax.plot(line, line, "k-", lw=0.8)
+        ax.fill_between(line, line / 2.0, line * 2.0, color="0.85", label="within a factor 2", zorder=0)
+        ax.set(xscale="log", yscale="log", xlim=(0.5, 300.0), ylim=(0.05, 300.0), xlabel="paper [s]",
+               ylabel="simulated [s]", title=title)
+    axes[0].legend(fontsize=8, loc="upper left")
+    figure.suptitle("Tank plant against Table 1 (cases settled in both; not settled ones are not drawn)")
+    figure.tight_layout()
+    figure.savefig(path, dpi=110)
+    plt.close(figure)
 
 
 def _report_text(report: Dict[str, Any], best: Dict[str, Any]) -> str:
@@ -387,3 +423,10 @@ def _report_text(report: Dict[str, Any], best: Dict[str, Any]) -> str:
     lines += ["", pe.format_table(best["rows"], "Best parameter set of the full fit: tank plant, experiment gains, "
                                   "%s servos" % report["servo_model"])]
     return "\n".join(lines) + "\n"
+
+
+if __name__ == "__main__":  # the figure again from a study's identify.json: python -m ... REPORT.json OUT.png
+    import sys
+
+    with open(sys.argv[1]) as stream:
+        plot_report(json.load(stream), sys.argv[2])
