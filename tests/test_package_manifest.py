@@ -15,6 +15,7 @@ KEYS = {
     "matplotlib": "python3-matplotlib", "rospkg": "python3-rospkg", "tqdm": "python3-tqdm",
     "scipy": "python3-scipy", "rosbags": "python3-rosbags-pip",
     "distributed": "python3-dask-distributed-pip", "dask": "python3-dask-distributed-pip",
+    "cma": "python3-cma-pip", "SALib": "python3-salib-pip",
     "adafruit_extended_bus": "python3-adafruit-extended-bus-pip",
     "adafruit_pca9685": "python3-adafruit-circuitpython-pca9685-pip",
     "adafruit_ads1x15": "python3-adafruit-circuitpython-ads1x15-pip",
