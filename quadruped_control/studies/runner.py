@@ -226,13 +226,20 @@ class _EachTrial:
         return [self.fn(spec) for spec in specs]
 
 
+#: folders whose unused result files were already reported by this process (a study that runs the
+#: runner many times, such as the identification's generations, says it once)
+_REPORTED: set = set()
+
+
 def _report_stale(out_dir: str, paths: Sequence[Optional[str]], show: bool) -> int:
-    """Count (and, if ``show``, say in one line) the result files of ``out_dir`` that belong to none of
-    this study's keys: results of other specs, or of these specs computed by other code or configuration."""
+    """Count (and, if ``show``, say in one line, once per folder and process) the result files of
+    ``out_dir`` that belong to none of this call's keys: results of other specs (also an earlier stage of
+    the same study), or of these specs computed by other code or configuration."""
     folder = os.path.join(out_dir, "trials")
     current = {os.path.basename(p) for p in paths if p}
     stale = [name for name in os.listdir(folder) if name.endswith(".json") and name not in current]
-    if stale and show:
+    if stale and show and folder not in _REPORTED:
+        _REPORTED.add(folder)
         sys.stderr.write("study: %d result file(s) in %s belong to other trials, code or configuration; "
                          "they are not reused\n" % (len(stale), folder))
     return len(stale)

@@ -227,3 +227,14 @@ def test_a_file_named_by_a_spec_is_part_of_its_key(tmp_path) -> None:
     path.write_text("rope_length: 0.6\n")
     os.utime(path, ns=(1, 1))  # a new size or time: the remembered hash is not used
     assert spec_key(spec) != first
+
+
+def test_unused_result_files_are_reported_once_per_folder(tmp_path, capsys):
+    from quadruped_control.studies import runner
+
+    folder = tmp_path / "trials"
+    folder.mkdir()
+    (folder / "old.json").write_text("{}")
+    assert runner._report_stale(str(tmp_path), [], True) == 1
+    assert runner._report_stale(str(tmp_path), [], True) == 1  # counted again, said once
+    assert capsys.readouterr().err.count("not reused") == 1
