@@ -109,9 +109,11 @@ class PwmNode:
         rospy.logerr_throttle(1.0, "pwm_node: command rejected: %s" % reason)
 
     def _on_timer(self, _event) -> None:
-        if self.closed:
-            return
         with self.lock:
+            # Checked under the lock: a shutdown between a check outside it and the update would have
+            # the timer update an output that is already off (it raised "used before start()").
+            if self.closed:
+                return
             was_tripped = self.output.watchdog_tripped
             self.output.update()
             tripped = self.output.watchdog_tripped

@@ -38,7 +38,7 @@ Parameters
   ~lockstep_timeout (2.0 s wall: a step not answered by then advances anyway and is counted; the run is
   then no longer deterministic)
   ~lockstep_graph (["imu/data attitude_controller", "servo_command pwm_node"]: "topic node" pairs that
-  must be connected before simulated time starts)
+  must be connected, at the publishers' end too, before simulated time starts)
 Services
   ~imu_streaming    std_srvs/SetBool  stop / resume the fake VN-100's output (stale-IMU tests)
 """
@@ -59,7 +59,7 @@ from rosgraph_msgs.msg import Clock
 from std_srvs.srv import SetBool, SetBoolResponse
 
 from quadruped_common.ros.node_startup import start_node
-from quadruped_control.sim.lockstep import AnswerTracker, SimClock
+from quadruped_control.sim.lockstep import AnswerTracker, SimClock, missing_links
 
 from quadruped_common.config import ParameterError
 from quadruped_common.robot import JOINT_NAMES
@@ -235,26 +235,39 @@ class SimNode:
         self.answers.on_command(widths)
 
     def _lockstep_missing(self) -> List[str]:
-        """What the stack still lacks before simulated time may start (empty: ready)."""
+        """What the stack still lacks before simulated time may start (empty: ready): the VN-100 set up,
+        and every link of the control path up at both ends (:func:`missing_links`): the
+        ``~lockstep_graph`` topics from each of their publishers, the controller's answers to this node,
+        and /clock to every node on the path."""
         missing = []
         mode, divisor, _fields = self.vn100.binary_config[75]
         if mode not in (1, 3) or divisor <= 0 or self.vn100.async_paused:
             missing.append("VN-100 binary output not configured yet")
-        if self.state_sub.get_num_connections() == 0:
-            missing.append("no controller_state publisher connected")
-        master = rosgraph.Master(rospy.get_name())
-        for topic, node in self.lockstep_graph:
-            topic_name = rospy.resolve_name(topic)
-            node_name = node if node.startswith("/") else rosgraph.names.ns_join(rospy.get_namespace(), node)
+        me = rospy.get_name()
+        master = rosgraph.Master(me)
+        try:
+            publishers = {topic: nodes for topic, nodes in master.getSystemState()[0]}
+        except (rosgraph.MasterError, OSError, xmlrpc.client.Error) as exc:
+            return missing + ["master not reachable: %s" % exc]
+        wanted = [(rospy.resolve_name(topic), node if node.startswith("/") else
+                   rosgraph.names.ns_join(rospy.get_namespace(), node)) for topic, node in self.lockstep_graph]
+        wanted += [(self.state_sub.resolved_name, me), (self.command_sub.resolved_name, me)]
+        links = []
+        for topic, subscriber in wanted:
+            if not publishers.get(topic):
+                missing.append("no publisher of %s" % topic)
+            links += [(publisher, topic, subscriber) for publisher in publishers.get(topic, [])]
+        path_nodes = sorted({node for link in links for node in (link[0], link[2])} - {me})
+        links += [(me, "/clock", node) for node in path_nodes]
+
+        def bus_info(node: str):
             try:
-                _code, _message, info = xmlrpc.client.ServerProxy(master.lookupNode(node_name)).getBusInfo(
-                    rospy.get_name())
+                _code, _message, info = xmlrpc.client.ServerProxy(master.lookupNode(node)).getBusInfo(me)
+                return info
             except (rosgraph.MasterError, OSError, xmlrpc.client.Error):
-                missing.append("%s not up" % node_name)
-                continue
-            if not any(entry[2] == "i" and entry[4] == topic_name and entry[5] for entry in info):
-                missing.append("%s not connected to %s" % (node_name, topic_name))
-        return missing
+                return None
+
+        return missing + missing_links(links, bus_info)
 
     def _wait_until_ready(self) -> None:
         """Hold simulated time at its start until the control path is connected end to end (so no

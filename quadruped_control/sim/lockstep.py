@@ -20,7 +20,7 @@ from __future__ import annotations
 import math
 import threading
 from dataclasses import dataclass
-from typing import Optional, Sequence
+from typing import Callable, Iterable, List, Optional, Sequence, Tuple
 
 import numpy as np
 
@@ -118,6 +118,43 @@ class AnswerTracker:
                     return False
                 self._condition.wait(min(remaining, 0.001))
         return True
+
+
+#: One link of the lock-step graph: (publisher node, topic, subscriber node), all resolved names.
+Link = Tuple[str, str, str]
+
+
+def missing_links(links: Iterable[Link], bus_info: Callable[[str], Optional[Sequence[Sequence]]]) -> List[str]:
+    """The links that cannot carry a message yet, in words (empty: every link is up at both ends).
+
+    ``bus_info(node)`` is the node's ``getBusInfo`` list (ROS slave API: ``(id, endpoint, direction,
+    transport, topic, connected, info)`` per connection) or None when the node is not up. A link is up
+    when the subscriber lists a connected inbound connection on the topic *and* the publisher lists an
+    outbound one to that subscriber. The publisher's side matters: rospy answers a subscriber's
+    handshake before it adds the connection to the list it publishes to, so in between the subscriber
+    already shows "connected" while a message published then is silently lost. Asking only the
+    subscriber let the first IMU samples of a run vanish now and then under load, and the run was no
+    longer deterministic.
+    """
+    cache = {}
+
+    def info(node: str) -> Optional[Sequence[Sequence]]:
+        if node not in cache:
+            cache[node] = bus_info(node)
+        return cache[node]
+
+    missing: List[str] = []
+    for publisher, topic, subscriber in links:
+        inbound, outbound = info(subscriber), info(publisher)
+        if inbound is None:
+            missing.append("%s not up" % subscriber)
+        elif not any(entry[2] == "i" and entry[4] == topic and entry[5] for entry in inbound):
+            missing.append("%s not connected to %s" % (subscriber, topic))
+        if outbound is None:
+            missing.append("%s not up" % publisher)
+        elif not any(entry[2] == "o" and entry[4] == topic and entry[1] == subscriber for entry in outbound):
+            missing.append("%s does not publish %s to %s yet" % (publisher, topic, subscriber))
+    return list(dict.fromkeys(missing))
 
 
 @dataclass

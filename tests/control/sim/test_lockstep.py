@@ -5,7 +5,8 @@ import time
 import numpy as np
 import pytest
 
-from quadruped_control.sim.lockstep import AnswerTracker, SimClock, compare_trajectories, main, widths_match
+from quadruped_control.sim.lockstep import (AnswerTracker, SimClock, compare_trajectories, main, missing_links,
+                                            widths_match)
 
 
 def test_sim_clock_is_exact_multiples():
@@ -75,3 +76,35 @@ def test_compare_trajectories_on_common_stamps(tmp_path):
     assert main([str(tmp_path / "a.npz"), str(tmp_path / "b.npz"), "--tolerance", "1e-7",
                  "--min-samples", "100"]) == 1
     assert compare_trajectories([], [], stamps, q).same(1.0, 0) is False
+
+
+def _bus(*entries):
+    """getBusInfo rows: (id, endpoint, direction, transport, topic, connected, info)."""
+    return [(i, endpoint, direction, "TCPROS", topic, connected, "")
+            for i, (endpoint, direction, topic, connected) in enumerate(entries)]
+
+
+def test_missing_links_needs_both_ends_of_each_link():
+    links = [("/vn100_node", "/imu/data", "/attitude_controller")]
+    subscriber_only = {"/attitude_controller": _bus(("http://vn100:1", "i", "/imu/data", True)),
+                       "/vn100_node": _bus()}
+    # The subscriber already shows the connection, the publisher has not listed it yet: rospy would
+    # drop a message published now, so the link is not up.
+    assert missing_links(links, subscriber_only.get) == [
+        "/vn100_node does not publish /imu/data to /attitude_controller yet"]
+    both = dict(subscriber_only, **{"/vn100_node": _bus(("/attitude_controller", "o", "/imu/data", True))})
+    assert missing_links(links, both.get) == []
+    # An outbound connection to another node, or on another topic, does not count.
+    other = dict(subscriber_only, **{"/vn100_node": _bus(("/rosbag", "o", "/imu/data", True),
+                                                         ("/attitude_controller", "o", "/imu/raw", True))})
+    assert len(missing_links(links, other.get)) == 1
+
+
+def test_missing_links_reports_nodes_that_are_down_once():
+    links = [("/sim_node", "/clock", "/pwm_node"), ("/attitude_controller", "/servo_command", "/pwm_node")]
+    up = {"/sim_node": _bus(("/pwm_node", "o", "/clock", True)),
+          "/attitude_controller": _bus(("/pwm_node", "o", "/servo_command", True))}
+    assert missing_links(links, up.get) == ["/pwm_node not up"]
+    disconnected = dict(up, **{"/pwm_node": _bus(("http://sim:1", "i", "/clock", False),
+                                                 ("http://ctl:1", "i", "/servo_command", True))})
+    assert missing_links(links, disconnected.get) == ["/pwm_node not connected to /clock"]
