@@ -17,9 +17,16 @@ functions per trial:
 
 The stroke cycle's phase logic is written here once more, on per-trial state arrays instead of the
 robot's objects (pairs, recorded paths); the tests step both side by side and compare every state to
-1e-9. What the batch leaves out, because no simulated trial reaches it: the hold (safe state, scheme
-switches; a trial whose measurement the float controller would refuse is reported as ``refused``, frozen
-and stops being trusted), the coordinated stroke scheme, and timing changes during a trial.
+1e-9. What the compiled loop leaves out, because no simulated trial of the paper's scheme reaches it: the
+hold (safe state, scheme switches; a trial whose measurement the float controller would refuse is
+reported as ``refused``, frozen and stops being trusted) and timing changes during a trial.
+
+:class:`ControllerObjects` runs everything else: the robot's own
+:class:`~quadruped_control.control.controller.AttitudeController` objects, one per trial, stepped one
+after another with the same interface. The batch uses it for the coordinated stroke scheme (its
+workspace search and planned paths live on objects, and a second copy of them on arrays would be a
+second controller) and for trials with the controller switched off; only the plant, the servos and the
+recording are batched then.
 
 The paper's power strokes are straight lines (a constant velocity from the stroke's start), so the
 recorded stroke of :class:`~quadruped_control.control.strokes.base.StrokePath` is the segment from its
@@ -38,13 +45,13 @@ import numpy as np
 from quadruped_common.jit import jitable, kernel
 from quadruped_common.robot import LEGS
 from quadruped_control.control.allocation import foot_velocity_command_f
-from quadruped_control.control.controller import control_law_f
+from quadruped_control.control.controller import AttitudeController, control_law_f
 from quadruped_control.control.controller_config import ControllerConfig
 from quadruped_control.control.strokes.base import TIME_EPS, cubic_time_profile
 from quadruped_control.model.kinematics import _geometry, ik_row, joint_angles_floats
 from quadruped_control.model.params import RobotParams
 
-__all__ = ["BatchController", "controller_batch_step"]
+__all__ = ["BatchController", "ControllerObjects", "controller_batch_step"]
 
 
 @jitable
@@ -300,4 +307,58 @@ class BatchController:
                               self.saturated, self.positions, self.joints, self.velocities, self.path_start,
                               self.path_start_joints, self.path_end, self.power, self.phase_time, self.t_move,
                               self.t_total, self.t_pow, self.refused, self.ik_fallbacks)
+        return self.joints
+
+
+class ControllerObjects:
+    """N of the robot's own :class:`AttitudeController` objects, one per trial, with the interface of
+    :class:`BatchController` (module docstring): any stroke scheme, and ``enabled`` False for a trial
+    whose controller stays in its hold state (passive dynamics). A measurement the controller refuses
+    makes it hold for that step, as the per-trial engine does (counted in ``holds``); so, unlike the
+    compiled loop's, these trials are never ``refused``: they stay what the per-trial engine computes.
+
+    ``configs`` must share dt, max_step_factor and max_angular_rate (one clock for the batch)."""
+
+    def __init__(self, robot: RobotParams, configs: Sequence[ControllerConfig], setpoints: np.ndarray,
+                 enabled: Optional[Sequence[bool]] = None) -> None:
+        if not configs:
+            raise ValueError("a batch needs at least one trial")
+        first = configs[0]
+        for config in configs:
+            for shared in ("dt", "max_step_factor", "max_angular_rate"):
+                if getattr(config, shared) != getattr(first, shared):
+                    raise ValueError("the trials of a batch must share %s (%r != %r)"
+                                     % (shared, getattr(config, shared), getattr(first, shared)))
+        n = len(configs)
+        self.n = n
+        self.robot = robot
+        self.dt = float(first.dt)
+        self.enabled = np.ones(n, dtype=bool) if enabled is None else np.array(enabled, dtype=bool).reshape(n)
+        self.R_d = np.array(setpoints, dtype=float).reshape(n, 3, 3)
+        self.controllers = [AttitudeController(robot, config) for config in configs]
+        for controller, R_d in zip(self.controllers, self.R_d):
+            controller.set_setpoint(R_d)
+        self.joints = np.array([controller.stroke.nominal_joints for controller in self.controllers], dtype=float)
+        self.tau_sat = np.zeros((n, 3))
+        self.power = np.zeros((n, 2), dtype=bool)
+        self.refused = np.zeros(n, dtype=bool)
+        self.holds = np.zeros(n, dtype=np.int64)
+        self.ik_fallbacks = np.zeros(n, dtype=np.int64)
+
+    def step(self, t: float, R: np.ndarray, omega: np.ndarray) -> np.ndarray:
+        """One step of every controller at ``t`` with R (N, 3, 3), omega (N, 3); returns the joint
+        targets (N, 4, 3), updated in place by the next step; fills ``tau_sat`` and ``power``."""
+        for i, controller in enumerate(self.controllers):
+            if not self.enabled[i]:
+                output = controller.hold(t, "controller off")
+            else:
+                try:
+                    output = controller.step(t, R[i], omega[i])
+                except ValueError as exc:
+                    self.holds[i] += 1
+                    output = controller.hold(t, "bad measurement: %s" % exc)
+            self.joints[i] = output.joint_targets
+            self.tau_sat[i] = output.state.tau_sat
+            phases = output.state.pair_phase
+            self.power[i, 0], self.power[i, 1] = phases[0] == "power", phases[1] == "power"
         return self.joints

@@ -11,10 +11,16 @@ plant (:class:`~quadruped_control.sim.plants.paper_batch.PaperPlantBatch` or
 grid t_k = k dt and the recorded samples are those of the per-trial engine, and the tests compare the
 two trial by trial (states to 1e-9 over the first 10 s, the same metrics).
 
-Each trial has its own gains, torque limit, stroke timing, setpoint, initial attitude, servo model and
-centre-of-buoyancy offset; the robot, the controller's period, leg pairs and feedforward switches are
-shared (:class:`BatchTrial`). Not batched yet (the per-trial engine runs them): IMU noise, the
-coordinated stroke scheme, the controller off.
+Each trial has its own gains, torque limit, stroke timing, setpoint, initial attitude, servo model,
+centre-of-buoyancy offset or tank parameters, IMU noise (its own seeded generator, drawn as the per-trial
+engine draws, :func:`~quadruped_control.sim.simulation.imu_measurement`) and stroke scheme; the robot and
+the controller's period are shared (:class:`BatchTrial`). When every trial runs the paper's stroke scheme
+with the controller on, the controller is the compiled loop of
+:class:`~quadruped_control.control.batch.BatchController`; otherwise (the coordinated scheme, the
+controller off) it is the robot's own controller objects,
+:class:`~quadruped_control.control.batch.ControllerObjects`, and only the plant, servos and recording
+are batched. ``run(..., stroke_metrics=True)`` accumulates the stroke-scheme figures as it goes
+(:class:`~quadruped_control.sim.stroke_metrics.StrokeTorqueMetrics`).
 
 Memory: the recorded attitude (roll, pitch, yaw and the geodesic error, float64) costs 32 bytes per
 trial and step, 0.86 GB for 1,500 trials of 180 s; the full states are kept only for the first
@@ -32,13 +38,15 @@ import numpy as np
 from quadruped_common.jit import kernel
 from quadruped_common.so3 import geodesic_f, rotations_to_rpy, rpy_f
 from quadruped_control.analysis.metrics import compute_metrics
-from quadruped_control.control.batch import BatchController
+from quadruped_control.control.batch import BatchController, ControllerObjects
 from quadruped_control.control.controller_config import ControllerConfig
 from quadruped_control.model.params import RobotParams
 from quadruped_control.sim.plants.paper_batch import PaperPlantBatch
 from quadruped_control.sim.plants.tank import TankParams
 from quadruped_control.sim.plants.tank_batch import TankPlantBatch
 from quadruped_control.sim.servo_model import ServoParams, servo_batch_step
+from quadruped_control.sim.simulation import imu_measurement
+from quadruped_control.sim.stroke_metrics import StrokeTorqueMetrics
 
 __all__ = ["BatchResult", "BatchSimulation", "BatchTrial"]
 
@@ -58,6 +66,12 @@ class BatchTrial:
     restoring_offset: Optional[Sequence[float]] = None
     #: the tank plant's parameters (:class:`~quadruped_control.sim.plants.tank.TankParams`); None: the paper plant
     tank: Optional[TankParams] = None
+    #: IMU noise std: attitude (rad, rotation vector) and gyro (rad/s), drawn from default_rng(seed)
+    attitude_noise: float = 0.0
+    gyro_noise: float = 0.0
+    seed: int = 0
+    #: False: the controller stays in its hold state (passive dynamics)
+    controller_enabled: bool = True
 
 
 @dataclass
@@ -66,7 +80,8 @@ class BatchResult:
     (N, 3) rad; ``failed`` (N,) trials whose plant step failed (kinematics or a non-finite state) and
     ``refused`` (N,) trials whose measurement the robot's controller would have refused (it would hold),
     both untrustworthy from then on; ``states``: the first steps' (p, v, R, omega, joint positions) per
-    trial when recorded; ``ik_fallbacks`` (N,)."""
+    trial when recorded; ``ik_fallbacks`` (N,); ``stroke_metrics``: per trial, when asked for
+    (:class:`~quadruped_control.sim.stroke_metrics.StrokeTorqueMetrics`)."""
 
     t: np.ndarray
     rpy: np.ndarray
@@ -77,6 +92,7 @@ class BatchResult:
     ik_fallbacks: np.ndarray
     wall_time: float
     states: Optional[Dict[str, np.ndarray]] = None
+    stroke_metrics: Optional[List[Dict[str, float]]] = None
 
     @property
     def n(self) -> int:
@@ -120,7 +136,18 @@ class BatchSimulation:
         self.robot = robot
         self.trials = list(trials)
         setpoints = np.array([np.asarray(t.setpoint, dtype=float) for t in trials])
-        self.controller = BatchController(robot, [t.config for t in trials], setpoints)
+        configs = [t.config for t in trials]
+        if all(t.config.stroke_scheme == "paper" and t.controller_enabled for t in trials):
+            self.controller: Any = BatchController(robot, configs, setpoints)
+        else:
+            self.controller = ControllerObjects(robot, configs, setpoints, [t.controller_enabled for t in trials])
+        for trial in trials:
+            for name in ("attitude_noise", "gyro_noise"):
+                value = getattr(trial, name)
+                if not (math.isfinite(value) and value >= 0.0):
+                    raise ValueError("%s must be a finite non-negative std, got %r" % (name, value))
+        self.noisy = [i for i, t in enumerate(trials) if t.attitude_noise > 0.0 or t.gyro_noise > 0.0]
+        self.rngs = {i: np.random.default_rng(int(trials[i].seed)) for i in self.noisy}
         self.dt = self.controller.dt
         tank = [trial.tank is not None for trial in trials]
         if any(tank) and not all(tank):
@@ -160,10 +187,28 @@ class BatchSimulation:
         servo_batch_step(self.q, command, self.ideal, self.max_speed, self.time_constant, h, out)
         return out
 
+    def _measure(self):
+        """What each trial's IMU reports: the true state, with noise where the trial has some."""
+        if not self.noisy:
+            return self.rotation, self.omega
+        R, omega = self.rotation.copy(), self.omega.copy()
+        for i in self.noisy:
+            trial = self.trials[i]
+            R[i], omega[i] = imu_measurement(self.rngs[i], self.rotation[i], self.omega[i], trial.attitude_noise,
+                                             trial.gyro_noise)
+        return R, omega
+
+    def _control(self) -> np.ndarray:
+        """The controllers' step at t_k on the measurement; the joint targets (N, 4, 3)."""
+        return self.controller.step(self.k * self.dt, *self._measure())
+
     def step(self) -> None:
         """One control period of every trial: measure at t_k, control, hold the joint targets to t_k+1."""
+        self._advance(self._control())
+
+    def _advance(self, targets: np.ndarray) -> None:
+        """Servos and plant from t_k to t_k+1 with the joint targets of t_k."""
         h = self.dt
-        targets = self.controller.step(self.k * self.dt, self.rotation, self.omega)
         q_start = self.q
         q_end = self._servo(targets, h)
         mid = 0.5 * (q_start + q_end)
@@ -173,9 +218,11 @@ class BatchSimulation:
         self.q = q_end
         self.k += 1
 
-    def run(self, duration: float, record_states: int = 0) -> BatchResult:
+    def run(self, duration: float, record_states: int = 0, stroke_metrics: bool = False) -> BatchResult:
         """Simulate ``duration`` s: round(duration / dt) + 1 samples per trial, as the per-trial engine
-        records them; ``record_states``: keep the full states of the first that many samples."""
+        records them; ``record_states``: keep the full states of the first that many samples;
+        ``stroke_metrics``: accumulate the stroke-scheme figures (the controller then also runs at the last
+        sample, as the per-trial engine does, for its stroke phase)."""
         duration = float(duration)
         if not (math.isfinite(duration) and duration > 0.0):
             raise ValueError("duration must be a positive finite number of seconds, got %r" % (duration,))
@@ -189,18 +236,21 @@ class BatchSimulation:
         states: Dict[str, List[np.ndarray]] = {"position": [], "velocity": [], "rotation": [], "omega": [],
                                                "joints": []}
         setpoints = self.controller.R_d
+        metrics = StrokeTorqueMetrics(self.robot, n) if stroke_metrics else None
         start = time.perf_counter()
         # A diverging trial turns its own rows non-finite (flagged in ``failed``, then frozen): no warnings.
         with np.errstate(all="ignore"):
-            self._record_loop(samples, steps, kept, times, rpy, geodesic, states, setpoints)
+            self._record_loop(samples, steps, kept, times, rpy, geodesic, states, setpoints, metrics)
         wall = time.perf_counter() - start
         recorded = {key: np.stack(values, axis=1) for key, values in states.items()} if kept else None
         return BatchResult(t=times, rpy=rpy, geodesic=geodesic, setpoint_rpy=rotations_to_rpy(setpoints),
                            failed=self.plant.failed.copy(), refused=self.controller.refused.copy(),
-                           ik_fallbacks=self.controller.ik_fallbacks.copy(), wall_time=wall, states=recorded)
+                           ik_fallbacks=self.controller.ik_fallbacks.copy(), wall_time=wall, states=recorded,
+                           stroke_metrics=metrics.results() if metrics is not None else None)
 
     def _record_loop(self, samples: int, steps: int, kept: int, times: np.ndarray, rpy: np.ndarray,
-                     geodesic: np.ndarray, states: Dict[str, List[np.ndarray]], setpoints: np.ndarray) -> None:
+                     geodesic: np.ndarray, states: Dict[str, List[np.ndarray]], setpoints: np.ndarray,
+                     metrics: Optional[StrokeTorqueMetrics]) -> None:
         setpoint_rows = np.ascontiguousarray(setpoints.reshape(-1, 9))
         for i in range(samples):
             times[i] = self.k * self.dt
@@ -209,5 +259,14 @@ class BatchSimulation:
                 for key, value in (("position", self.position), ("velocity", self.velocity),
                                    ("rotation", self.rotation), ("omega", self.omega), ("joints", self.q)):
                     states[key].append(value.copy())
+            if metrics is None:
+                if i < steps:
+                    self.step()
+                continue
+            # The state of sample i and the controller's answer to it (metrics.add copies; the plant steps
+            # its arrays in place).
+            targets = self._control()
+            metrics.add(times[i], self.q.reshape(self.n, 12), self.rotation, self.omega, self.controller.tau_sat,
+                        np.any(self.controller.power, axis=1))
             if i < steps:
-                self.step()
+                self._advance(targets)

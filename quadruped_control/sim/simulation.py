@@ -53,6 +53,7 @@ __all__ = [
     "SimulationError",
     "SimulationResult",
     "SimulationSettings",
+    "imu_measurement",
     "load_simulation_settings",
     "nominal_joint_angles",
 ]
@@ -377,6 +378,18 @@ class SimulationResult:
 # Closed loop
 # --------------------------------------------------------------------------------------------------
 
+def imu_measurement(rng: np.random.Generator, R: np.ndarray, omega: np.ndarray, attitude_noise: float,
+                    gyro_noise: float) -> Tuple[np.ndarray, np.ndarray]:
+    """What the simulated IMU reports for the true (R, omega): R exp(n_R^) with n_R ~ N(0, attitude_noise^2 I)
+    (a rotation-vector error, rad) and omega + n_w with n_w ~ N(0, gyro_noise^2 I) (rad/s); the draws in
+    that order from ``rng``, none for a zero std (so noise-free runs draw nothing)."""
+    if attitude_noise > 0.0:
+        R = R @ exp_so3(rng.normal(0.0, attitude_noise, 3))
+    if gyro_noise > 0.0:
+        omega = omega + rng.normal(0.0, gyro_noise, 3)
+    return R, omega
+
+
 class ClosedLoopSimulation:
     """Controller + plant at the controller's period (the paper's RK4 with dt = 0.01 s).
 
@@ -424,12 +437,7 @@ class ClosedLoopSimulation:
         return self.k * self.dt
 
     def _measure(self, state: RigidBodyState) -> Tuple[np.ndarray, np.ndarray]:
-        R, omega = state.rotation, state.omega
-        if self.attitude_noise > 0.0:
-            R = R @ exp_so3(self._rng.normal(0.0, self.attitude_noise, 3))
-        if self.gyro_noise > 0.0:
-            omega = omega + self._rng.normal(0.0, self.gyro_noise, 3)
-        return R, omega
+        return imu_measurement(self._rng, state.rotation, state.omega, self.attitude_noise, self.gyro_noise)
 
     def step(self) -> Tuple[RigidBodyState, ControllerOutput]:
         """One control period: measure at t_k, control, hold the joint targets until t_k+1.

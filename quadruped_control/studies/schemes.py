@@ -25,7 +25,7 @@ import numpy as np
 from quadruped_control.studies.cases import paper_sim_cases, random_cases, table1_cases
 from quadruped_control.studies.trial import TrialSpec, run_many
 
-__all__ = ["build_specs", "compare", "main_study"]
+__all__ = ["build_specs", "compare", "main_study", "trial_row"]
 
 SCHEME_ORDER = ("paper", "coordinated")
 PERTURBATION_DEG = 0.5
@@ -59,7 +59,8 @@ def build_specs(perturbed: int = 1, gain_sets: Sequence[str] = ("simulation", "e
     return specs
 
 
-def _row(summary: Dict[str, Any]) -> Dict[str, Any]:
+def trial_row(summary: Dict[str, Any]) -> Dict[str, Any]:
+    """One row of the study's table from a trial's summary (label 'case|start|gains|servo|scheme')."""
     case, start, gains, servo, scheme = summary["label"].split("|")
     m = summary["metrics"]
     return dict(case=case, start=int(start), gains=gains, servo=servo, scheme=scheme, settled=m["settled"],
@@ -201,7 +202,7 @@ def main_study(args: Any) -> int:
     start = time.perf_counter()
     summaries = run_many(specs, args, "schemes")
     wall = time.perf_counter() - start
-    rows = sorted((_row(s) for s in summaries), key=lambda r: (r["case"], r["start"], r["gains"], r["servo"],
+    rows = sorted((trial_row(s) for s in summaries), key=lambda r: (r["case"], r["start"], r["gains"], r["servo"],
                                                                 r["scheme"]))
     result = compare(rows)
     result.update(study="schemes", wall_time=wall, trials=len(rows), perturbed_starts=args.perturbed,

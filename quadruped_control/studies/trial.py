@@ -192,21 +192,18 @@ def batch_unsupported(spec: TrialSpec) -> Optional[str]:
     """Why the batched engine (:mod:`quadruped_control.sim.batch`) cannot run ``spec``, or None if it can."""
     if spec.plant not in ("paper", "tank"):
         return "plant %r" % spec.plant
-    if spec.attitude_noise_deg or spec.gyro_noise:
-        return "IMU noise"
-    if spec.controller != "on":
-        return "controller off"
-    if spec.scheme not in (None, "paper"):
-        return "stroke scheme %r" % spec.scheme
-    if spec.out_dir or spec.scheme_metrics:
-        return "per-trial files or stroke metrics"
+    if spec.out_dir:
+        return "per-trial files (time series, figures)"
     return None
 
 
 def _batch_group(spec: TrialSpec) -> Tuple[Any, ...]:
-    """Specs with the same key share a robot, a period, a duration and a plant: one batch."""
+    """Specs with the same key share a robot, a period, a duration and a plant: one batch. The paper's
+    scheme with the controller on runs the compiled controller loop, anything else the controller
+    objects (:class:`~quadruped_control.sim.batch.BatchSimulation`): kept apart so the former stay fast."""
+    compiled = spec.scheme in (None, "paper") and spec.controller == "on"
     return (spec.robot_yaml, spec.robot_overrides, spec.controller_yaml, spec.simulation_yaml, spec.duration,
-            spec.plant)
+            spec.plant, compiled)
 
 
 def run_batch(specs: Sequence[TrialSpec]) -> List[Dict[str, Any]]:
@@ -234,10 +231,13 @@ def run_batch(specs: Sequence[TrialSpec]) -> List[Dict[str, Any]]:
                              initial=rpy_to_rot(*np.radians(specs[i].initial_rpy_deg)),
                              servo_model=specs[i].servo_model, servo_params=setup.servo_params,
                              restoring_offset=specs[i].restoring_offset,
-                             tank=setup.model.tank if setup.model is not None else None)
+                             tank=setup.model.tank if setup.model is not None else None, seed=specs[i].seed,
+                             attitude_noise=math.radians(specs[i].attitude_noise_deg), gyro_noise=specs[i].gyro_noise,
+                             controller_enabled=specs[i].controller == "on")
                   for i, setup in zip(indices, setups)]
         robot = setups[0].robot
-        result = BatchSimulation(robot, trials).run(specs[indices[0]].duration)
+        result = BatchSimulation(robot, trials).run(specs[indices[0]].duration,
+                                                    stroke_metrics=any(specs[i].scheme_metrics for i in indices))
         for row, (i, setup) in enumerate(zip(indices, setups)):
             spec = specs[i]
             if not result.trusted(row):
@@ -249,8 +249,12 @@ def run_batch(specs: Sequence[TrialSpec]) -> List[Dict[str, Any]]:
                     "plant": spec.plant, "engine": "batch", "batch_size": len(indices),
                     "gains": dataclasses.asdict(config.gains), "tau_max": config.tau_max,
                     "t_rec": config.t_rec, "t_pow_max": config.t_pow_max,
-                    "ik_fallbacks": int(result.ik_fallbacks[row])}
+                    "ik_fallbacks": int(result.ik_fallbacks[row]), "seed": spec.seed,
+                    "attitude_noise_deg": spec.attitude_noise_deg, "gyro_noise": spec.gyro_noise,
+                    "controller": spec.controller}
             summary = _summary(spec, setup, metrics, info, result.wall_time, result.real_time_factor)
+            if spec.scheme_metrics:
+                summary["scheme_metrics"] = result.stroke_metrics[row]
             if spec.keep_trace:
                 summary["trace"] = _trace(spec, result.t, result.rpy[row], result.setpoint_rpy[row],
                                           result.geodesic[row])
@@ -259,31 +263,18 @@ def run_batch(specs: Sequence[TrialSpec]) -> List[Dict[str, Any]]:
 
 
 def stroke_metrics(result: SimulationResult, robot: Any, every: int = 5) -> Dict[str, float]:
-    """Torque delivered by the paws, eq. (torque_leg) from the simulated joints (every ``every``-th sample,
-    joint rates by central differences), against the commanded tau_sat: the mean delivered component along
-    tau_sat over the mean |tau_sat| (``torque_ratio``) and the mean delivered component across it over the
-    mean |tau_sat| (``torque_sideways``); and the fraction of samples with some pair in power."""
-    from quadruped_control.control.allocation import estimate_body_torque
+    """The stroke metrics of one recorded trial
+    (:class:`~quadruped_control.sim.stroke_metrics.StrokeTorqueMetrics`, which the batched engine feeds
+    as it runs): torque delivered by the paws (eq. torque_leg from the simulated joints, every
+    ``every``-th sample) against tau_sat, and the fraction of samples with some pair in power."""
+    from quadruped_control.sim.stroke_metrics import StrokeTorqueMetrics
 
-    n = result.t.size
-    q = result.joint_positions.reshape(n, 4, 3)
-    q_dot = np.gradient(q, result.t, axis=0)
-    along, across, commanded = [], [], []
-    for k in range(1, n - 1, every):
-        tau_sat = result.tau_sat[k]
-        norm = float(np.linalg.norm(tau_sat))
-        delivered = estimate_body_torque(q[k], q_dot[k], result.rotation[k], result.omega[k], robot)
-        commanded.append(norm)
-        if norm > 1e-9:
-            unit = tau_sat / norm
-            along.append(float(delivered @ unit))
-            across.append(float(np.linalg.norm(delivered - (delivered @ unit) * unit)))
-    mean_cmd = float(np.mean(commanded)) if commanded else 0.0
+    metrics = StrokeTorqueMetrics(robot, 1, every)
     power = np.any(result.pair_phase == "power", axis=1)
-    return {"torque_commanded_mean": mean_cmd,
-            "torque_ratio": float(np.sum(along) / len(commanded) / mean_cmd) if mean_cmd > 0 else 0.0,
-            "torque_sideways": float(np.sum(across) / len(commanded) / mean_cmd) if mean_cmd > 0 else 0.0,
-            "power_fraction": float(np.mean(power))}
+    for k in range(result.t.size):
+        metrics.add(result.t[k], result.joint_positions[k], result.rotation[k], result.omega[k], result.tau_sat[k],
+                    power[k])
+    return metrics.result(0)
 
 
 def write_trial(result: SimulationResult, metrics: Dict[str, Any], out_dir: str, title: str = "") -> None:

@@ -31,6 +31,16 @@ def _cases():
     return cases
 
 
+def _assert_states_agree(result, i, out, what):
+    """Every state (R, omega, p, servo angles) of batch trial ``i`` against the per-trial result, to 1e-9."""
+    states = result.states
+    for name, expected, got in (("R", out.rotation, states["rotation"][i]), ("omega", out.omega, states["omega"][i]),
+                                ("p", out.position, states["position"][i]),
+                                ("q", out.joint_positions, states["joints"][i].reshape(-1, 12))):
+        error = float(np.max(np.abs(expected - got)))
+        assert error <= 1e-9, "%s: %s differs by %.3g" % (what, name, error)
+
+
 def test_batch_states_agree_with_the_per_trial_engine_to_1e_9_over_10_s(robot):
     """Every state (p, v, R, omega, servo angles) of 16 mixed trials (both gain sets, both servo models,
     roll/yaw/combined setpoints, a tilted start) against the per-trial engine, sample by sample."""
@@ -47,12 +57,7 @@ def test_batch_states_agree_with_the_per_trial_engine_to_1e_9_over_10_s(robot):
         sim = ClosedLoopSimulation(robot, configs[g], make_servo_model(servo, servo_params),
                                    initial_R=initial[i], setpoint_R=rpy_to_rot(*np.radians(rpy)))
         out = sim.run(duration)
-        states = result.states
-        for name, expected, got in (("R", out.rotation, states["rotation"][i]), ("omega", out.omega, states["omega"][i]),
-                                    ("p", out.position, states["position"][i]),
-                                    ("q", out.joint_positions, states["joints"][i].reshape(-1, 12))):
-            error = float(np.max(np.abs(expected - got)))
-            assert error <= 1e-9, "%s %s %s: %s differs by %.3g" % (g, rpy, servo, name, error)
+        _assert_states_agree(result, i, out, "%s %s %s" % (g, rpy, servo))
         np.testing.assert_allclose(result.geodesic[i], out.geodesic, rtol=0, atol=1e-9)
         np.testing.assert_allclose(result.rpy[i], out.rpy, rtol=0, atol=1e-9)
 
@@ -80,8 +85,8 @@ def test_a_diverging_trial_is_flagged_and_frozen_without_stopping_the_others(rob
 
 def test_batch_refuses_what_it_does_not_run(robot):
     config = load_controller_config(None, "simulation")
-    with pytest.raises(ValueError, match="paper"):
-        BatchSimulation(robot, [BatchTrial(config=config.replace(stroke_scheme="coordinated"), setpoint=np.eye(3))])
+    with pytest.raises(ValueError, match="attitude_noise"):
+        BatchSimulation(robot, [BatchTrial(config=config, setpoint=np.eye(3), attitude_noise=-1.0)])
     with pytest.raises(ValueError, match="share dt"):
         BatchSimulation(robot, [BatchTrial(config=config, setpoint=np.eye(3)),
                                 BatchTrial(config=config.replace(dt=0.02), setpoint=np.eye(3))])
@@ -91,6 +96,51 @@ def test_batch_refuses_what_it_does_not_run(robot):
         BatchSimulation(robot, [BatchTrial(config=config, setpoint=np.eye(3), servo_model="fast")])
     with pytest.raises(ValueError, match="duration"):
         BatchSimulation(robot, [BatchTrial(config=config, setpoint=np.eye(3))]).run(float("nan"))
+
+
+def _objects_cases():
+    """(scheme, controller on, attitude noise rad, gyro noise rad/s, seed, setpoint rpy deg, servo)."""
+    return [("coordinated", True, 0.0, 0.0, 0, (45.0, 0.0, 0.0), "rate-limited"),
+            ("coordinated", True, 0.0, 0.0, 0, (15.0, 15.0, 15.0), "ideal"),
+            ("coordinated", True, math.radians(0.5), 0.01, 7, (0.0, 0.0, 75.0), "rate-limited"),
+            ("paper", False, 0.0, 0.0, 0, (30.0, 0.0, 0.0), "ideal"),
+            ("paper", True, math.radians(1.0), 0.02, 3, (30.0, -20.0, 60.0), "rate-limited")]
+
+
+@pytest.mark.parametrize("plant", ["paper", "tank"])
+def test_controller_objects_batch_agrees_with_the_per_trial_engine_to_1e_9_over_10_s(robot, plant):
+    """The coordinated scheme, IMU noise and the controller off (the robot's own controller objects
+    inside the batch) against the per-trial engine: every state to 1e-9 over 10 s, and the stroke
+    metrics of the schemes study."""
+    from quadruped_control.sim.plants.tank import TankModel, load_tank_params
+    from quadruped_control.studies.trial import stroke_metrics
+
+    servo_params = load_servo_params()
+    base = load_controller_config(None, "experiment")
+    tank = load_tank_params() if plant == "tank" else None
+    cases = _objects_cases()
+    trials, sims = [], []
+    for i, (scheme, on, attitude_noise, gyro_noise, seed, rpy, servo) in enumerate(cases):
+        config = base.replace(stroke_scheme=scheme)
+        initial = rpy_to_rot(*np.radians((5.0 * i, -3.0, 10.0)))
+        setpoint = rpy_to_rot(*np.radians(rpy))
+        trials.append(BatchTrial(config=config, setpoint=setpoint, initial=initial, servo_model=servo,
+                                 servo_params=servo_params, tank=tank, attitude_noise=attitude_noise,
+                                 gyro_noise=gyro_noise, seed=seed, controller_enabled=on))
+        sims.append(ClosedLoopSimulation(robot, config, make_servo_model(servo, servo_params), initial_R=initial,
+                                         setpoint_R=setpoint, seed=seed, attitude_noise=attitude_noise,
+                                         gyro_noise=gyro_noise, controller_enabled=on,
+                                         model=TankModel(robot, tank) if tank is not None else None))
+    result = BatchSimulation(robot, trials).run(10.0, record_states=1001, stroke_metrics=True)
+    assert not result.failed.any() and not result.refused.any()
+    for i, sim in enumerate(sims):
+        out = sim.run(10.0)
+        _assert_states_agree(result, i, out, "case %r" % (cases[i],))
+        expected = stroke_metrics(out, robot)
+        for key, value in expected.items():
+            assert result.stroke_metrics[i][key] == pytest.approx(value, rel=1e-9, abs=1e-12), (cases[i], key)
+        if cases[i][0] == "coordinated":
+            assert 0.0 < expected["power_fraction"] < 1.0 and expected["torque_commanded_mean"] > 0.0
 
 
 def test_tank_batch_agrees_with_the_per_trial_tank_plant_to_1e_9_over_10_s(robot):
@@ -127,12 +177,7 @@ def test_tank_batch_agrees_with_the_per_trial_tank_plant_to_1e_9_over_10_s(robot
     assert not result.failed.any() and not result.refused.any()
     for i, sim in enumerate(sims):
         out = sim.run(10.0)
-        states = result.states
-        for name, expected, got in (("R", out.rotation, states["rotation"][i]), ("omega", out.omega, states["omega"][i]),
-                                    ("p", out.position, states["position"][i]),
-                                    ("q", out.joint_positions, states["joints"][i].reshape(-1, 12))):
-            error = float(np.max(np.abs(expected - got)))
-            assert error <= 1e-9, "trial %d (%s): %s differs by %.3g" % (i, specs[i].label, name, error)
+        _assert_states_agree(result, i, out, "trial %d (%s)" % (i, specs[i].label))
 
 
 @pytest.mark.skipif(not jit.AVAILABLE, reason="numba is not installed: the batch already runs the plain functions")

@@ -44,12 +44,32 @@ def test_run_batch_gives_the_per_trial_metrics_for_mixed_plants_and_durations():
 def test_batch_unsupported_names_the_reason_and_run_batch_refuses():
     base = _specs()[0]
     assert batch_unsupported(base) is None
-    for change, reason in ((dict(attitude_noise_deg=1.0), "noise"), (dict(controller="off"), "controller off"),
-                           (dict(scheme="coordinated"), "coordinated"), (dict(scheme_metrics=True), "stroke metrics")):
+    for change, reason in ((dict(out_dir="/tmp/uq_never_written"), "per-trial files"), (dict(plant="cube"), "plant")):
         spec = dataclasses.replace(base, **change)
         assert reason in batch_unsupported(spec)
         with pytest.raises(ValueError, match="cannot run batched"):
             run_batch([base, spec])
+
+
+def test_run_batch_runs_noise_controller_off_and_the_coordinated_scheme_as_the_per_trial_engine():
+    """These run on the robot's own controller objects inside the batch, with the stroke metrics of the
+    schemes study: the same summaries as the per-trial engine."""
+    base = dataclasses.replace(_specs()[1], keep_trace=False)
+    specs = [dataclasses.replace(base, label="noisy", attitude_noise_deg=0.5, gyro_noise=0.01, seed=4),
+             dataclasses.replace(base, label="off", controller="off"),
+             dataclasses.replace(base, label="coordinated", scheme="coordinated", scheme_metrics=True),
+             dataclasses.replace(base, label="paper metrics", scheme_metrics=True)]
+    for spec in specs:
+        assert batch_unsupported(spec) is None
+    for spec, summary in zip(specs, run_batch(specs)):
+        expected = run_trial(spec)
+        assert summary["scheme"] == expected["scheme"] and summary["info"]["controller"] == expected["info"]["controller"]
+        a, b = summary["metrics"]["geodesic"], expected["metrics"]["geodesic"]
+        assert a["final_smoothed_deg"] == pytest.approx(b["final_smoothed_deg"], abs=1e-6), spec.label
+        assert ("scheme_metrics" in summary) == spec.scheme_metrics
+        if spec.scheme_metrics:
+            for key, value in expected["scheme_metrics"].items():
+                assert summary["scheme_metrics"][key] == pytest.approx(value, rel=1e-9, abs=1e-12), (spec.label, key)
 
 
 def test_run_batch_stops_a_trial_the_robots_controller_would_hold():
@@ -68,10 +88,10 @@ def test_the_engine_choice_of_a_study():
     many = [dataclasses.replace(spec, label="t%d" % i) for i in range(AUTO_BATCH_MIN)]
     assert use_batch_engine(many, "auto") and not use_batch_engine(many[:-1], "auto")
     assert not use_batch_engine(many, "trial") and use_batch_engine(many[:1], "batch")
-    noisy = many[:-1] + [dataclasses.replace(spec, label="noisy", gyro_noise=0.01)]
-    assert not use_batch_engine(noisy, "auto")  # one trial the batch cannot run: all per trial
-    with pytest.raises(ParameterError, match="noisy.*noise"):
-        use_batch_engine(noisy, "batch")
+    with_files = many[:-1] + [dataclasses.replace(spec, label="files", out_dir="/tmp/uq_never_written")]
+    assert not use_batch_engine(with_files, "auto")  # one trial the batch cannot run: all per trial
+    with pytest.raises(ParameterError, match="files.*per-trial files"):
+        use_batch_engine(with_files, "batch")
     with pytest.raises(ParameterError, match="engine"):
         use_batch_engine(many, "gpu")
 
