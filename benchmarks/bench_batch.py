@@ -1,16 +1,17 @@
 """Benchmark of the batched simulator (:mod:`quadruped_control.sim.batch`): real-time factor per core
 against the batch size N, and peak memory.
 
-Run: .venv/bin/python benchmarks/bench_batch.py [--plant paper|tank] [--sizes 1 15 240 1500] [--duration 180]
-[--runs 3]
+Run: .venv/bin/python benchmarks/bench_batch.py [--plant paper|tank] [--scheme paper|coordinated]
+[--sizes 1 15 240 1500] [--duration 180] [--runs 3]
 
 Each N runs in a fresh process (so its peak resident memory is its own): N trials of ``--duration`` s
-on the ``--plant`` (tank: config/tank.yaml) with rate-limited servos and the experiment gains, the paper's stroke scheme, the
-setpoints cycling through Table 1's fifteen cases (16 parameter sets x 15 trials at N = 240: the gains
-scaled by 0.7 .. 1.3 per set). Prints, per N, the aggregate real-time factor on one core (simulated
-seconds of all trials per wall second) as min / median / max of ``--runs`` runs, the same for the
-per-trial engine at N = 1 for comparison, and the peak RSS. The coordinated scheme is not batched yet
-(the engine refuses it); run nothing else beside it (2 shared cores).
+on the ``--plant`` (tank: config/tank.yaml) with rate-limited servos and the experiment gains, the
+``--scheme`` stroke scheme (the paper's runs the compiled controller loop, the coordinated one the
+robot's controller objects inside the batch), the setpoints cycling through Table 1's fifteen cases
+(16 parameter sets x 15 trials at N = 240: the gains scaled by 0.7 .. 1.3 per set). Prints, per N, the
+aggregate real-time factor on one core (simulated seconds of all trials per wall second) as min /
+median / max of ``--runs`` runs, the same for the per-trial engine at N = 1 for comparison, and the
+peak RSS. Run nothing else beside it (2 shared cores).
 """
 import argparse
 import dataclasses
@@ -36,8 +37,8 @@ from quadruped_control.sim.simulation import ClosedLoopSimulation  # noqa: E402
 from quadruped_control.studies.paper_experiments import PAPER_TABLE, initial_attitude, setpoint_rpy_deg  # noqa: E402
 
 
-def _trials(n, plant):
-    base = load_controller_config(None, "experiment")
+def _trials(n, plant, scheme):
+    base = load_controller_config(None, "experiment").replace(stroke_scheme=scheme)
     servo = load_servo_params()
     tank = load_tank_params() if plant == "tank" else None
     if tank is not None:
@@ -55,18 +56,18 @@ def _trials(n, plant):
     return trials
 
 
-def one_size(n, duration, runs, plant):
+def one_size(n, duration, runs, plant, scheme):
     robot = load_robot_params()
     factors = []
     for _ in range(runs):
-        result = BatchSimulation(robot, _trials(n, plant)).run(duration)
+        result = BatchSimulation(robot, _trials(n, plant, scheme)).run(duration)
         factors.append(result.real_time_factor)
     return {"n": n, "factors": factors, "peak_rss_mib": resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0}
 
 
-def per_trial(duration, runs, plant):
+def per_trial(duration, runs, plant, scheme):
     robot = load_robot_params()
-    trial = _trials(1, plant)[0]
+    trial = _trials(1, plant, scheme)[0]
     factors = []
     for _ in range(runs):
         model = TankModel(robot, trial.tank) if trial.tank is not None else None
@@ -81,6 +82,7 @@ def per_trial(duration, runs, plant):
 def main():
     parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     parser.add_argument("--plant", choices=("paper", "tank"), default="tank")
+    parser.add_argument("--scheme", choices=("paper", "coordinated"), default="paper")
     parser.add_argument("--sizes", type=int, nargs="+", default=[1, 15, 240, 1500])
     parser.add_argument("--duration", type=float, default=180.0)
     parser.add_argument("--runs", type=int, default=3)
@@ -88,18 +90,19 @@ def main():
     parser.add_argument("--per-trial", action="store_true", help=argparse.SUPPRESS)
     args = parser.parse_args()
     if args.per_trial:
-        print(json.dumps(per_trial(args.duration, args.runs, args.plant)))
+        print(json.dumps(per_trial(args.duration, args.runs, args.plant, args.scheme)))
         return
     if args.child is not None:
-        print(json.dumps(one_size(args.child, args.duration, args.runs, args.plant)))
+        print(json.dumps(one_size(args.child, args.duration, args.runs, args.plant, args.scheme)))
         return
-    print("batched simulator: %s plant, rate-limited servos, experiment gains, %g s trials, %d runs"
-          % (args.plant, args.duration, args.runs))
+    print("batched simulator: %s plant, %s strokes, rate-limited servos, experiment gains, %g s trials, %d runs"
+          % (args.plant, args.scheme, args.duration, args.runs))
     print("%-18s %28s %14s" % ("engine / N", "real time x per core min/med/max", "peak RSS MiB"))
     rows = [("per-trial, N=1", ["--per-trial"])] + [("batch, N=%d" % n, ["--child", str(n)]) for n in args.sizes]
     for name, extra in rows:
         out = subprocess.run([sys.executable, os.path.abspath(__file__), "--duration", str(args.duration),
-                              "--runs", str(args.runs), "--plant", args.plant] + extra, check=True, capture_output=True, text=True)
+                              "--runs", str(args.runs), "--plant", args.plant,
+                              "--scheme", args.scheme] + extra, check=True, capture_output=True, text=True)
         row = json.loads(out.stdout.strip().splitlines()[-1])
         f = row["factors"]
         print("%-18s %9.0f / %6.0f / %6.0f %14.0f" % (name, min(f), statistics.median(f), max(f), row["peak_rss_mib"]))

@@ -18,7 +18,7 @@ from typing import Sequence, Tuple, Union
 
 import numpy as np
 
-from quadruped_common.jit import hypot3, jitable
+from quadruped_common.jit import hypot2, hypot3, jitable
 
 ArrayLike = Union[Sequence[float], np.ndarray]
 
@@ -212,7 +212,7 @@ def rpy_f(r00: float, r01: float, r02: float, r10: float, r20: float, r21: float
           r22: float) -> Tuple[float, float, float]:
     """:func:`rot_to_rpy` on the elements of R it needs, as floats (compiled code calls it too)."""
     # cos(pitch) from the first column is accurate near gimbal lock, unlike asin(-R20).
-    cp = math.hypot(r00, r10)
+    cp = hypot2(r00, r10)
     pitch = math.atan2(-r20, cp)
     if cp > 1e-9:
         roll = math.atan2(r21, r22)

@@ -76,7 +76,6 @@ def _floats3(value: ArrayLike, name: str) -> Vec3:
 
 @jitable
 def _norm(x: float, y: float, z: float) -> float:
-    # math.hypot with three arguments needs Python 3.8; it avoids overflow and underflow.
     return hypot3(x, y, z)
 
 

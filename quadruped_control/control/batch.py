@@ -28,12 +28,12 @@ workspace search and planned paths live on objects, and a second copy of them on
 second controller) and for trials with the controller switched off; only the plant, the servos and the
 recording are batched then.
 
-The paper's power strokes are straight lines (a constant velocity from the stroke's start), so the
-recorded stroke of :class:`~quadruped_control.control.strokes.base.StrokePath` is the segment from its
-start to its end and its arc-length retrace is the linear interpolation along that segment: the same
-points to rounding. Where the float path falls back to the nearest recorded point (the chord between
-two reachable points left the workspace: not seen in any study), the batch keeps the foot where it is
-and counts the event in ``ik_fallbacks``.
+Each power stroke is recorded per trial and leg as the robot's
+:class:`~quadruped_control.control.strokes.base.StrokePath` records it (the points reached, their IK
+solutions and cumulative lengths, on arrays of ``path_capacity`` points), and the recovery retraces it
+with :func:`~quadruped_control.control.strokes.base.arc_length_point`, the function
+``StrokePath.at_arc_length`` calls: the batch computes the robot's foot targets to the same bits, the
+fallback to the nearest recorded point included (counted in ``ik_fallbacks``).
 """
 from __future__ import annotations
 
@@ -42,12 +42,12 @@ from typing import Optional, Sequence
 
 import numpy as np
 
-from quadruped_common.jit import jitable, kernel
+from quadruped_common.jit import hypot3, jitable, kernel
 from quadruped_common.robot import LEGS
 from quadruped_control.control.allocation import foot_velocity_command_f
 from quadruped_control.control.controller import AttitudeController, control_law_f
 from quadruped_control.control.controller_config import ControllerConfig
-from quadruped_control.control.strokes.base import TIME_EPS, cubic_time_profile
+from quadruped_control.control.strokes.base import TIME_EPS, arc_length_point, cubic_time_profile
 from quadruped_control.model.kinematics import _geometry, ik_row, joint_angles_floats
 from quadruped_control.model.params import RobotParams
 
@@ -67,8 +67,9 @@ def _clamped_ik(x, y, z, frame, g):
 
 @jitable
 def _start_power(i, pair, legs, frames, k_drag, t_pow_max, normalize, tau_sat, omega, positions, joints, velocities,
-                 path_start, path_start_joints, path_end, power, phase_time, t_pow):
-    """:meth:`StrokeCycle._start_power`: latch eq. (foot_vel) with each leg's share tau_sat / 4."""
+                 path_points, path_joints, path_length, path_count, power, phase_time, t_pow):
+    """:meth:`StrokeCycle._start_power`: latch eq. (foot_vel) with each leg's share tau_sat / 4 and start
+    each leg's recorded stroke at its current point."""
     power[i, pair] = True
     phase_time[i, pair] = 0.0
     t_pow[i, pair] = t_pow_max[i]
@@ -82,16 +83,34 @@ def _start_power(i, pair, legs, frames, k_drag, t_pow_max, normalize, tau_sat, o
             vx = vy = vz = 0.0  # defensive, as the float path: a non-finite command means no stroke
         velocities[i, leg, 0], velocities[i, leg, 1], velocities[i, leg, 2] = vx, vy, vz
         for k in range(3):
-            path_start[i, leg, k] = positions[i, leg, k]
-            path_start_joints[i, leg, k] = joints[i, leg, k]
-            path_end[i, leg, k] = positions[i, leg, k]
+            path_points[i, leg, 0, k] = positions[i, leg, k]
+            path_joints[i, leg, 0, k] = joints[i, leg, k]
+        path_length[i, leg, 0] = 0.0
+        path_count[i, leg] = 1
 
 
 @jitable
-def _power_step(i, pair, legs, h, frames, g, t_rec, positions, joints, velocities, path_end, power, phase_time,
-                t_move, t_total, t_pow):
-    """:meth:`StrokeCycle._power_step`: eq. (foot_integration) and IK; the phase ends at the workspace
-    boundary or after t_pow (then :meth:`StrokeCycle._start_recovery`)."""
+def _record(i, leg, x, y, z, t1, t2, t3, path_points, path_joints, path_length, path_count) -> bool:
+    """:meth:`StrokePath.append`: the next point of the stroke (not stored when it equals the last);
+    False if the path is full (the capacity covers t_pow_max, see :class:`BatchController`)."""
+    n = path_count[i, leg]
+    step = hypot3(x - path_points[i, leg, n - 1, 0], y - path_points[i, leg, n - 1, 1], z - path_points[i, leg, n - 1, 2])
+    if step == 0.0:
+        return True
+    if n >= path_points.shape[2]:
+        return False
+    path_points[i, leg, n, 0], path_points[i, leg, n, 1], path_points[i, leg, n, 2] = x, y, z
+    path_joints[i, leg, n, 0], path_joints[i, leg, n, 1], path_joints[i, leg, n, 2] = t1, t2, t3
+    path_length[i, leg, n] = path_length[i, leg, n - 1] + step
+    path_count[i, leg] = n + 1
+    return True
+
+
+@jitable
+def _power_step(i, pair, legs, h, frames, g, t_rec, positions, joints, velocities, path_points, path_joints,
+                path_length, path_count, power, phase_time, t_move, t_total, t_pow, refused):
+    """:meth:`StrokeCycle._power_step`: eq. (foot_integration), IK and the recorded stroke; the phase ends
+    at the workspace boundary or after t_pow (then :meth:`StrokeCycle._start_recovery`)."""
     phase_time[i, pair] += h
     boundary = False
     for slot in range(2):
@@ -106,6 +125,8 @@ def _power_step(i, pair, legs, h, frames, g, t_rec, positions, joints, velocitie
             continue
         positions[i, leg, 0], positions[i, leg, 1], positions[i, leg, 2] = tx, ty, tz
         joints[i, leg, 0], joints[i, leg, 1], joints[i, leg, 2] = t1, t2, t3
+        if not _record(i, leg, tx, ty, tz, t1, t2, t3, path_points, path_joints, path_length, path_count):
+            refused[i] = True  # a stroke longer than its record: no longer the robot's; not trusted
     if boundary or phase_time[i, pair] >= t_pow[i, pair] - TIME_EPS:
         power[i, pair] = False
         phase_time[i, pair] = 0.0
@@ -115,13 +136,12 @@ def _power_step(i, pair, legs, h, frames, g, t_rec, positions, joints, velocitie
             leg = legs[pair, slot]
             for k in range(3):
                 velocities[i, leg, k] = 0.0
-                path_end[i, leg, k] = positions[i, leg, k]
 
 
 @jitable
-def _recovery_step(i, pair, legs, h, frames, g, positions, joints, path_start, path_start_joints, path_end,
+def _recovery_step(i, pair, legs, h, frames, g, positions, joints, path_points, path_joints, path_length, path_count,
                    phase_time, t_move, t_total, ik_fallbacks) -> bool:
-    """:meth:`StrokeCycle._recovery_step`: the cubic retrace of the straight stroke; True when the phase
+    """:meth:`StrokeCycle._recovery_step`: the cubic retrace of the recorded stroke; True when the phase
     is over (the caller starts the power phase)."""
     time = phase_time[i, pair] + h
     phase_time[i, pair] = time
@@ -131,19 +151,20 @@ def _recovery_step(i, pair, legs, h, frames, g, positions, joints, path_start, p
         leg = legs[pair, slot]
         if done or s >= 1.0:
             for k in range(3):
-                positions[i, leg, k] = path_start[i, leg, k]
-                joints[i, leg, k] = path_start_joints[i, leg, k]
+                positions[i, leg, k] = path_points[i, leg, 0, k]
+                joints[i, leg, k] = path_joints[i, leg, 0, k]
             continue
-        # StrokePath.at_arc_length(length (1 - s)) on the straight stroke: start + (1 - s) (end - start)
-        px = path_start[i, leg, 0] + (1.0 - s) * (path_end[i, leg, 0] - path_start[i, leg, 0])
-        py = path_start[i, leg, 1] + (1.0 - s) * (path_end[i, leg, 1] - path_start[i, leg, 1])
-        pz = path_start[i, leg, 2] + (1.0 - s) * (path_end[i, leg, 2] - path_start[i, leg, 2])
+        n = path_count[i, leg]
+        px, py, pz, nearest = arc_length_point(path_points[i, leg], path_length[i, leg], n,
+                                               path_length[i, leg, n - 1] * (1.0 - s))
         if px == positions[i, leg, 0] and py == positions[i, leg, 1] and pz == positions[i, leg, 2]:
             continue
         ok, t1, t2, t3 = _clamped_ik(px, py, pz, frames[leg], g)
         if not ok:
+            # the chord between two recorded (reachable) points left the workspace: the nearest one
             ik_fallbacks[i] += 1
-            continue
+            px, py, pz = path_points[i, leg, nearest, 0], path_points[i, leg, nearest, 1], path_points[i, leg, nearest, 2]
+            t1, t2, t3 = path_joints[i, leg, nearest, 0], path_joints[i, leg, nearest, 1], path_joints[i, leg, nearest, 2]
         positions[i, leg, 0], positions[i, leg, 1], positions[i, leg, 2] = px, py, pz
         joints[i, leg, 0], joints[i, leg, 1], joints[i, leg, 2] = t1, t2, t3
     return done
@@ -153,8 +174,8 @@ def _recovery_step(i, pair, legs, h, frames, g, positions, joints, path_start, p
 def controller_batch_step(h, R, omega_measured, R_d, gains, limits, t_rec, t_pow_max, normalize, inertia, gyroscopic,
                           buoyancy, net_buoyancy, k_drag, max_angular_rate, legs, frames, g, integral, delta_sat,
                           tau_sat, omega, e_R, geodesic, tau_cmd, saturated, positions, joints, velocities,
-                          path_start, path_start_joints, path_end, power, phase_time, t_move, t_total, t_pow,
-                          refused, ik_fallbacks):
+                          path_points, path_joints, path_length, path_count, power, phase_time, t_move, t_total,
+                          t_pow, refused, ik_fallbacks):
     """One control step of every trial not yet ``refused``, in place on the state arrays (N leading).
 
     ``R`` (N, 3, 3), ``omega_measured`` (N, 3): the measurement; ``R_d`` (N, 9) the setpoints; ``gains``
@@ -191,12 +212,13 @@ def controller_batch_step(h, R, omega_measured, R_d, gains, limits, t_rec, t_pow
             in_power = power[i, pair]  # the phase at the step's start: a power step may end it
             if in_power:
                 if h > 0.0:
-                    _power_step(i, pair, legs, h, frames, g, t_rec, positions, joints, velocities, path_end, power,
-                                phase_time, t_move, t_total, t_pow)
-            elif _recovery_step(i, pair, legs, h, frames, g, positions, joints, path_start, path_start_joints,
-                                path_end, phase_time, t_move, t_total, ik_fallbacks):
+                    _power_step(i, pair, legs, h, frames, g, t_rec, positions, joints, velocities, path_points,
+                                path_joints, path_length, path_count, power, phase_time, t_move, t_total, t_pow,
+                                refused)
+            elif _recovery_step(i, pair, legs, h, frames, g, positions, joints, path_points, path_joints, path_length,
+                                path_count, phase_time, t_move, t_total, ik_fallbacks):
                 _start_power(i, pair, legs, frames, k_drag, t_pow_max, normalize, tau_sat, omega, positions, joints,
-                             velocities, path_start, path_start_joints, path_end, power, phase_time, t_pow)
+                             velocities, path_points, path_joints, path_length, path_count, power, phase_time, t_pow)
 
 
 def _per_trial(configs: Sequence[ControllerConfig], name: str) -> np.ndarray:
@@ -255,6 +277,9 @@ class BatchController:
             raise ValueError("a nominal foot position is unreachable: %s" % exc) from None
         self.nominal = nominal
         self.nominal_joints = np.clip(np.array(angles, dtype=float), low, high)
+        #: points a recorded stroke can hold: the start and one per power step of the longest t_pow_max
+        #: (the control period can only be shorter than dt by rounding, max_step caps a longer one)
+        self.path_capacity = int(math.ceil(float(np.max(self.t_pow_max)) / self.dt)) + 3
         self.reset()
 
     # ---- state -------------------------------------------------------------------------------
@@ -274,9 +299,14 @@ class BatchController:
         self.positions = np.tile(self.nominal, (n, 1, 1))
         self.joints = np.tile(self.nominal_joints, (n, 1, 1))
         self.velocities = np.zeros((n, 4, 3))
-        self.path_start = self.positions.copy()
-        self.path_start_joints = self.joints.copy()
-        self.path_end = self.positions.copy()
+        # Each leg's recorded stroke (StrokePath on arrays); at the start a path of one point, the foot.
+        capacity = self.path_capacity
+        self.path_points = np.zeros((n, 4, capacity, 3))
+        self.path_joints = np.zeros((n, 4, capacity, 3))
+        self.path_length = np.zeros((n, 4, capacity))
+        self.path_points[:, :, 0, :] = self.positions
+        self.path_joints[:, :, 0, :] = self.joints
+        self.path_count = np.ones((n, 4), dtype=np.int64)
         self.power = np.zeros((n, 2), dtype=bool)
         self.phase_time = np.zeros((n, 2))
         self.t_move = np.zeros((n, 2))
@@ -304,9 +334,9 @@ class BatchController:
                               self.inertia, self.gyroscopic, self.buoyancy, self.net_buoyancy, self.k_drag,
                               self.max_angular_rate, self.legs, self.frames, self.ik_constants, self.integral,
                               self.delta_sat, self.tau_sat, self.omega, self.e_R, self.geodesic, self.tau_cmd,
-                              self.saturated, self.positions, self.joints, self.velocities, self.path_start,
-                              self.path_start_joints, self.path_end, self.power, self.phase_time, self.t_move,
-                              self.t_total, self.t_pow, self.refused, self.ik_fallbacks)
+                              self.saturated, self.positions, self.joints, self.velocities, self.path_points,
+                              self.path_joints, self.path_length, self.path_count, self.power, self.phase_time,
+                              self.t_move, self.t_total, self.t_pow, self.refused, self.ik_fallbacks)
         return self.joints
 
 

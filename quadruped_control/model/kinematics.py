@@ -52,7 +52,7 @@ from typing import Any, Optional, Sequence, Tuple, Union
 
 import numpy as np
 
-from quadruped_common.jit import jitable
+from quadruped_common.jit import hypot2, jitable
 from quadruped_common.robot import LEGS, MIRROR_DIAG
 from quadruped_common.so3 import TWO_PI, hat, wrap_angle
 from quadruped_control.model.params import FiveBar, RobotParams
@@ -218,8 +218,8 @@ def five_bar_ik(x_d: float, y_prime: float, geometry: FiveBar) -> Tuple[float, f
     if not (math.isfinite(x_d) and math.isfinite(y_prime)):
         raise UnreachableError("five-bar target must be finite, got (%r, %r)" % (x_d, y_prime))
     a1, a2, a3, a4, c = geometry.a1, geometry.a2, geometry.a3, geometry.a4, geometry.c
-    d13 = math.hypot(x_d, y_prime)            # eq. (ik_dists)
-    d24 = math.hypot(x_d - c, y_prime)
+    d13 = hypot2(x_d, y_prime)            # eq. (ik_dists)
+    d24 = hypot2(x_d - c, y_prime)
     if d13 < _ROUND_TOL or d24 < _ROUND_TOL:
         raise UnreachableError("five-bar target (%.4f, %.4f) m is on a motor axis: out of reach"
                                % (x_d, y_prime))
@@ -377,7 +377,7 @@ def _leg_ik_full(x_d: float, y_d: float, z_d: float, params: RobotParams) -> np.
     if not (math.isfinite(x_d) and math.isfinite(y_d) and math.isfinite(z_d)):
         raise UnreachableError("target (%r, %r, %r) is not finite" % (x_d, y_d, z_d))
     l_z = params.l_z
-    radius = math.hypot(y_d, z_d)
+    radius = hypot2(y_d, z_d)
     if radius < l_z:
         raise UnreachableError("target (%.4f, %.4f, %.4f) m is %.4f m from the hip axis, closer than the "
                                "five-bar plane offset l_z = %.4f m" % (x_d, y_d, z_d, radius, l_z))
@@ -497,7 +497,7 @@ def ik_row(rx: float, ry: float, rz: float, frame: Sequence[float],
     ox, oy, oz, mx, my, mz = frame[0], frame[1], frame[2], frame[3], frame[4], frame[5]
     a1, a2, a3, a4, c, l_y, l_z, low1, high1, low2, high2, low3, high3 = constants
     x_d, y_d, z_d = mx * (rx - ox), my * (ry - oy), mz * (rz - oz)
-    radius = math.hypot(y_d, z_d)
+    radius = hypot2(y_d, z_d)
     if radius >= l_z and math.isfinite(x_d + radius):  # also rejects NaN
         # eq. (ik_theta3), then wrap_into_range into the hip servo range
         theta3 = math.atan2(z_d, y_d) - math.acos(min(l_z / radius, 1.0)) - 0.5 * math.pi
@@ -505,8 +505,8 @@ def ik_row(rx: float, ry: float, rz: float, frame: Sequence[float],
         if theta3 <= high3 + _ANGLE_TOL:
             y_prime = y_d * math.cos(theta3) + z_d * math.sin(theta3) - l_y
             # five_bar_ik without theta4, theta5 (their arccos arguments are only range-checked)
-            d13 = math.hypot(x_d, y_prime)
-            d24 = math.hypot(x_d - c, y_prime)
+            d13 = hypot2(x_d, y_prime)
+            d24 = hypot2(x_d - c, y_prime)
             if d13 >= _ROUND_TOL and d24 >= _ROUND_TOL:
                 k1 = (d13 * d13 + a1 * a1 - a3 * a3) / (2.0 * a1 * d13)
                 k2 = (d24 * d24 + a2 * a2 - a4 * a4) / (2.0 * a2 * d24)

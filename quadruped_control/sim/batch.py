@@ -177,15 +177,12 @@ class BatchSimulation:
         self.rotation = np.array([np.asarray(t.initial, dtype=float) for t in trials])
         self.omega = np.zeros((n, 3))
         self.q = self.controller.joints.copy()  # servos at the nominal pose
+        self._q_buffers = (self.q, np.empty_like(self.q))
+        self._mid, self._rate = np.empty_like(self.q), np.empty_like(self.q)
         self.k = 0
         if isinstance(self.plant, TankPlantBatch):
             self.plant.attach(self.position, self.rotation)
 
-    def _servo(self, command: np.ndarray, h: float) -> np.ndarray:
-        # A new array: the controller updates its joint targets in place, and q is the servos' own state.
-        out = np.empty_like(self.q)
-        servo_batch_step(self.q, command, self.ideal, self.max_speed, self.time_constant, h, out)
-        return out
 
     def _measure(self):
         """What each trial's IMU reports: the true state, with noise where the trial has some."""
@@ -209,12 +206,13 @@ class BatchSimulation:
     def _advance(self, targets: np.ndarray) -> None:
         """Servos and plant from t_k to t_k+1 with the joint targets of t_k."""
         h = self.dt
-        q_start = self.q
-        q_end = self._servo(targets, h)
-        mid = 0.5 * (q_start + q_end)
-        rate = (q_end - q_start) / h
+        # The servos' state (never the controller's target array, which the next step updates in place)
+        # alternates between two buffers: the step reads one and writes the other.
+        q_end = self._q_buffers[0] if self.q is self._q_buffers[1] else self._q_buffers[1]
+        servo_batch_step(self.q, targets, self.ideal, self.max_speed, self.time_constant, h, q_end, self._mid,
+                         self._rate)
         self.position, self.velocity, self.rotation, self.omega = self.plant.step(
-            self.position, self.velocity, self.rotation, self.omega, mid, rate, h)
+            self.position, self.velocity, self.rotation, self.omega, self._mid, self._rate, h)
         self.q = q_end
         self.k += 1
 

@@ -179,18 +179,24 @@ def rate_limited_lag_step(q: float, command: float, max_speed: float, time_const
 
 
 @kernel
-def servo_batch_step(q, command, ideal, max_speed, time_constant, dt, out):
+def servo_batch_step(q, command, ideal, max_speed, time_constant, dt, out, mid, rate):
     """Every trial's servos after ``dt`` s with ``command`` held, into ``out`` (N, 4, 3): the command itself
     for an ``ideal`` trial, else :func:`rate_limited_lag_step` per joint with the trial's ``max_speed``
-    and ``time_constant`` (N,): the per-trial function in a compiled loop (:mod:`quadruped_common.jit`)."""
+    and ``time_constant`` (N,): the per-trial function in a compiled loop (:mod:`quadruped_common.jit`).
+    Also the joints as the plant holds them over the step
+    (:class:`~quadruped_control.sim.simulation.PlantSimulator`), into ``mid`` (q + out) / 2 and ``rate``
+    (out - q) / dt, in the same loop (``out``, ``mid``, ``rate`` must not alias ``q``)."""
     for i in range(q.shape[0]):
         for leg in range(q.shape[1]):
             for joint in range(q.shape[2]):
+                start = q[i, leg, joint]
                 if ideal[i]:
-                    out[i, leg, joint] = command[i, leg, joint]
+                    end = command[i, leg, joint]
                 else:
-                    out[i, leg, joint] = rate_limited_lag_step(q[i, leg, joint], command[i, leg, joint],
-                                                               max_speed[i], time_constant[i], dt)
+                    end = rate_limited_lag_step(start, command[i, leg, joint], max_speed[i], time_constant[i], dt)
+                out[i, leg, joint] = end
+                mid[i, leg, joint] = 0.5 * (start + end)
+                rate[i, leg, joint] = (end - start) / dt
 
 
 def servo_params_from_dict(tree: Mapping[str, Any], robot_yaml: Optional[str] = None) -> ServoParams:

@@ -16,18 +16,17 @@ makes the feet jump).
 from __future__ import annotations
 
 import abc
-import bisect
 import math
 from typing import Callable, List, Optional, Sequence, Tuple
 
 from quadruped_common.config import ParameterError
-from quadruped_common.jit import jitable
+from quadruped_common.jit import hypot3, jitable
 from quadruped_common.robot import LEGS
 from quadruped_control.model.kinematics import UnreachableError
 from quadruped_control.model.params import RobotParams
 
 __all__ = ["PHASE_HOLD", "PHASE_POWER", "PHASE_RECOVERY", "IkFunction", "PairState", "StrokePath", "StrokeScheme", "TIME_EPS",
-           "Vec3", "VelocityCommand", "cubic_time_profile"]
+           "Vec3", "VelocityCommand", "arc_length_point", "cubic_time_profile"]
 
 Vec3 = Tuple[float, float, float]
 
@@ -56,6 +55,34 @@ def cubic_time_profile(u: float) -> float:
     return u * u * (3.0 - 2.0 * u)
 
 
+@jitable
+def arc_length_point(points, cumulative, count: int, a: float) -> Tuple[float, float, float, int]:
+    """The point at arc length ``a`` (clipped to [0, length]) along the polyline of the first ``count``
+    ``points`` (rows of x, y, z) with cumulative lengths ``cumulative`` (0 first), interpolated linearly,
+    and the index of the nearest recorded point: (x, y, z, index). The one form of
+    :meth:`StrokePath.at_arc_length`, which the robot calls on its lists and the batched controller on
+    arrays (the same arithmetic, so both retrace their strokes to the same bits)."""
+    total = cumulative[count - 1]
+    if a <= 0.0 or total <= 0.0:
+        return points[0][0], points[0][1], points[0][2], 0
+    last = count - 1
+    if a >= total:
+        return points[last][0], points[last][1], points[last][2], last
+    # j: the last index with cumulative[j] <= a (bisect_right - 1); cumulative[0] = 0 <= a < total
+    low, high = 0, last
+    while high - low > 1:
+        middle = (low + high) // 2
+        if cumulative[middle] <= a:
+            low = middle
+        else:
+            high = middle
+    j = low
+    w = (a - cumulative[j]) / (cumulative[j + 1] - cumulative[j])
+    x0, y0, z0 = points[j][0], points[j][1], points[j][2]
+    x1, y1, z1 = points[j + 1][0], points[j + 1][1], points[j + 1][2]
+    return x0 + w * (x1 - x0), y0 + w * (y1 - y0), z0 + w * (z1 - z0), (j if w < 0.5 else j + 1)
+
+
 class StrokePath:
     """The recorded power trajectory of one foot: points (body frame) with their IK solutions.
 
@@ -73,7 +100,7 @@ class StrokePath:
     def append(self, point: Vec3, joints: Vec3) -> None:
         """Record the next point (ignored if it equals the last one)."""
         lx, ly, lz = self.points[-1]
-        step = math.hypot(point[0] - lx, point[1] - ly, point[2] - lz)
+        step = hypot3(point[0] - lx, point[1] - ly, point[2] - lz)
         if step == 0.0:
             return
         self.points.append(point)
@@ -95,19 +122,8 @@ class StrokePath:
 
     def at_arc_length(self, a: float) -> Tuple[Vec3, int]:
         """Point at arc length ``a`` (clipped to [0, length]) and the index of the nearest recorded point."""
-        cumulative = self.cumulative
-        total = cumulative[-1]
-        if a <= 0.0 or total <= 0.0:
-            return self.points[0], 0
-        last = len(cumulative) - 1
-        if a >= total:
-            return self.points[last], last
-        j = bisect.bisect_right(cumulative, a) - 1  # cumulative[j] <= a < cumulative[j + 1]
-        seg = cumulative[j + 1] - cumulative[j]
-        w = (a - cumulative[j]) / seg
-        (x0, y0, z0), (x1, y1, z1) = self.points[j], self.points[j + 1]
-        nearest = j if w < 0.5 else j + 1
-        return (x0 + w * (x1 - x0), y0 + w * (y1 - y0), z0 + w * (z1 - z0)), nearest
+        x, y, z, nearest = arc_length_point(self.points, self.cumulative, len(self.cumulative), a)
+        return (x, y, z), nearest
 
 
 class PairState:

@@ -25,7 +25,7 @@ import math
 
 import numpy as np
 
-from quadruped_common.jit import jitable, kernel
+from quadruped_common.jit import jitable, kernel, trial_step
 from quadruped_control.model import hydrodynamics
 from quadruped_control.model.hydrodynamics import paw_buoyancy_f, torso_buoyancy_torque_matrix
 from quadruped_control.model.kinematics import _geometry, leg_row
@@ -33,7 +33,8 @@ from quadruped_control.model.params import RobotParams
 from quadruped_control.sim.plants.paper import paper_rk4_held
 from quadruped_control.sim.plants.rigid_body import as_mat3, exp_rotation, matmul, polish
 
-__all__ = ["PaperPlantBatch", "held_step_inputs", "leg_geometry", "leg_rows", "paper_batch_step", "store_step_end"]
+__all__ = ["PaperPlantBatch", "held_step_inputs", "leg_geometry", "leg_rows", "paper_batch_step", "paper_trial_step",
+           "store_step_end"]
 
 
 def leg_geometry(robot: RobotParams):
@@ -100,6 +101,18 @@ def store_step_end(y, R0, i, p, v, R, w) -> bool:
     return True
 
 
+@trial_step
+def paper_trial_step(i, frames, five_bar, drag_constant, drag, inertia, inertia_inverse, inverse_mass,
+                     net_paw_buoyancy, restoring, p, v, R, w, q, q_dot, dt, feet) -> bool:
+    """One held-input RK4 step of trial ``i`` in place; False if it failed (module docstring)."""
+    ok, lift, up, R0 = held_step_inputs(q, q_dot, i, frames, five_bar, net_paw_buoyancy, restoring, R, feet)
+    if not ok:
+        return False
+    y = paper_rk4_held(feet, drag_constant, drag, up, lift, inertia, inertia_inverse, inverse_mass, R0,
+                       p[i, 0], p[i, 1], p[i, 2], v[i, 0], v[i, 1], v[i, 2], w[i, 0], w[i, 1], w[i, 2], dt)
+    return store_step_end(y, R0, i, p, v, R, w)
+
+
 @kernel
 def paper_batch_step(frames, five_bar, drag_constant, drag, inertia, inertia_inverse, inverse_mass,
                      net_paw_buoyancy, restoring, p, v, R, w, q, q_dot, dt, failed):
@@ -107,18 +120,9 @@ def paper_batch_step(frames, five_bar, drag_constant, drag, inertia, inertia_inv
     (module docstring). ``restoring`` (N, 3, 3): each trial's centre-of-buoyancy moment matrix."""
     feet = np.empty((4, 6))
     for i in range(p.shape[0]):
-        if failed[i]:
-            continue
-        try:  # plain Python raises where compiled code returns nan (math.sin(inf), 1 / 0): both fail the trial
-            ok, lift, up, R0 = held_step_inputs(q, q_dot, i, frames, five_bar, net_paw_buoyancy, restoring, R, feet)
-            if not ok:
-                failed[i] = True
-                continue
-            y = paper_rk4_held(feet, drag_constant, drag, up, lift, inertia, inertia_inverse, inverse_mass, R0,
-                               p[i, 0], p[i, 1], p[i, 2], v[i, 0], v[i, 1], v[i, 2], w[i, 0], w[i, 1], w[i, 2], dt)
-            if not store_step_end(y, R0, i, p, v, R, w):
-                failed[i] = True
-        except Exception:  # noqa: BLE001 (any failure of one trial fails that trial only)
+        if not failed[i] and not paper_trial_step(i, frames, five_bar, drag_constant, drag, inertia, inertia_inverse,
+                                                  inverse_mass, net_paw_buoyancy, restoring, p, v, R, w, q, q_dot,
+                                                  dt, feet):
             failed[i] = True
 
 

@@ -19,14 +19,31 @@ from typing import Sequence
 
 import numpy as np
 
-from quadruped_common.jit import kernel
+from quadruped_common.jit import kernel, trial_step
 from quadruped_control.model.params import RobotParams
 from quadruped_control.sim.plants.paper_batch import held_step_inputs, leg_geometry, store_step_end
 from quadruped_control.sim.plants.rigid_body import RigidBodyState
 from quadruped_control.sim.plants.tank import TankModel, TankParams
 from quadruped_control.sim.plants.tank_dynamics import leg_sums, mass_solver, tank_rk4
 
-__all__ = ["TankPlantBatch", "tank_batch_step"]
+__all__ = ["TankPlantBatch", "tank_batch_step", "tank_trial_step"]
+
+
+@trial_step
+def tank_trial_step(i, frames, five_bar, net_paw_buoyancy, drag_constant, drag, extra_lift, suspension, hook, anchor,
+                    rope, torsion, untwisted, linear, quadratic, body_m, paw_added_mass, restoring,
+                    p, v, R, w, q, q_dot, dt, feet) -> bool:
+    """One held-input RK4 step of eq. (tank) for trial ``i`` in place; False if it failed."""
+    ok, lift, up, R0 = held_step_inputs(q, q_dot, i, frames, five_bar, net_paw_buoyancy, restoring, R, feet)
+    if not ok:
+        return False
+    sums = leg_sums(feet)
+    solver = mass_solver(body_m[i], paw_added_mass[i], sums[0], sums[2])
+    constants = (drag_constant[i], drag[i], extra_lift[i], suspension[i], hook[i], anchor[i], rope[i],
+                 torsion[i], untwisted[i], linear[i], quadratic[i], body_m[i], paw_added_mass[i])
+    y0 = (p[i, 0], p[i, 1], p[i, 2], v[i, 0], v[i, 1], v[i, 2], 0.0, 0.0, 0.0, w[i, 0], w[i, 1], w[i, 2])
+    y = tank_rk4(constants, feet, lift, up, sums, solver, R0, y0, dt)
+    return store_step_end(y, R0, i, p, v, R, w)
 
 
 @kernel
@@ -38,22 +55,10 @@ def tank_batch_step(frames, five_bar, net_paw_buoyancy, drag_constant, drag, ext
     row (or value) per trial, and ``restoring`` (N, 3, 3) each trial's torso buoyancy moment matrix."""
     feet = np.empty((4, 6))
     for i in range(p.shape[0]):
-        if failed[i]:
-            continue
-        try:  # plain Python raises where compiled code returns nan (math.sin(inf), 1 / 0): both fail the trial
-            ok, lift, up, R0 = held_step_inputs(q, q_dot, i, frames, five_bar, net_paw_buoyancy, restoring, R, feet)
-            if not ok:
-                failed[i] = True
-                continue
-            sums = leg_sums(feet)
-            solver = mass_solver(body_m[i], paw_added_mass[i], sums[0], sums[2])
-            constants = (drag_constant[i], drag[i], extra_lift[i], suspension[i], hook[i], anchor[i], rope[i],
-                         torsion[i], untwisted[i], linear[i], quadratic[i], body_m[i], paw_added_mass[i])
-            y0 = (p[i, 0], p[i, 1], p[i, 2], v[i, 0], v[i, 1], v[i, 2], 0.0, 0.0, 0.0, w[i, 0], w[i, 1], w[i, 2])
-            y = tank_rk4(constants, feet, lift, up, sums, solver, R0, y0, dt)
-            if not store_step_end(y, R0, i, p, v, R, w):
-                failed[i] = True
-        except Exception:  # noqa: BLE001 (any failure of one trial fails that trial only)
+        if not failed[i] and not tank_trial_step(i, frames, five_bar, net_paw_buoyancy, drag_constant, drag,
+                                                 extra_lift, suspension, hook, anchor, rope, torsion, untwisted,
+                                                 linear, quadratic, body_m, paw_added_mass, restoring, p, v, R, w,
+                                                 q, q_dot, dt, feet):
             failed[i] = True
 
 

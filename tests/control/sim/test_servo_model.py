@@ -188,6 +188,9 @@ def test_the_batch_servo_step_is_the_exact_float_step_per_joint_compiled_or_not(
                            servo_model.rate_limited_lag_step(q[i, leg, j], command[i, leg, j], speed[i], lag[i], 0.01)
                            for j in range(3)] for leg in range(4)] for i in range(50)])
     for step in (servo_model.servo_batch_step, servo_model.servo_batch_step.py_func):
-        out = np.empty_like(q)
-        step(q, command, ideal, speed, lag, 0.01, out)
+        out, mid, rate = np.empty_like(q), np.empty_like(q), np.empty_like(q)
+        step(q, command, ideal, speed, lag, 0.01, out, mid, rate)
         np.testing.assert_allclose(out, expected, rtol=0, atol=1e-15)
+        # the held joints of PlantSimulator, bit for bit as numpy computes them
+        assert np.array_equal(mid, 0.5 * (q + out), equal_nan=True)
+        assert np.array_equal(rate, (out - q) / 0.01, equal_nan=True)
