@@ -31,8 +31,8 @@ recording are batched then.
 Each power stroke is recorded per trial and leg as the robot's
 :class:`~quadruped_control.control.strokes.base.StrokePath` records it (the points reached, their IK
 solutions and cumulative lengths, on arrays of ``path_capacity`` points), and the recovery retraces it
-with :func:`~quadruped_control.control.strokes.base.arc_length_point`, the function
-``StrokePath.at_arc_length`` calls: the batch computes the robot's foot targets to the same bits, the
+with :func:`~quadruped_control.control.strokes.base.arc_length_point`, the arithmetic
+``StrokePath.at_arc_length`` runs: the batch computes the robot's foot targets to the same bits, the
 fallback to the nearest recorded point included (counted in ``ik_fallbacks``).
 """
 from __future__ import annotations
@@ -47,7 +47,7 @@ from quadruped_common.robot import LEGS
 from quadruped_control.control.allocation import foot_velocity_command_f
 from quadruped_control.control.controller import AttitudeController, control_law_f
 from quadruped_control.control.controller_config import ControllerConfig
-from quadruped_control.control.strokes.base import TIME_EPS, arc_length_point, cubic_time_profile
+from quadruped_control.control.strokes.base import TIME_EPS, arc_length_point, arc_length_segment, cubic_time_profile
 from quadruped_control.model.kinematics import _geometry, ik_row, joint_angles_floats
 from quadruped_control.model.params import RobotParams
 
@@ -154,9 +154,17 @@ def _recovery_step(i, pair, legs, h, frames, g, positions, joints, path_points, 
                 positions[i, leg, k] = path_points[i, leg, 0, k]
                 joints[i, leg, k] = path_joints[i, leg, 0, k]
             continue
-        n = path_count[i, leg]
-        px, py, pz, nearest = arc_length_point(path_points[i, leg], path_length[i, leg], n,
-                                               path_length[i, leg, n - 1] * (1.0 - s))
+        # StrokePath.at_arc_length(length (1 - s)), with s < 1 here
+        last = path_count[i, leg] - 1
+        a = path_length[i, leg, last] * (1.0 - s)
+        if a <= 0.0 or path_length[i, leg, last] <= 0.0:
+            px, py, pz, nearest = path_points[i, leg, 0, 0], path_points[i, leg, 0, 1], path_points[i, leg, 0, 2], 0
+        elif a >= path_length[i, leg, last]:
+            px, py, pz, nearest = (path_points[i, leg, last, 0], path_points[i, leg, last, 1],
+                                   path_points[i, leg, last, 2], last)
+        else:
+            px, py, pz, nearest = arc_length_point(path_points[i, leg], path_length[i, leg],
+                                                   arc_length_segment(path_length[i, leg], last + 1, a), a)
         if px == positions[i, leg, 0] and py == positions[i, leg, 1] and pz == positions[i, leg, 2]:
             continue
         ok, t1, t2, t3 = _clamped_ik(px, py, pz, frames[leg], g)

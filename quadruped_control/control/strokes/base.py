@@ -16,6 +16,7 @@ makes the feet jump).
 from __future__ import annotations
 
 import abc
+import bisect
 import math
 from typing import Callable, List, Optional, Sequence, Tuple
 
@@ -26,7 +27,7 @@ from quadruped_control.model.kinematics import UnreachableError
 from quadruped_control.model.params import RobotParams
 
 __all__ = ["PHASE_HOLD", "PHASE_POWER", "PHASE_RECOVERY", "IkFunction", "PairState", "StrokePath", "StrokeScheme", "TIME_EPS",
-           "Vec3", "VelocityCommand", "arc_length_point", "cubic_time_profile"]
+           "Vec3", "VelocityCommand", "arc_length_point", "arc_length_segment", "cubic_time_profile"]
 
 Vec3 = Tuple[float, float, float]
 
@@ -56,27 +57,28 @@ def cubic_time_profile(u: float) -> float:
 
 
 @jitable
-def arc_length_point(points, cumulative, count: int, a: float) -> Tuple[float, float, float, int]:
-    """The point at arc length ``a`` (clipped to [0, length]) along the polyline of the first ``count``
-    ``points`` (rows of x, y, z) with cumulative lengths ``cumulative`` (0 first), interpolated linearly,
-    and the index of the nearest recorded point: (x, y, z, index). The one form of
-    :meth:`StrokePath.at_arc_length`, which the robot calls on its lists and the batched controller on
-    arrays (the same arithmetic, so both retrace their strokes to the same bits)."""
-    total = cumulative[count - 1]
-    if a <= 0.0 or total <= 0.0:
-        return points[0][0], points[0][1], points[0][2], 0
-    last = count - 1
-    if a >= total:
-        return points[last][0], points[last][1], points[last][2], last
-    # j: the last index with cumulative[j] <= a (bisect_right - 1); cumulative[0] = 0 <= a < total
-    low, high = 0, last
+def arc_length_segment(cumulative, count: int, a: float) -> int:
+    """The segment j of a polyline with cumulative lengths ``cumulative`` (first ``count``, 0 first) that
+    holds arc length ``a``, for 0 < a < length: the last j with cumulative[j] <= a (``bisect_right - 1``;
+    compiled code has no bisect, the robot's path calls :func:`bisect.bisect_right` instead: an index,
+    so both find the same one)."""
+    low, high = 0, count - 1
     while high - low > 1:
         middle = (low + high) // 2
         if cumulative[middle] <= a:
             low = middle
         else:
             high = middle
-    j = low
+    return low
+
+
+@jitable
+def arc_length_point(points, cumulative, j: int, a: float) -> Tuple[float, float, float, int]:
+    """The point at arc length ``a`` on segment ``j`` (:func:`arc_length_segment`) of the polyline
+    ``points`` (rows of x, y, z) with cumulative lengths ``cumulative``, interpolated linearly, and the
+    index of the nearest recorded point: (x, y, z, index). The arithmetic of
+    :meth:`StrokePath.at_arc_length`, which the robot runs on its lists and the batched controller on
+    arrays, so both retrace their strokes to the same bits."""
     w = (a - cumulative[j]) / (cumulative[j + 1] - cumulative[j])
     x0, y0, z0 = points[j][0], points[j][1], points[j][2]
     x1, y1, z1 = points[j + 1][0], points[j + 1][1], points[j + 1][2]
@@ -122,7 +124,15 @@ class StrokePath:
 
     def at_arc_length(self, a: float) -> Tuple[Vec3, int]:
         """Point at arc length ``a`` (clipped to [0, length]) and the index of the nearest recorded point."""
-        x, y, z, nearest = arc_length_point(self.points, self.cumulative, len(self.cumulative), a)
+        cumulative = self.cumulative
+        total = cumulative[-1]
+        if a <= 0.0 or total <= 0.0:
+            return self.points[0], 0
+        last = len(cumulative) - 1
+        if a >= total:
+            return self.points[last], last
+        j = bisect.bisect_right(cumulative, a) - 1  # arc_length_segment, in C
+        x, y, z, nearest = arc_length_point(self.points, cumulative, j, a)
         return (x, y, z), nearest
 
 

@@ -3,8 +3,10 @@ recorded stroke paths, the hold template)."""
 import math
 
 import pytest
+from hypothesis import given
+from hypothesis import strategies as st
 
-from quadruped_control.control.strokes.base import StrokePath, cubic_time_profile
+from quadruped_control.control.strokes.base import StrokePath, arc_length_segment, cubic_time_profile
 from quadruped_control.control.strokes.coordinated import CoordinatedStrokes
 from quadruped_control.control.strokes.paper import StrokeCycle
 from quadruped_control.model.params import load_robot_params
@@ -51,3 +53,22 @@ def test_hold_counts_its_time_and_treats_bad_steps_as_zero(scheme):
     for _ in range(400):
         strokes.hold(0.01)
     assert strokes.at_rest and strokes.foot_targets() == strokes.nominal
+
+
+@given(st.lists(st.floats(0.001, 1.0), min_size=1, max_size=60), st.floats(0.0, 1.0))
+def test_arc_length_segment_finds_the_segment_bisect_finds(steps, fraction):
+    """The compiled retrace's search and the robot's bisect pick the same segment for every arc length
+    strictly inside the path (the endpoints are handled before either is called)."""
+    import bisect
+
+    cumulative = [0.0]
+    for step in steps:
+        cumulative.append(cumulative[-1] + step)
+    a = fraction * cumulative[-1]
+    if not 0.0 < a < cumulative[-1]:
+        return
+    assert arc_length_segment(cumulative, len(cumulative), a) == bisect.bisect_right(cumulative, a) - 1
+    # and on a recorded cumulative value itself (bisect_right: that point's own segment)
+    k = int(fraction * (len(cumulative) - 2)) if len(cumulative) > 2 else 0
+    if 0.0 < cumulative[k] < cumulative[-1]:
+        assert arc_length_segment(cumulative, len(cumulative), cumulative[k]) == k
