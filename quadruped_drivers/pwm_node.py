@@ -31,7 +31,7 @@ from std_srvs.srv import SetBool, SetBoolResponse
 
 from quadruped_common.monitoring import RateMonitor, WindowStatistics
 from quadruped_common.robot import JOINT_NAMES
-from quadruped_common.ros.node_startup import start_node
+from quadruped_common.ros.node_startup import stack_clock, start_node
 from quadruped_drivers.hardware_config import load_hardware_config
 from quadruped_drivers.node_support import open_bus, with_failsafe
 from quadruped_drivers.pwm_output import ServoPwmOutput
@@ -46,7 +46,10 @@ class PwmNode:
         bus = open_bus(backend, self.hardware.i2c_bus, rospy.get_param("~bus_socket", "/tmp/uq_sim_i2c.sock"))
         self.lock = threading.Lock()  # one thread at a time owns the bus (docs/hardware_libraries.md: PCA9685 library)
         period = 1.0 / float(rospy.get_param("~update_rate", 100.0))
-        self.output = ServoPwmOutput(bus, self.hardware, update_period=period)
+        # The command watchdog judges a command's age on the clock its timer runs on: in lock-step a slow
+        # step on a loaded machine must not trip it (on wall time it could, and the chip would go to its
+        # failsafe at a moment that differs from run to run).
+        self.output = ServoPwmOutput(bus, self.hardware, update_period=period, clock=stack_clock())
         self._start_output()
         if not rospy.get_param("~enable_on_start", True):
             self.output.disable()

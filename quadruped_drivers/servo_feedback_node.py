@@ -29,7 +29,7 @@ from sensor_msgs.msg import JointState
 from quadruped_common.config import ParameterError
 from quadruped_common.monitoring import LowPassDifferentiator, RateMonitor, WindowStatistics
 from quadruped_common.robot import JOINT_NAMES, load_servo_no_load_speed
-from quadruped_common.ros.node_startup import start_node
+from quadruped_common.ros.node_startup import stack_clock, start_node
 from quadruped_drivers.calibration import load_servo_calibration
 from quadruped_drivers.hardware_config import load_hardware_config
 from quadruped_drivers.node_support import open_bus
@@ -48,8 +48,7 @@ class ServoFeedbackNode:
         # The array's ages (stale, failed) and the joint-rate check run on the clock the servos move on:
         # simulated time in lock-step (it may run faster or slower than the wall), the monotonic clock
         # otherwise (wall time can jump).
-        clock = rospy.get_time if rospy.get_param("/use_sim_time", False) else time.monotonic
-        self.array = ServoFeedbackArray(bus, hardware, calibration, clock=clock, max_joint_speed=max_speed)
+        self.array = ServoFeedbackArray(bus, hardware, calibration, clock=stack_clock(), max_joint_speed=max_speed)
         self.frame_id = rospy.get_param("~frame_id", "")
         self.differentiator = LowPassDifferentiator(len(JOINT_NAMES),
                                                     float(rospy.get_param("~velocity_time_constant", 0.03)))

@@ -31,7 +31,7 @@ from diagnostic_updater import DiagnosticStatusWrapper, Updater
 from sensor_msgs.msg import Imu
 
 from quadruped_common.monitoring import RateMonitor
-from quadruped_common.ros.node_startup import start_node
+from quadruped_common.ros.node_startup import stack_clock, start_node
 from quadruped_drivers.vn100.driver import Vn100Driver, serial_port_factory
 from quadruped_drivers.vn100.sample_gate import DROP_REASONS, TIME_ANOMALY, SampleGate
 from quadruped_drivers.vn100.settings import VN100_KEYS, load_vn100_settings, sensor_limits
@@ -70,7 +70,8 @@ class Vn100Node:
                                   rate_hz=self.rate_hz,
                                   reconnect_interval=float(param("reconnect_interval")),
                                   command_timeout=float(param("command_timeout")),
-                                  stale_timeout=float(param("stale_timeout")))
+                                  stale_timeout=float(param("stale_timeout")),
+                                  link_clock=stack_clock())  # silence on simulated time in lock-step
         self.gate = SampleGate(sensor_limits(settings), max_backdate=float(param("stale_timeout")))
         self.publisher = rospy.Publisher("imu/data", Imu, queue_size=10, tcp_nodelay=True)
         self.monitor = RateMonitor(2.0)

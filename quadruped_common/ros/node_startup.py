@@ -7,6 +7,9 @@
 * the start-up heap frozen (:mod:`quadruped_common.heap`): no full garbage collection walks it again;
 * :func:`stop_xmlrpc_server_on_shutdown`, the work-around for ros/ros_comm#2238 below.
 
+:func:`stack_clock` is the clock a driver judges ages and timeouts on (command watchdog, link silence,
+stale readings): the one its ROS timers run on.
+
 ros/ros_comm#2238 (open in Noetic, which is end-of-life): ``rosgraph.xmlrpc.XmlRpcNode.shutdown``
 closes the listening socket but never asks ``socketserver``'s ``serve_forever`` loop to stop. The
 loop's ``poll`` then reports the closed descriptor as ready at once, forever: one thread per node
@@ -18,6 +21,7 @@ period and were killed with SIGKILL. The work-around stops the loop the document
 from __future__ import annotations
 
 import threading
+import time
 from typing import Callable, Tuple, Type, TypeVar
 
 import rospy
@@ -66,6 +70,14 @@ def stop_xmlrpc_server_on_shutdown() -> None:
     rospy.on_shutdown(lambda: stop_xmlrpc_server(node))
 
 
+def stack_clock() -> Callable[[], float]:
+    """The clock of the node's timers as a function of seconds: ROS time under ``/use_sim_time``
+    (simulated time in lock-step: a slow step on a loaded machine is no timeout there, and the
+    watchdogs act at the same simulated moments in every run), ``time.monotonic`` otherwise (wall time
+    can jump). Read it after ``init_node``."""
+    return rospy.get_time if rospy.get_param("/use_sim_time", False) else time.monotonic
+
+
 def start_node(name: str, build: Callable[[], NodeT],
                errors: Tuple[Type[BaseException], ...] = CONFIGURATION_ERRORS) -> NodeT:
     """``rospy.init_node(name)`` and ``build()`` (module docstring); returns the node object.
@@ -86,4 +98,4 @@ def start_node(name: str, build: Callable[[], NodeT],
     return node
 
 
-__all__ = ["CONFIGURATION_ERRORS", "start_node", "stop_xmlrpc_server", "stop_xmlrpc_server_on_shutdown"]
+__all__ = ["CONFIGURATION_ERRORS", "stack_clock", "start_node", "stop_xmlrpc_server", "stop_xmlrpc_server_on_shutdown"]

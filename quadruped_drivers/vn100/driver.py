@@ -20,7 +20,11 @@ parser that decodes binary packets, so packets interleaved with the replies are 
 Serial errors never escape :meth:`Vn100Driver.read_samples`: the port is closed, ``disconnects``
 counted, ``last_error`` set, and a new connection is attempted every ``reconnect_interval`` s of
 the injected ``clock``. Optionally (``stale_timeout``) a connection delivering no valid packet for
-that long is treated the same way (e.g. the sensor reset and lost its configuration).
+that long is treated the same way (e.g. the sensor reset and lost its configuration). That silence is
+judged on ``link_clock`` (default ``clock``): the node passes the ROS clock, so in lock-step simulation
+(simulated time) the link times out after 0.1 s of *simulated* silence, as on the robot, and not when
+a loaded machine takes 0.1 s of wall time for one step; reply and reconnect deadlines stay on
+``clock`` (bytes on a wire take wall time, and simulated time stands still while the sensor is set up).
 """
 from __future__ import annotations
 
@@ -94,7 +98,8 @@ class Vn100Driver:
                  clock: Callable[[], float] = time.monotonic, reconnect_interval: float = 1.0,
                  read_size: int = 4096, command_timeout: float = 0.5, command_retries: int = 2,
                  stale_timeout: Optional[float] = None, async_mode: int = 1,
-                 group1_fields: int = vp.DEFAULT_GROUP1_FIELDS) -> None:
+                 group1_fields: int = vp.DEFAULT_GROUP1_FIELDS,
+                 link_clock: Optional[Callable[[], float]] = None) -> None:
         self.rate_divisor = vp.rate_divisor_for(rate_hz)
         self.rate_hz = vp.IMU_RATE_HZ / self.rate_divisor
         if reconnect_interval < 0 or command_timeout <= 0 or read_size < 1 or command_retries < 0:
@@ -107,6 +112,7 @@ class Vn100Driver:
         self._expected_config = (async_mode, self.rate_divisor, {1: group1_fields})
         self._port_factory = port_factory
         self._clock = clock
+        self._link_clock = link_clock if link_clock is not None else clock
         self.reconnect_interval = float(reconnect_interval)
         self.read_size = int(read_size)
         self.command_timeout = float(command_timeout)
@@ -166,7 +172,7 @@ class Vn100Driver:
             raise
         self.connects += 1
         self.last_error = ""
-        self.last_sample_time = self._clock()
+        self.last_sample_time = self._link_clock()
 
     def _configure(self) -> None:
         port = self._port
@@ -283,7 +289,7 @@ class Vn100Driver:
         except (OSError, ValueError) as exc:  # pyserial: SerialException is an OSError
             self._disconnect("serial error: %s" % (exc,))
             return samples
-        now = self._clock()
+        now = self._link_clock()
         if samples:
             self.last_sample_time = now
         elif (self.stale_timeout is not None and self.last_sample_time is not None

@@ -26,7 +26,7 @@ TRUTH_A = np.array([0.5, -1.0, 9.7])
 class Rig:
     """Fake sensor + in-memory port + driver sharing one manual clock."""
 
-    def __init__(self, rate_hz: float = 200.0, **fake_kwargs) -> None:
+    def __init__(self, rate_hz: float = 200.0, link_clock=None, **fake_kwargs) -> None:
         self.clock = ManualClock(100.0)
         self.device = FakeVn100(boot_time=99.0, **fake_kwargs)
         self.ports = []
@@ -40,7 +40,7 @@ class Rig:
             return port
 
         self.driver = Vn100Driver(factory, rate_hz=rate_hz, clock=self.clock,
-                                  reconnect_interval=1.0)
+                                  reconnect_interval=1.0, link_clock=link_clock)
 
     def run(self, seconds: float, step: float = 0.01):
         out = []
@@ -323,3 +323,30 @@ def test_unplugged_time_is_not_sent_after_replug():
     device.reconnect(power_cycle=False)
     device.advance(0.51)
     assert device.packets_sent - sent == 2  # only the 0.505 and 0.510 s packets
+
+
+def test_link_silence_is_judged_on_the_link_clock_only():
+    """Lock-step: the node judges the link on simulated time. Wall time passing without packets while
+    simulated time stands still (a slow step on a loaded machine) is no silence; simulated time passing
+    without packets is."""
+    simulated = ManualClock(5.0)
+    rig = Rig(link_clock=simulated)
+    rig.driver.stale_timeout = 0.1
+    assert rig.run(0.2)
+    rig.device.power_cycle()  # no more binary packets
+    for _ in range(50):  # 0.5 s of wall time, simulated time held
+        rig.clock.sleep(0.01)
+        assert rig.driver.read_samples() == []
+    assert rig.driver.disconnects == 0
+    simulated.sleep(0.11)
+    rig.driver.read_samples()
+    assert rig.driver.disconnects == 1 and "no valid packet" in rig.driver.last_error
+
+
+def test_without_a_link_clock_the_link_is_judged_on_the_clock():
+    rig = Rig()
+    rig.driver.stale_timeout = 0.1
+    assert rig.run(0.2)
+    rig.device.power_cycle()
+    rig.run(0.15)
+    assert rig.driver.disconnects == 1
