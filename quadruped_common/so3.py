@@ -353,7 +353,7 @@ def cross_rows(a: np.ndarray, b: np.ndarray) -> np.ndarray:
 
 def rotations_to_rpy(R: np.ndarray) -> np.ndarray:
     """(N, 3) roll, pitch, yaw (rad, R = Rz(yaw) Ry(pitch) Rx(roll)) of (N, 3, 3) rotations, as :func:`rot_to_rpy`."""
-    cp = np.hypot(R[:, 0, 0], R[:, 1, 0])
+    cp = np.sqrt(R[:, 0, 0] * R[:, 0, 0] + R[:, 1, 0] * R[:, 1, 0])  # hypot2 of rpy_f, the same bits
     pitch = np.arctan2(-R[:, 2, 0], cp)
     regular = cp > 1e-9
     roll = np.where(regular, np.arctan2(R[:, 2, 1], R[:, 2, 2]), 0.0)
