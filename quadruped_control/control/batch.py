@@ -16,8 +16,8 @@ functions per trial:
    (:func:`~quadruped_control.model.kinematics.ik_row`, the core of the robot's ``joint_angles_floats``).
 
 The stroke cycle's phase logic is written here once more, on per-trial state arrays instead of the
-robot's objects (pairs, recorded paths); the tests step both side by side and compare every state to
-1e-9. What the compiled loop leaves out, because no simulated trial of the paper's scheme reaches it: the
+robot's objects (pairs, recorded paths); the tests step both side by side and require every state to be
+equal. What the compiled loop leaves out, because no simulated trial of the paper's scheme reaches it: the
 hold (safe state, scheme switches; a trial whose measurement the float controller would refuse is
 reported as ``refused``, frozen and stops being trusted) and timing changes during a trial.
 

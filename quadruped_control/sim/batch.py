@@ -9,7 +9,7 @@ with its own speed and time constant), the joint hold of
 plant (:class:`~quadruped_control.sim.plants.paper_batch.PaperPlantBatch` or
 :class:`~quadruped_control.sim.plants.tank_batch.TankPlantBatch`, each trial with its own tank parameters). The step order, the time
 grid t_k = k dt and the recorded samples are those of the per-trial engine, and the tests compare the
-two trial by trial (states to 1e-9 over the first 10 s, the same metrics).
+two trial by trial (every state equal, bit for bit, and the same metrics).
 
 Each trial has its own gains, torque limit, stroke timing, setpoint, initial attitude, servo model,
 centre-of-buoyancy offset or tank parameters, IMU noise (its own seeded generator, drawn as the per-trial
@@ -182,7 +182,6 @@ class BatchSimulation:
         self.k = 0
         if isinstance(self.plant, TankPlantBatch):
             self.plant.attach(self.position, self.rotation)
-
 
     def _measure(self):
         """What each trial's IMU reports: the true state, with noise where the trial has some."""
