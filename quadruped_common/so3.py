@@ -14,7 +14,7 @@ gimbal lock) instead of returning NaN.
 from __future__ import annotations
 
 import math
-from typing import Sequence, Tuple, Union
+from typing import Any, Sequence, Tuple, Union
 
 import numpy as np
 
@@ -304,6 +304,14 @@ def geodesic_f(R_d: Sequence[float], R: Sequence[float]) -> float:
     # E = R_d^T R; |sin t| = |vee(skew part of E)| and cos t = (tr E - 1) / 2 both carry an absolute
     # error of ~eps, so atan2 is accurate to ~eps everywhere, while arccos(c) has an error of ~sqrt(eps)
     # near 0 and pi.
+    dx, dy, dz, trace = geodesic_terms(R_d, R)
+    return math.atan2(0.5 * hypot3(dx, dy, dz), 0.5 * (trace - 1.0))
+
+
+@jitable
+def geodesic_terms(R_d: Sequence[Any], R: Sequence[Any]) -> Tuple[Any, Any, Any, Any]:
+    """(2 vee(skew part of E), tr E) of E = R_d^T R for row-major 3x3 matrices given as 9 elements each:
+    floats (:func:`geodesic_f`) or arrays of many rotations (:func:`geodesic_angles`), the same arithmetic."""
     e01 = R_d[0] * R[1] + R_d[3] * R[4] + R_d[6] * R[7]
     e02 = R_d[0] * R[2] + R_d[3] * R[5] + R_d[6] * R[8]
     e10 = R_d[1] * R[0] + R_d[4] * R[3] + R_d[7] * R[6]
@@ -312,9 +320,8 @@ def geodesic_f(R_d: Sequence[float], R: Sequence[float]) -> float:
     e21 = R_d[2] * R[1] + R_d[5] * R[4] + R_d[8] * R[7]
     trace = 0.0
     for k in range(3):
-        trace += R_d[k] * R[k] + R_d[3 + k] * R[3 + k] + R_d[6 + k] * R[6 + k]
-    s = 0.5 * hypot3(e21 - e12, e02 - e20, e10 - e01)
-    return math.atan2(s, 0.5 * (trace - 1.0))
+        trace = trace + (R_d[k] * R[k] + R_d[3 + k] * R[3 + k] + R_d[6 + k] * R[6 + k])
+    return e21 - e12, e02 - e20, e10 - e01, trace
 
 
 def orthonormalize(R: ArrayLike) -> np.ndarray:
@@ -351,18 +358,30 @@ def cross_rows(a: np.ndarray, b: np.ndarray) -> np.ndarray:
     return np.stack((a1 * b2 - a2 * b1, a2 * b0 - a0 * b2, a0 * b1 - a1 * b0), axis=-1)
 
 
+def atan2_elementwise(y: np.ndarray, x: np.ndarray) -> np.ndarray:
+    """``math.atan2`` of each pair: the C library's atan2, as scalar and compiled code compute it.
+
+    Not ``np.arctan2``: on CPUs with AVX-512, numpy computes it with its own SIMD routine, which differs
+    from the C library's in the last bit for about a third of all arguments, so the recorded angles of the
+    per-trial simulator would not be those of the batched one (:func:`rpy_f`, :func:`geodesic_f`)."""
+    y = np.asarray(y, dtype=float)
+    x = np.broadcast_to(np.asarray(x, dtype=float), y.shape)
+    return np.fromiter(map(math.atan2, y.ravel().tolist(), x.ravel().tolist()), dtype=float,
+                       count=y.size).reshape(y.shape)
+
+
 def rotations_to_rpy(R: np.ndarray) -> np.ndarray:
     """(N, 3) roll, pitch, yaw (rad, R = Rz(yaw) Ry(pitch) Rx(roll)) of (N, 3, 3) rotations, as :func:`rot_to_rpy`."""
     cp = np.sqrt(R[:, 0, 0] * R[:, 0, 0] + R[:, 1, 0] * R[:, 1, 0])  # hypot2 of rpy_f, the same bits
-    pitch = np.arctan2(-R[:, 2, 0], cp)
+    pitch = atan2_elementwise(-R[:, 2, 0], cp)
     regular = cp > 1e-9
-    roll = np.where(regular, np.arctan2(R[:, 2, 1], R[:, 2, 2]), 0.0)
-    yaw = np.where(regular, np.arctan2(R[:, 1, 0], R[:, 0, 0]), 0.0)
+    roll = np.where(regular, atan2_elementwise(R[:, 2, 1], R[:, 2, 2]), 0.0)
+    yaw = np.where(regular, atan2_elementwise(R[:, 1, 0], R[:, 0, 0]), 0.0)
     if not np.all(regular):  # gimbal lock: all rotation about the vertical into roll (:func:`rot_to_rpy`)
         up = ~regular & (R[:, 2, 0] < 0.0)
         down = ~regular & ~(R[:, 2, 0] < 0.0)
-        roll = np.where(up, np.arctan2(R[:, 0, 1], R[:, 0, 2]), roll)
-        roll = np.where(down, np.arctan2(-R[:, 0, 1], -R[:, 0, 2]), roll)
+        roll = np.where(up, atan2_elementwise(R[:, 0, 1], R[:, 0, 2]), roll)
+        roll = np.where(down, atan2_elementwise(-R[:, 0, 1], -R[:, 0, 2]), roll)
     return np.column_stack((roll, pitch, yaw))
 
 
@@ -392,7 +411,9 @@ def rotations_to_quaternions(R: np.ndarray) -> np.ndarray:
 def geodesic_angles(R_d: np.ndarray, R: np.ndarray) -> np.ndarray:
     """(N,) angle of R_d^T R_k (rad, [0, pi]) as :func:`geodesic_angle`, for (N, 3, 3) rotations R and one
     setpoint R_d (3, 3) or one per rotation (N, 3, 3)."""
-    E = np.einsum("...ji,...jk->...ik", R_d, R)
-    s = 0.5 * np.sqrt((E[:, 2, 1] - E[:, 1, 2]) ** 2 + (E[:, 0, 2] - E[:, 2, 0]) ** 2 + (E[:, 1, 0] - E[:, 0, 1]) ** 2)
-    c = 0.5 * (E[:, 0, 0] + E[:, 1, 1] + E[:, 2, 2] - 1.0)
-    return np.arctan2(s, c)
+    # geodesic_terms on columns of elements (no einsum, whose SIMD sums round differently on some CPUs)
+    # and the C library's atan2: the per-trial and the batched simulator record the same bits.
+    D = np.broadcast_to(np.asarray(R_d, dtype=float), np.shape(R))
+    dx, dy, dz, trace = geodesic_terms([D[:, k // 3, k % 3] for k in range(9)], [R[:, k // 3, k % 3] for k in range(9)])
+    s = 0.5 * np.sqrt(dx * dx + dy * dy + dz * dz)  # hypot3, elementwise
+    return atan2_elementwise(s, 0.5 * (trace - 1.0))
