@@ -8,6 +8,10 @@ the drivers with the same interface as the real one (the adafruit bus-device sub
 request and one answer, so a ``writeto_then_readfrom`` stays one atomic transaction (repeated start) on
 the far side, exactly as on a real bus, and every byte the drivers produce reaches the fake registers.
 
+A stuck bus (a device holding SDA low, so every transaction ends in the adapter's timeout) is a fault of
+the wire, so it is injected here: :meth:`BusBridgeServer.set_stuck` makes every transaction wait
+``stuck_timeout_s`` and fail with ``ETIMEDOUT``, without touching the devices, until it is released.
+
 Wire format (little-endian), request: ``op u8, address u8, write_len u16, read_len u16, write bytes``;
 answer: ``errno u8`` (0 = ACK) followed by ``read_len`` bytes when errno is 0. Device errors travel as
 their errno and are raised as ``OSError(errno)`` by the client, like Linux i2c-dev reports a NACK.
@@ -19,6 +23,7 @@ import os
 import socket
 import struct
 import threading
+import time
 from typing import List, Optional
 
 _OP_WRITE = 1
@@ -45,12 +50,22 @@ class BusBridgeServer:
 
     Transactions from all clients are executed one at a time under ``lock`` (pass the lock the owner
     of the fake devices also takes, so physics updates and bus traffic never interleave mid-register).
+    ``stuck_timeout_s``: how long a transaction on a stuck bus (:meth:`set_stuck`) takes before it fails
+    with ``ETIMEDOUT``, as the I2C adapter's transfer timeout; it must stay below the client's socket
+    timeout (0.5 s), which would otherwise report a dead bridge instead.
     """
 
-    def __init__(self, bus, path: str, lock: Optional[threading.Lock] = None) -> None:
+    def __init__(self, bus, path: str, lock: Optional[threading.Lock] = None,
+                 stuck_timeout_s: float = 0.025) -> None:
+        if not 0.0 <= stuck_timeout_s < 0.5:
+            raise ValueError("stuck_timeout_s must be in [0, 0.5) s, got %r" % (stuck_timeout_s,))
         self._bus = bus
         self._path = path
         self._lock = lock or threading.Lock()
+        self._stuck = threading.Event()
+        self.stuck_timeout_s = float(stuck_timeout_s)
+        #: Transactions failed with ETIMEDOUT while the bus was stuck.
+        self.stuck_transactions = 0
         self._stop = threading.Event()
         self._threads: List[threading.Thread] = []
         self._connections: List[socket.socket] = []
@@ -69,6 +84,19 @@ class BusBridgeServer:
     @property
     def path(self) -> str:
         return self._path
+
+    @property
+    def stuck(self) -> bool:
+        """True while every transaction times out (:meth:`set_stuck`)."""
+        return self._stuck.is_set()
+
+    def set_stuck(self, stuck: bool) -> None:
+        """Hold the bus (every transaction waits ``stuck_timeout_s``, then fails with ``ETIMEDOUT``, and no
+        device sees it) or release it; the devices keep their registers either way."""
+        if stuck:
+            self._stuck.set()
+        else:
+            self._stuck.clear()
 
     def close(self) -> None:
         """Stop serving, close every connection and remove the socket file."""
@@ -116,6 +144,11 @@ class BusBridgeServer:
     def _execute(self, op: int, address: int, data: bytes, read_len: int) -> bytes:
         if read_len > _MAX_LEN:
             return bytes([errno.EINVAL])
+        if self._stuck.is_set():
+            # Waited outside the device lock: a stuck wire stalls the drivers, not the simulated robot.
+            time.sleep(self.stuck_timeout_s)
+            self.stuck_transactions += 1
+            return bytes([errno.ETIMEDOUT])
         buffer = bytearray(read_len)
         try:
             with self._lock:

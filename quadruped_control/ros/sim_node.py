@@ -39,8 +39,13 @@ Parameters
   then no longer deterministic)
   ~lockstep_graph (["imu/data attitude_controller", "servo_command pwm_node"]: "topic node" pairs that
   must be connected, at the publishers' end too, before simulated time starts)
-Services
-  ~imu_streaming    std_srvs/SetBool  stop / resume the fake VN-100's output (stale-IMU tests)
+  ~i2c_stuck_timeout (0.025 s: how long each transaction on a stuck bus takes before ETIMEDOUT)
+Services (fault injection: tests and benchmarks/fault_campaign.py)
+  ~imu_streaming    std_srvs/SetBool  stop / resume the fake VN-100's output: the serial link lost and
+                                      back (the sensor keeps its configuration)
+  ~i2c_bus_stuck    std_srvs/SetBool  true: the I2C bus is held (every transaction times out), false: free
+  ~pca9685_power    std_srvs/SetBool  false: the PCA9685 loses its supply (off the bus, no pulses), true:
+                                      powered again from its power-on reset state
 """
 from __future__ import annotations
 
@@ -53,7 +58,8 @@ import numpy as np
 import rosgraph
 import rospy
 from diagnostic_msgs.msg import DiagnosticStatus
-from diagnostic_updater import DiagnosticStatusWrapper, Updater
+from diagnostic_updater import DiagnosticStatusWrapper
+from quadruped_common.ros.diagnostics import Updater
 from geometry_msgs.msg import PoseStamped
 from rosgraph_msgs.msg import Clock
 from std_srvs.srv import SetBool, SetBoolResponse
@@ -125,7 +131,7 @@ class SimNode:
         # never interleave mid-transaction.
         self.lock = self.fake.lock
         self.bridge = BusBridgeServer(self.fake.bus, rospy.get_param("~bus_socket", "/tmp/uq_sim_i2c.sock"),
-                                      self.lock)
+                                      self.lock, stuck_timeout_s=float(rospy.get_param("~i2c_stuck_timeout", 0.025)))
         if self.lockstep:
             self.vn100 = FakeVn100(boot_time=self.sim_clock.t0)
             imu_clock, realtime = (lambda: self.sim_time), False
@@ -151,6 +157,8 @@ class SimNode:
         self.pose_pub = rospy.Publisher("sim/pose", PoseStamped, queue_size=10)
         self.output_pub = rospy.Publisher("sim/servo_output", ServoCommand, queue_size=10)
         rospy.Service("~imu_streaming", SetBool, self._on_imu_streaming)
+        rospy.Service("~i2c_bus_stuck", SetBool, self._on_bus_stuck)
+        rospy.Service("~pca9685_power", SetBool, self._on_pca_power)
         rospy.on_shutdown(self._shutdown)
         self.steps = 0
         self.overruns = 0
@@ -355,6 +363,9 @@ class SimNode:
         stat.add("lock-step timeouts", str(self.lockstep_timeouts))
         stat.add("clamped joint commands", str(self.plant.clamped_joints))
         stat.add("IMU streaming", str(self.vn100.connected))
+        stat.add("I2C bus stuck", str(self.bridge.stuck))
+        stat.add("I2C transactions timed out", str(self.bridge.stuck_transactions))
+        stat.add("PCA9685 powered", str(self.fake.pca_powered))
         stat.add("fake VN-100 packets", str(self.vn100.packets_sent))
         return stat
 
@@ -366,6 +377,18 @@ class SimNode:
         else:
             self.vn100.disconnect()
         message = "fake VN-100 output %s" % ("resumed" if request.data else "stopped")
+        rospy.logwarn("sim_node: %s", message)
+        return SetBoolResponse(success=True, message=message)
+
+    def _on_bus_stuck(self, request) -> SetBoolResponse:
+        self.bridge.set_stuck(bool(request.data))
+        message = "I2C bus %s" % ("stuck: every transaction times out" if request.data else "free again")
+        rospy.logwarn("sim_node: %s", message)
+        return SetBoolResponse(success=True, message=message)
+
+    def _on_pca_power(self, request) -> SetBoolResponse:
+        self.fake.set_pca_power(bool(request.data))
+        message = "PCA9685 %s" % ("powered (power-on reset state)" if request.data else "unpowered: no pulses")
         rospy.logwarn("sim_node: %s", message)
         return SetBoolResponse(success=True, message=message)
 

@@ -432,6 +432,25 @@ class FakeHardware:
         with self.bus.lock:
             return np.array([self.pca.pulse_width_us(joint.pwm_channel) for joint in self.config.joints])
 
+    @property
+    def pca_powered(self) -> bool:
+        """False while the PCA9685 has lost its supply (:meth:`set_pca_power`)."""
+        with self.bus.lock:
+            return self.bus.device_at(self.config.pca_address) is self.pca
+
+    def set_pca_power(self, powered: bool) -> None:
+        """Cut or restore the PCA9685's supply. Unpowered, the chip leaves the bus (every transaction to
+        it NACKs) and produces no pulses (servos limp); powered again, it starts from its power-on reset
+        state (asleep, every output off) until its driver configures it again."""
+        with self.bus.lock:
+            if powered == self.pca_powered:
+                return
+            self.pca.power_cycle()  # registers lost with the supply; reads as no pulses while off
+            if powered:
+                self.bus.attach(self.config.pca_address, self.pca)
+            else:
+                self.bus.detach(self.config.pca_address)
+
 
 def build_fake_hardware(hardware_config: Any, require_lock: bool = False,
                         log_transactions: bool = True) -> FakeHardware:

@@ -124,3 +124,26 @@ def test_bad_address_is_rejected_locally(bridge):
     _, _, client = bridge
     with pytest.raises(ValueError):
         client.writeto(0x80, b"\x00")
+
+
+def test_a_stuck_bus_times_out_every_transaction_without_touching_the_devices(bridge):
+    bus, server, client = bridge
+    client.writeto(0x40, b"\x00\x01")
+    server.stuck_timeout_s = 0.02
+    server.set_stuck(True)
+    assert server.stuck
+    for attempt in range(3):
+        with pytest.raises(OSError) as info:
+            client.writeto(0x40, b"\x00\x09")
+        assert info.value.errno == errno.ETIMEDOUT
+    with pytest.raises(OSError):
+        client.writeto_then_readfrom(0x40, b"\x00", bytearray(1))
+    assert bus.registers[0] == 1 and server.stuck_transactions == 4
+    server.set_stuck(False)
+    client.writeto(0x40, b"\x00\x02")  # the same connection works again
+    assert bus.registers[0] == 2
+
+
+def test_stuck_timeout_must_stay_below_the_clients_socket_timeout():
+    with pytest.raises(ValueError):
+        BusBridgeServer(RegisterBus(), os.path.join(tempfile.mkdtemp(prefix="uqbb"), "x.sock"), stuck_timeout_s=0.5)

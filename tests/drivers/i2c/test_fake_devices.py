@@ -12,8 +12,8 @@ from hypothesis import given, strategies as st
 from quadruped_drivers.hardware_config import load_hardware_config
 from quadruped_drivers.i2c import BusLockTimeout, bus_locked
 from quadruped_drivers.i2c.fake_bus import FakeI2CBus, Transaction, bits_on_wire, transaction_bits
-from quadruped_drivers.i2c.fake_devices import (FakeAds1115, FakePca9685, FakeTca9548a, ads1115_code,
-                                                build_fake_hardware)
+from quadruped_drivers.i2c.fake_devices import (PCA_AI, PCA_ALLCALL, PCA_LED0_ON_L, PCA_MODE1, FakeAds1115,
+                                                FakePca9685, FakeTca9548a, ads1115_code, build_fake_hardware)
 
 
 class Register8:
@@ -335,3 +335,24 @@ def test_fake_hardware_for_a_long_running_server_keeps_no_log():
     logged = build_fake_hardware(hw)
     logged.bus.writeto(hw.pca_address, bytes([0x00]))
     assert len(logged.bus.log) == 1
+
+
+def test_pca9685_power_loss_leaves_the_bus_gives_no_pulses_and_comes_back_reset():
+    hardware = load_hardware_config(None)
+    fake = build_fake_hardware(hardware)
+    pca = fake.pca
+    address = hardware.pca_address
+    # configure one channel as a driver would: awake, 1500 us on channel 0
+    fake.bus.writeto(address, bytes([PCA_MODE1, PCA_AI | PCA_ALLCALL]))
+    fake.bus.writeto(address, bytes([PCA_LED0_ON_L, 0, 0, 0x33, 0x01]))
+    assert pca.pulse_width_us(0) > 0
+    fake.set_pca_power(False)
+    assert not fake.pca_powered
+    assert (fake.pulse_widths_us() == 0).all()  # servos limp
+    with pytest.raises(OSError) as info:
+        fake.bus.writeto(address, bytes([PCA_MODE1, 0]))
+    assert info.value.errno == errno.ENXIO
+    fake.set_pca_power(False)  # idempotent
+    fake.set_pca_power(True)
+    assert fake.pca_powered and pca.asleep and (fake.pulse_widths_us() == 0).all()  # power-on reset
+    fake.bus.writeto(address, bytes([PCA_MODE1, PCA_AI | PCA_ALLCALL]))  # ACKs again
