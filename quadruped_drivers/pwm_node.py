@@ -26,7 +26,8 @@ from typing import List, Optional
 import numpy as np
 import rospy
 from diagnostic_msgs.msg import DiagnosticStatus
-from diagnostic_updater import DiagnosticStatusWrapper, Updater
+from diagnostic_updater import DiagnosticStatusWrapper
+from quadruped_common.ros.diagnostics import Updater
 from std_srvs.srv import SetBool, SetBoolResponse
 
 from quadruped_common.monitoring import RateMonitor, WindowStatistics

@@ -23,7 +23,8 @@ from typing import List, Optional
 
 import rospy
 from diagnostic_msgs.msg import DiagnosticStatus
-from diagnostic_updater import DiagnosticStatusWrapper, Updater
+from diagnostic_updater import DiagnosticStatusWrapper
+from quadruped_common.ros.diagnostics import Updater
 from sensor_msgs.msg import JointState
 
 from quadruped_common.config import ParameterError

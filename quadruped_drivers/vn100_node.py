@@ -27,7 +27,8 @@ from typing import List, Optional, Sequence
 
 import rospy
 from diagnostic_msgs.msg import DiagnosticStatus
-from diagnostic_updater import DiagnosticStatusWrapper, Updater
+from diagnostic_updater import DiagnosticStatusWrapper
+from quadruped_common.ros.diagnostics import Updater
 from sensor_msgs.msg import Imu
 
 from quadruped_common.monitoring import RateMonitor

@@ -40,7 +40,8 @@ from typing import List, Optional
 import numpy as np
 import rospy
 from diagnostic_msgs.msg import DiagnosticStatus
-from diagnostic_updater import DiagnosticStatusWrapper, Updater
+from diagnostic_updater import DiagnosticStatusWrapper
+from quadruped_common.ros.diagnostics import Updater
 from dynamic_reconfigure.server import Server as ReconfigureServer
 from geometry_msgs.msg import Point, Quaternion, QuaternionStamped, Vector3, Vector3Stamped
 from sensor_msgs.msg import Imu, JointState
