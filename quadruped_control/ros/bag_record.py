@@ -2,16 +2,28 @@
 
 ``rosbag record -o DIR/uq`` dies at start when DIR does not exist, and the rest of the stack would go on
 unrecorded. This wrapper makes the folder (like ``mkdir -p``) or stops with a clear message naming it,
-then replaces itself with ``rosbag record -o DIR/PREFIX ARGS...`` (ARGS include roslaunch's
-``__name:=`` / ``__log:=``, so the recorder keeps its node name). No rospy.
+then runs ``rosbag record -o DIR/PREFIX ARGS...`` (ARGS include roslaunch's ``__name:=`` / ``__log:=``,
+so the recorder keeps its node name) and supervises it (:func:`supervise`): a recorder that dies (a
+crash, SIGKILL, the OOM killer) is started again after ``RESTART_DELAY`` s into a new bag file, the one it
+left ``.active`` is reindexed by the bag report, which names the missing span. The wrapper is the
+launch's *required* process: it ends the launch only when the folder can no longer be written, so a
+run asked to record never goes on unrecorded, and a recorder crash no longer stops the robot (it used to:
+the recorder itself was the required node). roslaunch's SIGINT reaches the recorder directly (same
+process group); the wrapper then waits for it to close its bag. No rospy.
 
     bag_record BAG_DIR PREFIX [rosbag record arguments...]
 """
 from __future__ import annotations
 
 import os
+import signal
+import subprocess
 import sys
-from typing import List, Sequence
+import time
+from typing import Callable, List, Sequence
+
+#: Seconds between a recorder's death and its restart (roslaunch's respawn_delay of the other nodes).
+RESTART_DELAY = 1.0
 
 
 class BagDirError(RuntimeError):
@@ -75,5 +87,37 @@ def main(argv: Sequence[str]) -> int:
         return 1
     command = record_command(bag_dir, argv[2], argv[3:], os.environ.get("ROS_NAMESPACE", "/"))
     print("bag_record: recording into %s" % bag_dir, flush=True)
-    os.execvp(command[0], command)
-    return 0  # not reached: execvp replaces the process
+    stopping = []
+    for sig in (signal.SIGINT, signal.SIGTERM):
+        signal.signal(sig, lambda number, _frame: stopping.append(number))
+    return supervise(command, bag_dir, lambda: bool(stopping))
+
+
+def supervise(command: Sequence[str], bag_dir: str, stopping: Callable[[], bool],
+              restart_delay: float = RESTART_DELAY, popen=subprocess.Popen, log=print) -> int:
+    """Run ``command`` until ``stopping()``; start it again ``restart_delay`` s after it dies otherwise.
+    Returns its exit status once stopping, 1 when ``bag_dir`` can no longer be written (module docstring)."""
+    starts = 0
+    while True:
+        child = popen(list(command))
+        starts += 1
+        while True:
+            try:
+                status = child.wait()
+                break
+            except InterruptedError:  # pragma: no cover - Python retries wait() itself (PEP 475)
+                continue
+        if stopping():
+            return 0 if status in (0, -signal.SIGINT, -signal.SIGTERM) else status
+        log("bag_record: the recorder died (exit status %s); recording again in %.1f s into a new bag "
+            "(restart %d)" % (status, restart_delay, starts), flush=True)
+        deadline = time.monotonic() + restart_delay
+        while time.monotonic() < deadline and not stopping():
+            time.sleep(0.05)
+        if stopping():
+            return 0
+        try:
+            prepare_bag_dir(bag_dir)
+        except BagDirError as exc:
+            log("bag_record: %s; nothing more is recorded" % exc, flush=True)
+            return 1

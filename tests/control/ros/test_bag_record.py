@@ -73,3 +73,57 @@ def test_record_launch_uses_relative_names_and_the_wrapper():
     assert global_topics == {"/diagnostics", "/tf", "/tf_static", "/rosout"}
     assert {"imu/data", "joint_states", "servo_command", "controller_state", "attitude_setpoint",
             "attitude_setpoint_rpy_deg"} <= set(topics)
+
+
+def test_a_recorder_that_dies_is_started_again_until_the_launch_stops(tmp_path):
+    """supervise: each death of the recorder (here a child that exits at once) restarts it after the
+    delay; once stopping, the last exit ends the wrapper with success."""
+    from quadruped_control.ros.bag_record import supervise
+    started, logged = [], []
+
+    class Child:
+        def __init__(self, command):
+            started.append(command)
+
+        def wait(self):
+            return 0 if len(started) >= 3 else -9  # killed twice, then stopped by the launch
+
+    status = supervise(["rosbag", "record"], str(tmp_path), lambda: len(started) >= 3, restart_delay=0.01,
+                       popen=Child, log=lambda *a, **k: logged.append(a[0]))
+    assert status == 0 and len(started) == 3
+    assert len(logged) == 2 and "restart 1" in logged[0]
+
+
+def test_the_wrapper_ends_when_the_bag_dir_can_no_longer_be_written(tmp_path):
+    from quadruped_control.ros.bag_record import supervise
+    folder = tmp_path / "bags"
+    folder.mkdir()
+
+    class Child:
+        def __init__(self, command):
+            folder.rmdir()
+            folder.write_text("now a file")  # the folder is gone: the next start would record nothing
+
+        def wait(self):
+            return 1
+
+    assert supervise(["x"], str(folder), lambda: False, restart_delay=0.0, popen=Child, log=lambda *a, **k: None) == 1
+
+
+def test_the_wrapper_records_for_real_and_stops_on_sigint(tmp_path):
+    """main with a stand-in recorder: a child process that lives until SIGINT reaches its group."""
+    import signal
+    import subprocess
+    import sys
+    import time
+    script = ("import sys, time, os\n"
+              "sys.argv = sys.argv[:1]\n"
+              "from quadruped_control.ros import bag_record\n"
+              "bag_record.record_command = lambda d, p, a, n='/': [sys.executable, '-c', 'import time; time.sleep(60)']\n"
+              "sys.exit(bag_record.main(['bag_record', %r, 'uq', 'imu/data']))\n" % str(tmp_path))
+    root = os.path.dirname(os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__)))))
+    process = subprocess.Popen([sys.executable, "-c", script], cwd=root, start_new_session=True,
+                               env=dict(os.environ, PYTHONPATH=root))
+    time.sleep(1.0)
+    os.killpg(process.pid, signal.SIGINT)  # as roslaunch stops a node: SIGINT to its process group
+    assert process.wait(timeout=10) == 0
