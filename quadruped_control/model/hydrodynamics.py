@@ -54,6 +54,7 @@ __all__ = [
     "paw_drag_force",
     "paw_drag_force_unchecked",
     "paw_drag_wrench_f",
+    "paw_velocity_f",
     "torso_buoyancy_torque_matrix",
 ]
 
@@ -126,6 +127,15 @@ def leg_wrench(v_foot_world: ArrayLike, r_foot_body: ArrayLike, R: ArrayLike,
 
 
 @jitable
+def paw_velocity_f(px: float, py: float, pz: float, cx: float, cy: float, cz: float, bx: float, by: float,
+                   bz: float, wx: float, wy: float, wz: float) -> Tuple[float, float, float]:
+    """The paw's velocity through the water in body axes, u_i = R^T v_e,i^W = b + omega x r_i + c_i
+    (eq. (fb_jac)), for the foot r_i = (px, py, pz), its joint-induced velocity c_i = (cx, cy, cz), the
+    body velocity b = R^T v_B^W and rate omega_B^B."""
+    return bx + wy * pz - wz * py + cx, by + wz * px - wx * pz + cy, bz + wx * py - wy * px + cz
+
+
+@jitable
 def paw_drag_wrench_f(feet: Iterable[FootRow], drag_constant: float, bx: float, by: float, bz: float,
                       wx: float, wy: float, wz: float) -> Wrench6:
     """Fast path of :func:`leg_wrench` summed over the legs, on floats: eq. (drag), (force_leg),
@@ -141,9 +151,7 @@ def paw_drag_wrench_f(feet: Iterable[FootRow], drag_constant: float, bx: float, 
     sqrt = math.sqrt
     fx = fy = fz = tx = ty = tz = 0.0
     for px, py, pz, cx, cy, cz in feet:
-        ux = bx + wy * pz - wz * py + cx
-        uy = by + wz * px - wx * pz + cy
-        uz = bz + wx * py - wy * px + cz
+        ux, uy, uz = paw_velocity_f(px, py, pz, cx, cy, cz, bx, by, bz, wx, wy, wz)
         s = -drag_constant * sqrt(ux * ux + uy * uy + uz * uz)
         gx, gy, gz = s * ux, s * uy, s * uz                   # eq. (drag), (force_leg), body axes
         fx += gx

@@ -4,7 +4,7 @@ Parameters and their physically plausible bounds (:data:`PARAMETERS`; the reason
 docs/identification.md): the tank's uncertain estimates (centre of buoyancy, hook, net weight, rope
 length, torso added mass, servo speed, paw drag) and the candidate effects of
 :mod:`quadruped_control.sim.plants.tank` (appendage damping, linear and quadratic, roll/pitch and yaw;
-rope torsion). Every set is run on the batched simulator (:mod:`quadruped_control.sim.batch`), the 15
+rope torsion; the paws' wake, fraction and time constant). Every set is run on the batched simulator (:mod:`quadruped_control.sim.batch`), the 15
 experiments of Table 1 with the experiment gains and rate-limited servos, 160 s each.
 
 Objective (lower is better), summed over the experiments with the weights of :data:`WEIGHTS`
@@ -63,6 +63,8 @@ PARAMETERS: Tuple[Tuple[str, float, float], ...] = (
     ("appendage_quadratic_z", 0.0, 0.5),   # N m s^2/rad^2: the same about yaw
     ("torsion_stiffness", 0.0, 0.1),       # N m/rad: a braided rope and a foam block resist little
     ("torsion_damping", 0.0, 0.2),         # N m s/rad: the block turning in the water
+    ("wake_fraction", 0.0, 0.8),           # share of the paw's velocity its near wake reaches (sphere: 0.5-0.8)
+    ("wake_time_constant", 0.05, 1.0),     # s: from D/U (0.075 m at 0.3-1 m/s) to a whole stroke cycle
 )
 
 #: Weights of the objective's terms (module docstring).
@@ -91,6 +93,9 @@ def tank_overrides(values: Dict[str, float]) -> Tuple[Tuple[str, Any], ...]:
     for name in ("torsion_stiffness", "torsion_damping"):
         if name in values:
             out.append(("rope_" + name, float(values[name])))
+    for name in ("wake_fraction", "wake_time_constant"):
+        if name in values:
+            out.append(("paw_" + name, float(values[name])))
     return tuple(out)
 
 
@@ -102,7 +107,8 @@ def nominal_values(tank: TankParams) -> Dict[str, float]:
            "appendage_linear_xy": tank.appendage_damping_linear[0], "appendage_linear_z": tank.appendage_damping_linear[2],
            "appendage_quadratic_xy": tank.appendage_damping_quadratic[0],
            "appendage_quadratic_z": tank.appendage_damping_quadratic[2],
-           "torsion_stiffness": tank.rope_torsion_stiffness, "torsion_damping": tank.rope_torsion_damping}
+           "torsion_stiffness": tank.rope_torsion_stiffness, "torsion_damping": tank.rope_torsion_damping,
+           "wake_fraction": tank.paw_wake_fraction, "wake_time_constant": tank.paw_wake_time_constant}
     return {name: float(min(high, max(low, raw[name]))) for name, low, high in PARAMETERS}
 
 
@@ -166,6 +172,8 @@ _YAML_KEYS = {
     "paw_drag_scale": ("paw_drag", "scale", "%.3f"),
     "torsion_stiffness": ("suspension", "torsion_stiffness", "%.4f"),
     "torsion_damping": ("suspension", "torsion_damping", "%.4f"),
+    "wake_fraction": ("paw_wake", "fraction", "%.3f"),
+    "wake_time_constant": ("paw_wake", "time_constant", "%.3f"),
 }
 #: appendage damping: one line per kind, (xy, xy, z)
 _APPENDAGE_KEYS = {"linear": ("appendage_linear_xy", "appendage_linear_z"),

@@ -34,6 +34,20 @@ Candidate effects of the identification against Table 1, each zero (today's mode
   world vertical since :meth:`TankModel.attach` (the twist of the swing-twist decomposition of
   R R_0^T), omega_z^W the vertical component of the angular velocity. Acts only with the suspension on.
 
+- ``paw wake`` (:func:`paw_wake_update`): a paw that strokes sets the water around it moving, and the
+  recovery stroke reverses into that water. Each paw carries a wake velocity w_i (body axes) that relaxes
+  towards a fraction kappa of the paw's own velocity u_i with a time constant tau_w,
+  dw_i/dt = (kappa u_i - w_i) / tau_w, and the drag law sees u_i - w_i: late in the power stroke the paw
+  pushes water that already moves with it (less thrust), and the retracing recovery stroke meets that
+  water head-on (more drag against the stroke), so the net torque of a stroke cycle, the small difference
+  of the two impulses, drops; the body's own rotation builds the same wake, so its passive damping drops
+  too. A first-order "entrained water" model of the history effects of unsteady drag (the Basset
+  history force of Maxey and Riley, Phys. Fluids 26 (1983); oscillating spheres at low Keulegan-Carpenter
+  numbers, Sarpkaya and Isaacson, "Mechanics of Wave Forces on Offshore Structures" (1981), ch. 3).
+  kappa = 0 is today's quasi-steady drag. The wake is integrated once per step with the legs and the body
+  velocity of the step's start held (exact for the linear relaxation), and held through the step's RK4
+  stages: tau_w >= 0.05 s against the 10 ms step.
+
 Each effect has a switch (:class:`TankParams`); with all four off the equations reduce to the paper's
 eq. (trans), (rot) (tested). Parameters: ``config/tank.yaml``.
 Integration: the model's generic RK4 on SO(3) (``_rk4`` with this class's ``_chart_derivative``, the
@@ -56,8 +70,8 @@ from quadruped_control.sim.plants.paper import FloatingBaseModel
 from quadruped_control.sim.plants.rigid_body import (Mat3, RigidBodyState, StepContext, as_mat3, chart_step_end,
                                                      check_dt, diverged, joint_array)
 from quadruped_control.sim.plants.tank_dynamics import (TankConstants, appendage_damping_torque, leg_sums, mass_solver,
-                                                        rope_force, rope_torsion_torque, rope_twist, tank_forces,
-                                                        tank_rk4)
+                                                        paw_wake_update, rope_force, rope_torsion_torque, rope_twist,
+                                                        tank_forces, tank_rk4)
 
 __all__ = ["TankModel", "TankParams", "appendage_damping_torque", "hydrostatic_wrench", "load_tank_params",
            "rope_force", "rope_torsion_torque", "rope_twist", "torso_ellipsoid"]
@@ -93,6 +107,9 @@ class TankParams:
     #: rope torsion about the vertical: stiffness (N m/rad) and damping (N m s/rad)
     rope_torsion_stiffness: float = 0.0
     rope_torsion_damping: float = 0.0
+    #: paw wake: fraction kappa of the paw's velocity its wake reaches, and its time constant tau_w (s)
+    paw_wake_fraction: float = 0.0
+    paw_wake_time_constant: float = 0.3
 
     def __post_init__(self) -> None:
         for name in ("rope_length", "rope_stiffness"):
@@ -106,6 +123,11 @@ class TankParams:
                 raise ParameterError("tank %s must be finite and >= 0, got %r" % (name, value))
         if not (math.isfinite(self.servo_speed_scale) and 0.0 < self.servo_speed_scale <= 1.0):
             raise ParameterError("tank servo_speed_scale must be in (0, 1], got %r" % (self.servo_speed_scale,))
+        if not (math.isfinite(self.paw_wake_fraction) and 0.0 <= self.paw_wake_fraction < 1.0):
+            raise ParameterError("tank paw_wake_fraction must be in [0, 1), got %r" % (self.paw_wake_fraction,))
+        if not (math.isfinite(self.paw_wake_time_constant) and self.paw_wake_time_constant >= 0.02):
+            raise ParameterError("tank paw_wake_time_constant must be >= 0.02 s (two steps), got %r"
+                                 % (self.paw_wake_time_constant,))
         if not math.isfinite(self.net_weight):
             raise ParameterError("tank net_weight must be finite, got %r" % (self.net_weight,))
         for name in ("hook", "center_of_buoyancy"):
@@ -134,7 +156,7 @@ def tank_params_from_dict(data: Mapping[str, Any]) -> TankParams:
     wider than the identification's plausible bounds) into :class:`TankParams`; ParameterError naming
     the key otherwise."""
     check_keys(data, "", ("effects", "suspension", "hydrostatics", "added_mass", "paw_drag", "servos",
-                          "appendage_damping"),
+                          "appendage_damping", "paw_wake"),
                required=("suspension", "hydrostatics", "added_mass"))
     effects = check_keys(_optional_section(data, "effects"), "effects",
                          ("suspension", "hydrostatics", "torso_added_mass", "paw_added_mass", "drag"))
@@ -147,6 +169,7 @@ def tank_params_from_dict(data: Mapping[str, Any]) -> TankParams:
     paw_drag = check_keys(_optional_section(data, "paw_drag"), "paw_drag", ("scale",))
     servos = check_keys(_optional_section(data, "servos"), "servos", ("speed_scale",))
     appendage = check_keys(_optional_section(data, "appendage_damping"), "appendage_damping", ("linear", "quadratic"))
+    wake = check_keys(_optional_section(data, "paw_wake"), "paw_wake", ("fraction", "time_constant"))
 
     def axes(section: Mapping[str, Any], key: str, high: float) -> Vec3:
         return tuple(vector(section.get(key, [0.0, 0.0, 0.0]), "appendage_damping." + key, 3,
@@ -173,7 +196,9 @@ def tank_params_from_dict(data: Mapping[str, Any]) -> TankParams:
         appendage_damping_linear=axes(appendage, "linear", 100.0),
         appendage_damping_quadratic=axes(appendage, "quadratic", 100.0),
         rope_torsion_stiffness=number(rope.get("torsion_stiffness", 0.0), "suspension.torsion_stiffness", 0.0, 1e4),
-        rope_torsion_damping=number(rope.get("torsion_damping", 0.0), "suspension.torsion_damping", 0.0, 1e4))
+        rope_torsion_damping=number(rope.get("torsion_damping", 0.0), "suspension.torsion_damping", 0.0, 1e4),
+        paw_wake_fraction=number(wake.get("fraction", 0.0), "paw_wake.fraction", 0.0, 0.95),
+        paw_wake_time_constant=number(wake.get("time_constant", 0.3), "paw_wake.time_constant", 0.02, 100.0))
 
 
 def load_tank_params(path: Optional[str] = None, tree: Optional[Mapping[str, Any]] = None) -> TankParams:
@@ -253,6 +278,10 @@ class TankModel(FloatingBaseModel):
         self.untwisted = np.eye(3)
         self._untwisted = tuple(self.untwisted.ravel().tolist())
         self._body_m = tuple(self.body_mass_matrix.ravel().tolist())
+        #: Each paw's wake velocity (body axes, m/s; :func:`~.tank_dynamics.paw_wake_update`): plant state
+        #: beside the rigid body's, zero at :meth:`attach`.
+        self.wake = np.zeros((4, 3))
+        self._drag_feet = np.zeros((4, 6))
         if np.any(self.body_mass_matrix[:3, :3] != np.diag(np.diag(self.body_mass_matrix[:3, :3]))) \
                 or np.any(self.body_mass_matrix[:3, 3:] != 0.0):
             raise ValueError("the torso's translational mass block must be diagonal and uncoupled (mass matrix "
@@ -275,6 +304,7 @@ class TankModel(FloatingBaseModel):
         # The rope hangs untwisted in this attitude (rope torsion measures the twist from it).
         self.untwisted = np.array(state.rotation, dtype=float)
         self._untwisted = tuple(self.untwisted.ravel().tolist())
+        self.wake[:] = 0.0  # still water
         self._constants = self._build_constants()
 
     def mass_matrix(self, foot_positions: Sequence[Sequence[float]]) -> np.ndarray:
@@ -298,7 +328,8 @@ class TankModel(FloatingBaseModel):
                 (float(tank.rope_length), float(tank.rope_stiffness), float(tank.rope_damping)),
                 (float(tank.rope_torsion_stiffness), float(tank.rope_torsion_damping)), self._untwisted,
                 tuple(float(x) for x in tank.appendage_damping_linear),
-                tuple(float(x) for x in tank.appendage_damping_quadratic), self._body_m, float(self.paw_added_mass))
+                tuple(float(x) for x in tank.appendage_damping_quadratic), self._body_m, float(self.paw_added_mass),
+                float(tank.paw_wake_fraction), float(tank.paw_wake_time_constant))
 
     def _mass_solver(self, sr: Sequence[float], S: Sequence[float]) -> Tuple[Tuple[float, ...], ...]:
         """:func:`~.tank_dynamics.mass_solver` of this plant (ValueError if the matrix is singular)."""
@@ -312,8 +343,28 @@ class TankModel(FloatingBaseModel):
     def generalized_forces(self, context: "_TankContext", p: Sequence[float], v: Sequence[float], R: Mat3,
                            w: Sequence[float]) -> Tuple[float, ...]:
         """Right-hand side of eq. (tank) (:func:`~.tank_dynamics.tank_forces`)."""
-        return tank_forces(self._constants, context.feet, context.lift, context.up_torque, context.leg_sums,
-                           p[0], p[1], p[2], v[0], v[1], v[2], R, w[0], w[1], w[2])
+        return tank_forces(self._constants, context.feet, self._wake_rows(context), context.lift, context.up_torque,
+                           context.leg_sums, p[0], p[1], p[2], v[0], v[1], v[2], R, w[0], w[1], w[2])
+
+    def _wake_rows(self, context: "_TankContext") -> Sequence[Sequence[float]]:
+        """The rows the paw drag sees with the current wake (the legs' rows without a wake)."""
+        if self.tank.paw_wake_fraction <= 0.0 and not self.wake.any():
+            return context.feet
+        feet = np.asarray(context.feet, dtype=float)
+        return tuple(map(tuple, np.concatenate((feet[:, :3], feet[:, 3:] - self.wake), axis=1).tolist()))
+
+    def _advance_wake(self, state: RigidBodyState, dt: float, context: "_TankContext") -> Sequence[Sequence[float]]:
+        """:func:`~.tank_dynamics.paw_wake_update` over this step (state at its start): the drag rows."""
+        if self.tank.paw_wake_fraction <= 0.0:
+            return context.feet
+        r0, r1, r2, r3, r4, r5, r6, r7, r8 = state.rotation.ravel().tolist()
+        vx, vy, vz = state.velocity.tolist()
+        wx, wy, wz = state.omega.tolist()
+        # b = R^T v in the batch's order of operations (bit for bit with TankPlantBatch)
+        paw_wake_update(context.feet, self.wake, self.tank.paw_wake_fraction, self.tank.paw_wake_time_constant,
+                        r0 * vx + r3 * vy + r6 * vz, r1 * vx + r4 * vy + r7 * vz, r2 * vx + r5 * vy + r8 * vz,
+                        wx, wy, wz, dt, self._drag_feet)
+        return tuple(map(tuple, self._drag_feet.tolist()))
 
     def _step_context(self, q: Any, q_dot: Any) -> "_TankContext":
         flat = leg_kinematics_flat(q.tolist() if isinstance(q, np.ndarray) else q,
@@ -327,7 +378,8 @@ class TankModel(FloatingBaseModel):
         R0 = tuple(state.rotation.ravel().tolist())
         y0 = tuple(state.position.tolist() + state.velocity.tolist() + [0.0, 0.0, 0.0] + state.omega.tolist())
         try:
-            y = tank_rk4(self._constants, context.feet, context.lift, context.up_torque, context.leg_sums,
+            drag_feet = self._advance_wake(state, dt, context)
+            y = tank_rk4(self._constants, context.feet, drag_feet, context.lift, context.up_torque, context.leg_sums,
                          context.mass_solver, R0, y0, dt)
         except (ValueError, OverflowError) as exc:  # math.sin(inf) etc. once the state has blown up
             raise diverged(dt, state, str(exc)) from None

@@ -24,41 +24,54 @@ from quadruped_control.model.params import RobotParams
 from quadruped_control.sim.plants.paper_batch import held_step_inputs, leg_geometry, store_step_end
 from quadruped_control.sim.plants.rigid_body import RigidBodyState
 from quadruped_control.sim.plants.tank import TankModel, TankParams
-from quadruped_control.sim.plants.tank_dynamics import leg_sums, mass_solver, tank_rk4
+from quadruped_control.sim.plants.tank_dynamics import leg_sums, mass_solver, paw_wake_update, tank_rk4
 
 __all__ = ["TankPlantBatch", "tank_batch_step", "tank_trial_step"]
 
 
 @trial_step
 def tank_trial_step(i, frames, five_bar, net_paw_buoyancy, drag_constant, drag, extra_lift, suspension, hook, anchor,
-                    rope, torsion, untwisted, linear, quadratic, body_m, paw_added_mass, restoring,
-                    p, v, R, w, q, q_dot, dt, feet) -> bool:
-    """One held-input RK4 step of eq. (tank) for trial ``i`` in place; False if it failed."""
+                    rope, torsion, untwisted, linear, quadratic, body_m, paw_added_mass, wake_fraction,
+                    wake_time_constant, restoring, wake, p, v, R, w, q, q_dot, dt, feet, drag_feet) -> bool:
+    """One held-input RK4 step of eq. (tank) for trial ``i`` in place (its paws' ``wake[i]`` too, with the
+    body's velocity at the step's start, as :class:`~quadruped_control.sim.plants.tank.TankModel`);
+    False if it failed."""
     ok, lift, up, R0 = held_step_inputs(q, q_dot, i, frames, five_bar, net_paw_buoyancy, restoring, R, feet)
     if not ok:
         return False
     sums = leg_sums(feet)
     solver = mass_solver(body_m[i], paw_added_mass[i], sums[0], sums[2])
     constants = (drag_constant[i], drag[i], extra_lift[i], suspension[i], hook[i], anchor[i], rope[i],
-                 torsion[i], untwisted[i], linear[i], quadratic[i], body_m[i], paw_added_mass[i])
+                 torsion[i], untwisted[i], linear[i], quadratic[i], body_m[i], paw_added_mass[i], wake_fraction[i],
+                 wake_time_constant[i])
+    rows = feet
+    if wake_fraction[i] > 0.0:
+        vx, vy, vz = v[i, 0], v[i, 1], v[i, 2]
+        paw_wake_update(feet, wake[i], wake_fraction[i], wake_time_constant[i],
+                        R0[0] * vx + R0[3] * vy + R0[6] * vz, R0[1] * vx + R0[4] * vy + R0[7] * vz,
+                        R0[2] * vx + R0[5] * vy + R0[8] * vz, w[i, 0], w[i, 1], w[i, 2], dt, drag_feet)
+        rows = drag_feet
     y0 = (p[i, 0], p[i, 1], p[i, 2], v[i, 0], v[i, 1], v[i, 2], 0.0, 0.0, 0.0, w[i, 0], w[i, 1], w[i, 2])
-    y = tank_rk4(constants, feet, lift, up, sums, solver, R0, y0, dt)
+    y = tank_rk4(constants, feet, rows, lift, up, sums, solver, R0, y0, dt)
     return store_step_end(y, R0, i, p, v, R, w)
 
 
 @kernel
 def tank_batch_step(frames, five_bar, net_paw_buoyancy, drag_constant, drag, extra_lift, suspension, hook, anchor,
-                    rope, torsion, untwisted, linear, quadratic, body_m, paw_added_mass, restoring,
-                    p, v, R, w, q, q_dot, dt, failed):
+                    rope, torsion, untwisted, linear, quadratic, body_m, paw_added_mass, wake_fraction,
+                    wake_time_constant, restoring, wake, p, v, R, w, q, q_dot, dt, failed):
     """One held-input RK4 step of eq. (tank) for every trial not yet ``failed``, in place on p, v, w
-    (N, 3) and R (N, 3, 3). The constants are the fields of :data:`~.tank_dynamics.TankConstants`, one
-    row (or value) per trial, and ``restoring`` (N, 3, 3) each trial's torso buoyancy moment matrix."""
+    (N, 3), R (N, 3, 3) and the paws' ``wake`` (N, 4, 3). The constants are the fields of
+    :data:`~.tank_dynamics.TankConstants`, one row (or value) per trial, and ``restoring`` (N, 3, 3) each
+    trial's torso buoyancy moment matrix."""
     feet = np.empty((4, 6))
+    drag_feet = np.empty((4, 6))
     for i in range(p.shape[0]):
         if not failed[i] and not tank_trial_step(i, frames, five_bar, net_paw_buoyancy, drag_constant, drag,
                                                  extra_lift, suspension, hook, anchor, rope, torsion, untwisted,
-                                                 linear, quadratic, body_m, paw_added_mass, restoring, p, v, R, w,
-                                                 q, q_dot, dt, feet):
+                                                 linear, quadratic, body_m, paw_added_mass, wake_fraction,
+                                                 wake_time_constant, restoring, wake, p, v, R, w, q, q_dot, dt,
+                                                 feet, drag_feet):
             failed[i] = True
 
 
@@ -75,13 +88,15 @@ class TankPlantBatch:
         self.net_paw_buoyancy = float(robot.paw_net_buoyancy)
         self.restoring = np.array([m._restoring_matrix for m in self.models], dtype=float)  # noqa: SLF001
         self.failed = np.zeros(self.n, dtype=bool)
+        #: Each trial's paws' wake velocity (N, 4, 3), body axes: TankModel.wake for N trials.
+        self.wake = np.zeros((self.n, 4, 3))
         self._load_constants()
 
     def _load_constants(self) -> None:
         """The per-trial fields of TankConstants as arrays (one row per trial)."""
         columns = list(zip(*(m.constants() for m in self.models)))
         names = ("drag_constant", "drag", "extra_lift", "suspension", "hook", "anchor", "rope", "torsion",
-                 "untwisted", "linear", "quadratic", "body_m", "paw_added_mass")
+                 "untwisted", "linear", "quadratic", "body_m", "paw_added_mass", "wake_fraction", "wake_time_constant")
         self.constants = {name: np.array(column, dtype=bool if name == "suspension" else float)
                           for name, column in zip(names, columns)}
 
@@ -90,6 +105,7 @@ class TankPlantBatch:
         for i, model in enumerate(self.models):
             model.attach(RigidBodyState(np.array(position[i], dtype=float), np.zeros(3),
                                         np.array(rotation[i], dtype=float), np.zeros(3)))
+        self.wake[:] = 0.0
         self._load_constants()
 
     def step(self, p: np.ndarray, v: np.ndarray, R: np.ndarray, w: np.ndarray, q: np.ndarray, q_dot: np.ndarray,
@@ -100,6 +116,6 @@ class TankPlantBatch:
         tank_batch_step(self.frames, self.five_bar, self.net_paw_buoyancy, c["drag_constant"], c["drag"],
                         c["extra_lift"], c["suspension"], c["hook"], c["anchor"], c["rope"], c["torsion"],
                         c["untwisted"], c["linear"], c["quadratic"], c["body_m"], c["paw_added_mass"],
-                        self.restoring, p, v, R, w, np.ascontiguousarray(q), np.ascontiguousarray(q_dot),
-                        float(dt), self.failed)
+                        c["wake_fraction"], c["wake_time_constant"], self.restoring, self.wake, p, v, R, w,
+                        np.ascontiguousarray(q), np.ascontiguousarray(q_dot), float(dt), self.failed)
         return p, v, R, w

@@ -3,8 +3,9 @@ per-trial plant (:class:`~quadruped_control.sim.plants.tank.TankModel`, plain Py
 (:class:`~quadruped_control.sim.plants.tank_batch.TankPlantBatch`, a loop over trials compiled by numba
 when it is installed, :mod:`quadruped_common.jit`).
 
-- :func:`rope_force`, :func:`rope_twist`, :func:`rope_torsion_torque`, :func:`appendage_damping_torque`:
-  the tank's own force laws (physics and sources in :mod:`.tank`'s docstring);
+- :func:`rope_force`, :func:`rope_twist`, :func:`rope_torsion_torque`, :func:`appendage_damping_torque`,
+  :func:`paw_wake_update`: the tank's own force laws and the paws' wake (physics and sources in
+  :mod:`.tank`'s docstring);
 - :func:`leg_sums`, :func:`mass_solver`, :func:`solve_mass`: the mass matrix
   M = M_RB + M_A + sum_i M_paw(r_i) of a held step and its solution by the Schur complement;
 - :func:`tank_forces`: the right-hand side of eq. (tank), the paper's forces
@@ -24,17 +25,19 @@ import math
 from typing import Any, Sequence, Tuple
 
 from quadruped_common.jit import jitable
+from quadruped_control.model.hydrodynamics import paw_velocity_f
 from quadruped_control.sim.plants.paper import body_wrench_f
 from quadruped_control.sim.plants.rigid_body import Mat3, chart_point
 
-__all__ = ["TankConstants", "appendage_damping_torque", "leg_sums", "mass_solver", "rope_force",
+__all__ = ["TankConstants", "appendage_damping_torque", "leg_sums", "mass_solver", "paw_wake_update", "rope_force",
            "rope_torsion_torque", "rope_twist", "solve_mass", "tank_chart_derivative", "tank_forces", "tank_rk4"]
 
 Vec3 = Tuple[float, float, float]
 
 #: (drag_constant, body drag coefficients (8), extra lift (torso buoyancy - weight, N), suspension (bool),
 #: hook (3, m), anchor (3, m, world), rope (length, stiffness, damping), torsion (stiffness, damping),
-#: untwisted R_0 (9), appendage damping linear (3), quadratic (3), M_RB + M_A (36), paw added mass m_a)
+#: untwisted R_0 (9), appendage damping linear (3), quadratic (3), M_RB + M_A (36), paw added mass m_a,
+#: paw wake (fraction kappa, time constant tau_w in s))
 TankConstants = Tuple[Any, ...]
 
 
@@ -92,6 +95,33 @@ def rope_torsion_torque(R: Sequence[float], R0: Sequence[float], omega: Sequence
     omega_z_world = ux * omega[0] + uy * omega[1] + uz * omega[2]
     torque = -(stiffness * rope_twist(R, R0) + damping * omega_z_world)
     return (torque * ux, torque * uy, torque * uz)
+
+
+@jitable
+def paw_wake_update(feet: Sequence[Sequence[float]], wake: Any, fraction: float, time_constant: float, bx: float,
+                    by: float, bz: float, wx: float, wy: float, wz: float, dt: float, drag_feet: Any) -> None:
+    """Advance each paw's wake over a held step and write the rows its drag sees (:mod:`.tank`).
+
+    ``wake`` (4 x 3, body axes, m/s, in place): the water each paw has set moving; it relaxes towards the
+    fraction kappa of the paw's velocity u_i (:func:`~quadruped_control.model.hydrodynamics.paw_velocity_f`,
+    held over the step, from the body velocity b, rate omega and the legs' rows ``feet``):
+    dw/dt = (kappa u_i - w) / tau_w, solved exactly, w <- kappa u_i + (w - kappa u_i) exp(-dt / tau_w).
+    ``drag_feet`` (4 x 6, out): the rows (r_i, c_i - w_i), so that the drag law sees u_i - w_i, the paw's
+    velocity relative to its wake."""
+    decay = math.exp(-dt / time_constant)
+    for leg in range(4):
+        px, py, pz, cx, cy, cz = feet[leg][0], feet[leg][1], feet[leg][2], feet[leg][3], feet[leg][4], feet[leg][5]
+        ux, uy, uz = paw_velocity_f(px, py, pz, cx, cy, cz, bx, by, bz, wx, wy, wz)
+        tx, ty, tz = fraction * ux, fraction * uy, fraction * uz
+        wake[leg, 0] = tx + (wake[leg, 0] - tx) * decay
+        wake[leg, 1] = ty + (wake[leg, 1] - ty) * decay
+        wake[leg, 2] = tz + (wake[leg, 2] - tz) * decay
+        drag_feet[leg, 0] = px
+        drag_feet[leg, 1] = py
+        drag_feet[leg, 2] = pz
+        drag_feet[leg, 3] = cx - wake[leg, 0]
+        drag_feet[leg, 4] = cy - wake[leg, 1]
+        drag_feet[leg, 5] = cz - wake[leg, 2]
 
 
 # --------------------------------------------------------------------------------------------------
@@ -193,18 +223,19 @@ def solve_mass(solver: Tuple[Any, ...], g0: float, g1: float, g2: float, g3: flo
 # --------------------------------------------------------------------------------------------------
 
 @jitable
-def tank_forces(k: TankConstants, feet: Sequence[Sequence[float]], lift: float, up_torque: Sequence[float],
-                sums: Tuple[Any, ...], px: float, py: float, pz: float, vx: float, vy: float, vz: float, R: Mat3,
-                wx: float, wy: float, wz: float) -> Tuple[float, ...]:
+def tank_forces(k: TankConstants, feet: Sequence[Sequence[float]], drag_feet: Sequence[Sequence[float]], lift: float,
+                up_torque: Sequence[float], sums: Tuple[Any, ...], px: float, py: float, pz: float, vx: float,
+                vy: float, vz: float, R: Mat3, wx: float, wy: float, wz: float) -> Tuple[float, ...]:
     """Right-hand side of eq. (tank): the 6 body-axes generalised forces minus C(nu) nu and f_paw, for
     the constants ``k`` (:data:`TankConstants`), the step's legs (``feet`` rows, paw buoyancy ``lift`` and
-    torque matrix ``up_torque`` with the torso's buoyancy moment, :func:`leg_sums` ``sums``) and the state
-    p, v (world), R (row-major), omega (body)."""
+    torque matrix ``up_torque`` with the torso's buoyancy moment, :func:`leg_sums` ``sums``; ``drag_feet``
+    the rows the paw drag sees: ``feet`` itself, or with each paw's wake taken off, :func:`paw_wake_update`)
+    and the state p, v (world), R (row-major), omega (body)."""
     (drag_constant, drag, extra_lift, suspension, hook, anchor, rope, torsion, untwisted, linear, quadratic,
-     body_m, ma) = k
+     body_m, ma, _wake_fraction, _wake_time_constant) = k
     r0, r1, r2, r3, r4, r5, r6, r7, r8 = R
     bx, by, bz = r0 * vx + r3 * vy + r6 * vz, r1 * vx + r4 * vy + r7 * vz, r2 * vx + r5 * vy + r8 * vz
-    fx, fy, fz, tx, ty, tz = body_wrench_f(feet, drag_constant, drag, up_torque, bx, by, bz, R, wx, wy, wz)
+    fx, fy, fz, tx, ty, tz = body_wrench_f(drag_feet, drag_constant, drag, up_torque, bx, by, bz, R, wx, wy, wz)
     # world-up forces: paw buoyancy, then torso hydrostatics (its moment is in up_torque); R^T z_hat = (r6, r7, r8)
     up_force = lift + extra_lift
     fx, fy, fz = fx + up_force * r6, fy + up_force * r7, fz + up_force * r8
@@ -265,13 +296,14 @@ def tank_forces(k: TankConstants, feet: Sequence[Sequence[float]], lift: float, 
 
 
 @jitable
-def tank_chart_derivative(k: TankConstants, feet: Sequence[Sequence[float]], lift: float,
-                          up_torque: Sequence[float], sums: Tuple[Any, ...], solver: Tuple[Any, ...], R0: Mat3,
-                          y: Sequence[float]) -> Tuple[float, ...]:
+def tank_chart_derivative(k: TankConstants, feet: Sequence[Sequence[float]], drag_feet: Sequence[Sequence[float]],
+                          lift: float, up_torque: Sequence[float], sums: Tuple[Any, ...], solver: Tuple[Any, ...],
+                          R0: Mat3, y: Sequence[float]) -> Tuple[float, ...]:
     """d/dt of the chart state y = (p, v, xi, omega) (12 floats) under eq. (tank), R = R0 exp(hat(xi))."""
     px, py, pz, vx, vy, vz, x, y_, z, wx, wy, wz = y
     R, (rx, ry, rz) = chart_point(R0, x, y_, z, wx, wy, wz)
-    g0, g1, g2, g3, g4, g5 = tank_forces(k, feet, lift, up_torque, sums, px, py, pz, vx, vy, vz, R, wx, wy, wz)
+    g0, g1, g2, g3, g4, g5 = tank_forces(k, feet, drag_feet, lift, up_torque, sums, px, py, pz, vx, vy, vz, R, wx,
+                                         wy, wz)
     n0, n1, n2, n3, n4, n5 = solve_mass(solver, g0, g1, g2, g3, g4, g5)
     r0, r1, r2, r3, r4, r5, r6, r7, r8 = R
     bx, by, bz = r0 * vx + r3 * vy + r6 * vz, r1 * vx + r4 * vy + r7 * vz, r2 * vx + r5 * vy + r8 * vz
@@ -290,17 +322,17 @@ def _axpy12(y: Sequence[float], a: float, k: Sequence[float]) -> Tuple[float, ..
 
 
 @jitable
-def tank_rk4(k: TankConstants, feet: Sequence[Sequence[float]], lift: float, up_torque: Sequence[float],
-             sums: Tuple[Any, ...], solver: Tuple[Any, ...], R0: Mat3, y0: Sequence[float],
-             dt: float) -> Tuple[float, ...]:
+def tank_rk4(k: TankConstants, feet: Sequence[Sequence[float]], drag_feet: Sequence[Sequence[float]], lift: float,
+             up_torque: Sequence[float], sums: Tuple[Any, ...], solver: Tuple[Any, ...], R0: Mat3,
+             y0: Sequence[float], dt: float) -> Tuple[float, ...]:
     """One classic RK4 step of :func:`tank_chart_derivative` in the chart around R0 from the chart state
-    y0 = (p, v, 0, omega), the legs held over it: the chart state at its end (12 floats; the caller maps
-    it back with :func:`~.rigid_body.chart_step_end`)."""
+    y0 = (p, v, 0, omega), the legs (and the paws' wake, ``drag_feet``) held over it: the chart state at
+    its end (12 floats; the caller maps it back with :func:`~.rigid_body.chart_step_end`)."""
     h = 0.5 * dt
-    k1 = tank_chart_derivative(k, feet, lift, up_torque, sums, solver, R0, y0)
-    k2 = tank_chart_derivative(k, feet, lift, up_torque, sums, solver, R0, _axpy12(y0, h, k1))
-    k3 = tank_chart_derivative(k, feet, lift, up_torque, sums, solver, R0, _axpy12(y0, h, k2))
-    k4 = tank_chart_derivative(k, feet, lift, up_torque, sums, solver, R0, _axpy12(y0, dt, k3))
+    k1 = tank_chart_derivative(k, feet, drag_feet, lift, up_torque, sums, solver, R0, y0)
+    k2 = tank_chart_derivative(k, feet, drag_feet, lift, up_torque, sums, solver, R0, _axpy12(y0, h, k1))
+    k3 = tank_chart_derivative(k, feet, drag_feet, lift, up_torque, sums, solver, R0, _axpy12(y0, h, k2))
+    k4 = tank_chart_derivative(k, feet, drag_feet, lift, up_torque, sums, solver, R0, _axpy12(y0, dt, k3))
     s = dt / 6.0
     return (y0[0] + s * (k1[0] + 2.0 * (k2[0] + k3[0]) + k4[0]), y0[1] + s * (k1[1] + 2.0 * (k2[1] + k3[1]) + k4[1]),
             y0[2] + s * (k1[2] + 2.0 * (k2[2] + k3[2]) + k4[2]), y0[3] + s * (k1[3] + 2.0 * (k2[3] + k3[3]) + k4[3]),

@@ -354,6 +354,7 @@ def test_candidate_effects_are_off_unless_configured() -> None:
     for params in (TankParams(), TANK):
         assert params.appendage_damping_linear == params.appendage_damping_quadratic == (0.0, 0.0, 0.0)
         assert params.rope_torsion_stiffness == params.rope_torsion_damping == 0.0
+        assert params.paw_wake_fraction == 0.0
 
 
 @pytest.mark.parametrize("linear, quadratic", [(0.02, 0.0), (0.0, 0.05), (0.0, 0.0)])
@@ -402,7 +403,9 @@ def test_rope_torsion_turns_the_robot_back_with_its_period_and_keeps_the_energy(
 
 
 @pytest.mark.parametrize("section, key, value", [("appendage_damping", "linear", [0.0, -0.1, 0.0]),
-                                                 ("suspension", "torsion_stiffness", -1.0)])
+                                                 ("suspension", "torsion_stiffness", -1.0),
+                                                 ("paw_wake", "fraction", 1.0),
+                                                 ("paw_wake", "time_constant", 0.0)])
 def test_candidate_effect_keys_are_checked(tmp_path, section, key, value) -> None:
     import yaml
     with open(config_path("tank.yaml")) as stream:
@@ -415,4 +418,57 @@ def test_candidate_effect_keys_are_checked(tmp_path, section, key, value) -> Non
     tree[section][key] = [0.0, 0.1, 0.2] if section == "appendage_damping" else 0.3
     path.write_text(yaml.safe_dump(tree))
     params = load_tank_params(str(path))
-    assert params.appendage_damping_linear == (0.0, 0.1, 0.2) or params.rope_torsion_stiffness == 0.3
+    assert params.appendage_damping_linear == (0.0, 0.1, 0.2) or 0.3 in (
+        params.rope_torsion_stiffness, params.paw_wake_fraction, params.paw_wake_time_constant)
+
+
+def _wake_rows(u, wake, fraction, tau, dt):
+    """One paw_wake_update of four paws that all move at u (body axes) with the body at rest."""
+    from quadruped_control.sim.plants.tank_dynamics import paw_wake_update
+    feet = [(0.2, 0.1, -0.05) + tuple(u)] * 4
+    rows = np.zeros((4, 6))
+    paw_wake_update(feet, wake, fraction, tau, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, dt, rows)
+    return rows
+
+
+def test_paw_wake_relaxes_exactly_and_a_steady_stroke_loses_drag_as_1_minus_kappa_squared() -> None:
+    """dw/dt = (kappa u - w) / tau: after one step w = kappa u (1 - exp(-dt / tau)) exactly; after many
+    time constants w = kappa u, so the drag law sees (1 - kappa) u: the steady drag is (1 - kappa)^2 of
+    the quasi-steady one."""
+    u, kappa, tau, dt = np.array([0.5, -0.2, 0.1]), 0.4, 0.25, 0.01
+    wake = np.zeros((4, 3))
+    rows = _wake_rows(u, wake, kappa, tau, dt)
+    np.testing.assert_allclose(wake[0], kappa * u * (1.0 - math.exp(-dt / tau)), rtol=1e-14)
+    np.testing.assert_allclose(rows[:, 3:], u - wake, rtol=1e-14)
+    np.testing.assert_array_equal(rows[:, :3], [[0.2, 0.1, -0.05]] * 4)
+    for _ in range(int(20 * tau / dt)):
+        rows = _wake_rows(u, wake, kappa, tau, dt)
+    np.testing.assert_allclose(rows[0, 3:], (1.0 - kappa) * u, rtol=1e-8)
+    # kappa = 0: no wake, the drag sees the paw's own velocity (today's model)
+    still = np.zeros((4, 3))
+    np.testing.assert_array_equal(_wake_rows(u, still, 0.0, tau, dt)[0, 3:], u)
+
+
+def test_a_paw_reversing_into_its_wake_meets_more_drag_than_in_still_water() -> None:
+    """The recovery stroke retraces the power stroke: right after a long stroke at u, the paw moving at
+    -u meets the water at -(1 + kappa) u: (1 + kappa)^2 of the still-water drag, against the stroke."""
+    u, kappa, tau, dt = np.array([0.4, 0.0, 0.0]), 0.3, 0.2, 0.01
+    wake = np.zeros((4, 3))
+    for _ in range(200):
+        _wake_rows(u, wake, kappa, tau, dt)
+    rows = _wake_rows(-u, wake, kappa, tau, dt)
+    relative = rows[0, 3]
+    assert relative == pytest.approx(-(1.0 + kappa) * 0.4, rel=0.05)  # one step of relaxation already done
+
+
+def test_a_passive_spin_builds_a_wake_that_lowers_its_damping_and_kappa_zero_is_todays_model() -> None:
+    """A spinning body with still legs: its paws move at omega x r and build a wake, so it slows down
+    less than in still water (less passive damping); kappa = 0 gives exactly today's spin-down."""
+    drag = BARE.with_values(drag=True)
+    start = RigidBodyState(omega=np.array([0.0, 0.0, 1.5]))
+    plain = _spin(TankModel(ROBOT, drag), start, 2.0)[-1].omega[2]
+    off = _spin(TankModel(ROBOT, drag.with_values(paw_wake_time_constant=0.1)), start, 2.0)[-1].omega[2]
+    assert off == plain < 1.0
+    waked = _spin(TankModel(ROBOT, drag.with_values(paw_wake_fraction=0.5, paw_wake_time_constant=0.1)), start,
+                  2.0)[-1].omega[2]
+    assert plain < waked < 1.5
