@@ -99,6 +99,9 @@ def build_parser() -> argparse.ArgumentParser:
                         help="identify: CMA-ES population, also the baseline's grid size (default 16)")
     parser.add_argument("--ensemble", type=int, default=8,
                         help="identify: parameter sets kept as the ensemble (default 8)")
+    parser.add_argument("--include", nargs="+", default=[], metavar="PARAMETER",
+                        help="identify: parameters fitted whatever the screening says (e.g. a candidate effect "
+                             "under test: --include wake_fraction wake_time_constant)")
     parser.add_argument("--study", choices=tuple(STUDIES),
                         default=None,
                         help="run a study (paper-experiments: Table 1's 15 experiments, default on the tank plant "
@@ -165,6 +168,11 @@ def main(argv: Optional[Sequence[str]] = None) -> int:
                                          or args.popsize < 2 or args.ensemble < 1):
             parser.error("identify needs --screen, --evaluations, --cv-evaluations and --popsize >= 2 and "
                          "--ensemble >= 1")
+        if args.study == "identify":
+            from quadruped_control.studies.identify import PARAMETERS
+            unknown = sorted(set(args.include) - {name for name, _, _ in PARAMETERS})
+            if unknown:
+                parser.error("--include: unknown parameter(s) %s" % ", ".join(unknown))
         if args.study is not None:
             return STUDIES[args.study].main_study(args)
         spec = TrialSpec(label="setpoint %s deg" % " ".join("%g" % v for v in args.rpy),

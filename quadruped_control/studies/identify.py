@@ -17,8 +17,9 @@ restoring torque and starts from each experiment's own heading error, so it weig
 Design (:func:`main_study`):
 
 1. Screening: Morris elementary effects (SALib) over all parameters, ``--screen`` trajectories; the
-   parameters whose mu* reaches a tenth of the largest are identified, the others stay at their
-   config/tank.yaml values (the data cannot pin them down).
+   parameters whose mu* reaches a tenth of the largest are identified (and those named by ``--include``:
+   a candidate effect under test), the others stay at their config/tank.yaml values (the data cannot pin
+   them down).
 2. Fit: CMA-ES (the ``cma`` package) over the identified parameters scaled to [0, 1], ``--evaluations``
    parameter sets, seeded.
 3. Cross-validation: for each group of experiments (roll, pitch, coupled), the same fit on the other
@@ -317,7 +318,8 @@ def main_study(args: argparse.Namespace) -> int:
 
     screening = screen(evaluate, nominal, args.screen, args.seed, everything)
     largest = max(screening["mu_star"]) or 1.0
-    chosen = [n for n, m in zip(screening["names"], screening["mu_star"]) if m >= 0.1 * largest]
+    include = set(getattr(args, "include", None) or ())
+    chosen = [n for n, m in zip(screening["names"], screening["mu_star"]) if m >= 0.1 * largest or n in include]
     start = screening["best"]["values"]
     fixed = {n: (start[n] if n in chosen else nominal[n]) for n in nominal}
     full = fit(evaluate, chosen, fixed, start, args.evaluations, args.popsize, args.seed, everything, "fit")

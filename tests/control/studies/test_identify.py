@@ -82,12 +82,12 @@ def test_identify_cli_tiny_run(tmp_path) -> None:
     out = str(tmp_path / "id")
     assert simulate.main(["--study", "identify", "--screen", "2", "--evaluations", "4", "--cv-evaluations", "2",
                           "--popsize", "2", "--ensemble", "2", "--duration", "0.2", "--out", out, "--quiet",
-                          "--jobs", "1"]) == 0
+                          "--jobs", "1", "--include", "wake_fraction"]) == 0
     with open(os.path.join(out, "identify.json")) as stream:
         report = json.load(stream)
     names = [p[0] for p in idf.PARAMETERS]
     assert report["screening"]["names"] == names and report["screening"]["sets"] == 2 * (len(names) + 1)
-    assert set(report["identified"]) <= set(names) and report["identified"]
+    assert set(report["identified"]) <= set(names) and "wake_fraction" in report["identified"]
     assert report["fit"]["evaluations"] >= 4
     assert [f["held_out"] for f in report["cross_validation"]] == list(idf.GROUPS)
     for fold, cases in zip(report["cross_validation"], (6, 6, 3)):
@@ -96,3 +96,5 @@ def test_identify_cli_tiny_run(tmp_path) -> None:
     for path in report["ensemble_files"]:
         load_tank_params(path)  # a valid tank.yaml
     assert report["weights"] == idf.WEIGHTS
+    with pytest.raises(SystemExit):  # a parameter the study does not know is refused by name
+        simulate.main(["--study", "identify", "--include", "wake_speed", "--out", out])
