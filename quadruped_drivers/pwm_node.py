@@ -27,12 +27,12 @@ import numpy as np
 import rospy
 from diagnostic_msgs.msg import DiagnosticStatus
 from diagnostic_updater import DiagnosticStatusWrapper
-from quadruped_common.ros.diagnostics import Updater
 from std_srvs.srv import SetBool, SetBoolResponse
 
 from quadruped_common.monitoring import RateMonitor, WindowStatistics
 from quadruped_common.robot import JOINT_NAMES
 from quadruped_common.ros.node_startup import stack_clock, start_node
+from quadruped_common.ros.diagnostics import Updater
 from quadruped_drivers.hardware_config import load_hardware_config
 from quadruped_drivers.node_support import open_bus, with_failsafe
 from quadruped_drivers.pwm_output import ServoPwmOutput

@@ -24,13 +24,13 @@ from typing import List, Optional
 import rospy
 from diagnostic_msgs.msg import DiagnosticStatus
 from diagnostic_updater import DiagnosticStatusWrapper
-from quadruped_common.ros.diagnostics import Updater
 from sensor_msgs.msg import JointState
 
 from quadruped_common.config import ParameterError
 from quadruped_common.monitoring import LowPassDifferentiator, RateMonitor, WindowStatistics
 from quadruped_common.robot import JOINT_NAMES, load_servo_no_load_speed
 from quadruped_common.ros.node_startup import stack_clock, start_node
+from quadruped_common.ros.diagnostics import Updater
 from quadruped_drivers.calibration import load_servo_calibration
 from quadruped_drivers.hardware_config import load_hardware_config
 from quadruped_drivers.node_support import open_bus

@@ -28,11 +28,11 @@ from typing import List, Optional, Sequence
 import rospy
 from diagnostic_msgs.msg import DiagnosticStatus
 from diagnostic_updater import DiagnosticStatusWrapper
-from quadruped_common.ros.diagnostics import Updater
 from sensor_msgs.msg import Imu
 
 from quadruped_common.monitoring import RateMonitor
 from quadruped_common.ros.node_startup import stack_clock, start_node
+from quadruped_common.ros.diagnostics import Updater
 from quadruped_drivers.vn100.driver import Vn100Driver, serial_port_factory
 from quadruped_drivers.vn100.sample_gate import DROP_REASONS, TIME_ANOMALY, SampleGate
 from quadruped_drivers.vn100.settings import VN100_KEYS, load_vn100_settings, sensor_limits

@@ -41,7 +41,6 @@ import numpy as np
 import rospy
 from diagnostic_msgs.msg import DiagnosticStatus
 from diagnostic_updater import DiagnosticStatusWrapper
-from quadruped_common.ros.diagnostics import Updater
 from dynamic_reconfigure.server import Server as ReconfigureServer
 from geometry_msgs.msg import Point, Quaternion, QuaternionStamped, Vector3, Vector3Stamped
 from sensor_msgs.msg import Imu, JointState
@@ -52,6 +51,7 @@ from quadruped_common.monitoring import STALE_IMU, HoldEpisodes, RateMonitor, Wi
 from quadruped_common.robot import JOINT_NAMES
 from quadruped_common.ros.node_startup import start_node
 from quadruped_common.so3 import quat_to_rot, rot_to_quat, rpy_to_rot
+from quadruped_common.ros.diagnostics import Updater
 from quadruped_control.control.controller import AttitudeController
 from quadruped_control.control.controller_config import TUNABLE_BOUNDS, apply_tunables, load_controller_config
 from quadruped_control.control.supervisor import ControlSupervisor

@@ -59,7 +59,6 @@ import rosgraph
 import rospy
 from diagnostic_msgs.msg import DiagnosticStatus
 from diagnostic_updater import DiagnosticStatusWrapper
-from quadruped_common.ros.diagnostics import Updater
 from geometry_msgs.msg import PoseStamped
 from rosgraph_msgs.msg import Clock
 from std_srvs.srv import SetBool, SetBoolResponse
@@ -70,6 +69,7 @@ from quadruped_control.sim.lockstep import AnswerTracker, SimClock, missing_link
 from quadruped_common.config import ParameterError
 from quadruped_common.robot import JOINT_NAMES
 from quadruped_common.so3 import rot_to_quat, rpy_to_rot
+from quadruped_common.ros.diagnostics import Updater
 from quadruped_control.model.params import load_robot_params
 from quadruped_control.sim.plants import load_tank_params, make_plant
 from quadruped_control.sim.servo_model import make_servo_model

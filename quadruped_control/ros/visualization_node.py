@@ -27,7 +27,6 @@ import rospy
 import tf2_ros
 from diagnostic_msgs.msg import DiagnosticStatus
 from diagnostic_updater import DiagnosticStatusWrapper
-from quadruped_common.ros.diagnostics import Updater
 from geometry_msgs.msg import TransformStamped
 from sensor_msgs.msg import Imu, JointState
 from visualization_msgs.msg import Marker, MarkerArray
@@ -35,6 +34,7 @@ from visualization_msgs.msg import Marker, MarkerArray
 from quadruped_common.config import config_path
 from quadruped_common.monitoring import RateMonitor
 from quadruped_common.ros.node_startup import start_node
+from quadruped_common.ros.diagnostics import Updater
 from quadruped_control.model.params import load_robot_params
 from quadruped_control.ros.visualization import (Throttle, VisualizationError, foot_target_spheres,
                                              imu_orientation, unit_quaternion, visual_joint_state)
