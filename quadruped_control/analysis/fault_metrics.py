@@ -34,7 +34,7 @@ from typing import Dict, List, Optional, Sequence, Tuple
 import numpy as np
 
 __all__ = ["FaultRecord", "InjectionResult", "Timeline", "judge_injection", "kind_summary", "lost_messages",
-           "pulses_outside_limits", "motion_rows", "safe_rows", "tracking_rows"]
+           "pulses_outside_limits", "motion_rows", "safe_rows", "stamp_keys", "tracking_rows"]
 
 
 @dataclass
@@ -209,13 +209,17 @@ def judge_injection(timeline: Timeline, fault: FaultRecord, min_us: Sequence[flo
     return InjectionResult(fault.kind, fault.start, time_to_safe, time_to_recovery, fraction, outside, moved)
 
 
-def lost_messages(received: Sequence[float], recorded: Sequence[float], start: float, end: float) -> int:
-    """Messages stamped in [start, end) that a subscriber received but the bag does not hold (by count)."""
+def stamp_keys(stamps: Sequence[float]) -> set:
+    """Message stamps (s) as integer microseconds, for :func:`lost_messages` (build once per bag)."""
+    return set(np.round(np.asarray(stamps, dtype=float) * 1e6).astype(np.int64).tolist())
+
+
+def lost_messages(received: Sequence[float], recorded: set, start: float, end: float) -> int:
+    """Messages stamped in [start, end) that a subscriber received but the bag does not hold, matched by
+    stamp (``recorded``: the bag's :func:`stamp_keys`)."""
     received = np.asarray(received, dtype=float)
-    recorded = np.asarray(recorded, dtype=float)
-    got = int(((received >= start) & (received < end)).sum())
-    kept = int(((recorded >= start) & (recorded < end)).sum())
-    return max(0, got - kept)
+    got = stamp_keys(received[(received >= start) & (received < end)])
+    return len(got - recorded)
 
 
 def kind_summary(results: Sequence[InjectionResult], expect: str) -> Dict[str, object]:

@@ -55,7 +55,7 @@ from typing import Dict, List, Optional, Sequence
 import numpy as np
 
 from quadruped_control.analysis.fault_metrics import (FaultRecord, InjectionResult, Timeline, judge_injection,
-                                                      kind_summary)
+                                                      kind_summary, lost_messages, stamp_keys, tracking_rows)
 
 #: kind -> (expectation, fault duration in s (None: ends when the stack says so))
 KINDS: Dict[str, tuple] = {
@@ -256,8 +256,6 @@ class Monitor:
 
     def tracking_now(self, hardware, window: float = 0.3) -> bool:
         """The last ``window`` s tracked (controller armed and stroking, chip following its commands)."""
-        from quadruped_control.analysis.fault_metrics import tracking_rows
-
         import rospy
         now = rospy.get_time()
         timeline = self.timeline(since=now - window - 0.2)  # the tail only: this runs every 0.1 s
@@ -380,12 +378,15 @@ class Injector:
 # --------------------------------------------------------------------------------------------------
 
 def _bag_stamps(bag_dir: str):
+    """For /imu/data and /controller_state of every bag in ``bag_dir`` (``.active`` ones reindexed): the
+    first stamp and the stamps as :func:`~quadruped_control.analysis.fault_metrics.stamp_keys`; None
+    without a bag."""
     from quadruped_control.analysis.bag_report import read_bags
     paths = sorted(glob.glob(os.path.join(bag_dir, "*.bag")) + glob.glob(os.path.join(bag_dir, "*.bag.active")))
     if not paths:
         return None
     data = read_bags(paths)
-    return np.array(data.imu_t), np.array(data.state_t)
+    return [(min(stamps) if stamps else None, stamp_keys(stamps)) for stamps in (data.imu_t, data.state_t)]
 
 
 def _lost_before(received_imu, received_state, bag, start: float, since: float) -> Optional[int]:
@@ -395,16 +396,8 @@ def _lost_before(received_imu, received_state, bag, start: float, since: float) 
     after the campaign's own subscriber: that gap belongs to the fault before)."""
     if bag is None:
         return None
-    lost = 0
-    for received, recorded in ((received_imu, bag[0]), (received_state, bag[1])):
-        if len(recorded) == 0:
-            continue
-        received = np.asarray(received)
-        low = max(since, float(np.min(recorded)))
-        got = np.round(received[(received >= low) & (received < start)] * 1e6)
-        kept = set(np.round(recorded * 1e6).tolist())
-        lost += int(sum(1 for stamp in got.tolist() if stamp not in kept))
-    return lost
+    return sum(lost_messages(received, keys, max(since, first), start)
+               for received, (first, keys) in zip((received_imu, received_state), bag) if first is not None)
 
 
 def run_graph(kinds: Sequence[str], out: str, seed: int, log=print, ready_timeout: float = 120.0) -> List[dict]:

@@ -4,7 +4,7 @@ import pytest
 
 from quadruped_control.analysis.fault_metrics import (FaultRecord, InjectionResult, Timeline, judge_injection,
                                                       kind_summary, lost_messages, motion_rows,
-                                                      pulses_outside_limits, safe_rows, tracking_rows)
+                                                      pulses_outside_limits, safe_rows, stamp_keys, tracking_rows)
 
 FREQ = 50.0
 TICK = 1e6 / (FREQ * 4096.0)
@@ -109,8 +109,8 @@ def test_judge_no_recovery_when_the_chip_stays_limp():
 def test_lost_messages_and_summary():
     received = np.arange(0.0, 10.0, 0.005)
     recorded = np.delete(received, [100, 101, 1500])
-    assert lost_messages(received, recorded, 0.0, 5.0) == 2
-    assert lost_messages(received, received, 0.0, 10.0) == 0
+    assert lost_messages(received, stamp_keys(recorded), 0.0, 5.0) == 2
+    assert lost_messages(received, stamp_keys(received), 0.0, 10.0) == 0
     rows = [InjectionResult("x", 0.0, 0.05, 0.3, 0.0, 0, 0, 0), InjectionResult("x", 5.0, 0.08, 1.1, 0.0, 0, 0, 2),
             InjectionResult("x", 9.0, None, None, 0.0, 1, 3, None)]
     summary = kind_summary(rows, "safe")
