@@ -150,41 +150,60 @@ def _closure_terms(c1: Any, s1: Any, c2: Any, s2: Any, c21: Any, a1: float, a3: 
 
 @jitable
 def _closure_point(theta1: float, theta2: float, a1: float, a2: float, a3: float, a4: float,
-                   c: float) -> Tuple[bool, float, float, float, float, float, float]:
+                   c: float) -> Tuple[bool, float, float, Tuple[float, ...], float, float]:
     """The one implementation of the five-bar forward kinematics, eq. (fk_EFG), (fk_phi), (fk_planar), on
     floats, without raising (compiled code calls it too, :mod:`quadruped_common.jit`): ``(closes, x_d,
-    y_prime, phi, psi, disc, g)``. ``closes`` is False where E^2 + F^2 - G^2 < 0 (the passive links cannot
+    y_prime, links, disc, g)``. ``links`` = (cos theta1, sin theta1, cos theta2, sin theta2, cos phi,
+    sin phi, cos psi, sin psi) are the directions of the four links (phi of a4, psi of a3), which is all
+    the Jacobian (:func:`_five_bar_rates_core`) needs: the angles phi and psi themselves only
+    :func:`five_bar_fk` reports. ``closes`` is False where E^2 + F^2 - G^2 < 0 (the passive links cannot
     close) or the two elbows coincide (phi undefined); the other values are then meaningless, but for
-    ``disc`` and ``g`` that say why (:func:`_five_bar_closure` raises with them)."""
+    ``disc`` and ``g`` that say why (:func:`_five_bar_closure` raises with them).
+
+    Four sines and cosines and two square roots per call (the simulator calls it for every leg at every
+    step): cos(theta2 - theta1) by its addition formula, phi's direction by the half-angle identities
+    of eq. (fk_phi) instead of an arctangent and its cosine and sine, psi's as the unit vector from
+    elbow A to the foot."""
     c1, s1 = math.cos(theta1), math.sin(theta1)
     c2, s2 = math.cos(theta2), math.sin(theta2)
-    e, f, g, disc = _closure_terms(c1, s1, c2, s2, math.cos(theta2 - theta1), a1, a3, c)
+    e, f, g, disc = _closure_terms(c1, s1, c2, s2, c2 * c1 + s2 * s1, a1, a3, c)
     # The relative tolerance only matters at the edge of the workspace; NaN fails every comparison.
     if not ((disc >= 0.0 or disc >= -_ROUND_TOL * _closure_scale(a1, a3, c)) and g >= 1e-24):
-        return False, 0.0, 0.0, 0.0, 0.0, disc, g
-    phi = 2.0 * math.atan2(-f + math.sqrt(disc if disc > 0.0 else 0.0), g - e)  # eq. (fk_phi)
-    x_d = c + a2 * c2 + a4 * math.cos(phi)                                       # eq. (fk_planar)
-    y_prime = a2 * s2 + a4 * math.sin(phi)
-    return True, x_d, y_prime, phi, math.atan2(y_prime - a1 * s1, x_d - a1 * c1), disc, g
+        return False, 0.0, 0.0, (0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0), disc, g
+    # eq. (fk_phi): phi = 2 atan2(num, den), so cos phi = (den^2 - num^2) / r2, sin phi = 2 num den / r2
+    num = -f + math.sqrt(disc if disc > 0.0 else 0.0)
+    den = g - e
+    r2 = num * num + den * den
+    if r2 > 0.0:
+        c_phi, s_phi = (den * den - num * num) / r2, 2.0 * num * den / r2
+    else:
+        c_phi, s_phi = 1.0, 0.0  # atan2(0, 0) = 0, as the arctangent form gives
+    x_d = c + a2 * c2 + a4 * c_phi  # eq. (fk_planar)
+    y_prime = a2 * s2 + a4 * s_phi
+    u_x, u_y = x_d - a1 * c1, y_prime - a1 * s1  # link a3, from elbow A to the foot
+    length = hypot2(u_x, u_y)
+    if not length > 0.0:
+        return False, 0.0, 0.0, (0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0), disc, g
+    return True, x_d, y_prime, (c1, s1, c2, s2, c_phi, s_phi, u_x / length, u_y / length), disc, g
 
 
 def _five_bar_closure(theta1: float, theta2: float, a1: float, a2: float, a3: float, a4: float,
-                      c: float) -> Tuple[float, float, float, float]:
+                      c: float) -> Tuple[float, float, Tuple[float, ...]]:
     """The five-bar forward kinematics of :func:`_closure_point`, raising: the core of :func:`five_bar_fk`,
     :func:`five_bar_jacobian`, :func:`foot_position` and :func:`foot_jacobian`.
 
-    Returns ``(x_d, y_prime, phi, psi)``: the foot in F_P and the absolute angles of the passive links
-    a4 (phi, the "+" root of eq. (fk_phi)) and a3 (psi), not wrapped. ``theta1``, ``theta2`` must be
+    Returns ``(x_d, y_prime, links)``: the foot in F_P and the cosines and sines of theta1, theta2 and of
+    the absolute angles of the passive links a4 (phi, the "+" root of eq. (fk_phi)) and a3 (psi). ``theta1``, ``theta2`` must be
     finite (the callers check). Raises :class:`UnreachableError` if E^2 + F^2 - G^2 < 0 (the passive
     links cannot close) or if the two elbows coincide (phi undefined).
     """
-    closes, x_d, y_prime, phi, psi, disc, g = _closure_point(theta1, theta2, a1, a2, a3, a4, c)
+    closes, x_d, y_prime, links, disc, g = _closure_point(theta1, theta2, a1, a2, a3, a4, c)
     if not closes:
         raise _closure_error(theta1, theta2, disc, g, a1, a3, a4, c)
-    return x_d, y_prime, phi, psi
+    return x_d, y_prime, links
 
 
-def _checked_closure(theta1: float, theta2: float, geometry: FiveBar) -> Tuple[float, float, float, float]:
+def _checked_closure(theta1: float, theta2: float, geometry: FiveBar) -> Tuple[float, float, Tuple[float, ...]]:
     """:func:`_five_bar_closure` for the public functions: refuses non-finite angles first."""
     if not (math.isfinite(theta1) and math.isfinite(theta2)):
         raise UnreachableError("five-bar angles must be finite, got (%r, %r)" % (theta1, theta2))
@@ -203,7 +222,8 @@ def five_bar_fk(theta1: float, theta2: float, geometry: FiveBar) -> Tuple[float,
     Raises :class:`UnreachableError` for non-finite angles, if E^2 + F^2 - G^2 < 0 (the passive links
     cannot close) or if the two elbows coincide (phi undefined).
     """
-    x_d, y_prime, phi, psi = _checked_closure(theta1, theta2, geometry)
+    x_d, y_prime, links = _checked_closure(theta1, theta2, geometry)
+    phi, psi = math.atan2(links[5], links[4]), math.atan2(links[7], links[6])
     return x_d, y_prime, wrap_angle(phi), wrap_angle(psi - theta1), wrap_angle(phi - theta2)
 
 
@@ -238,24 +258,26 @@ def five_bar_ik(x_d: float, y_prime: float, geometry: FiveBar) -> Tuple[float, f
 
 
 @jitable
-def _five_bar_rates_core(theta1: float, theta2: float, phi: float, psi: float, a1: float,
-                         a2: float) -> Tuple[bool, float, float, float, float]:
+def _five_bar_rates_core(links: Tuple[float, ...], a1: float, a2: float) -> Tuple[bool, float, float, float, float]:
     """The one implementation of the five-bar Jacobian d(x_d, y')/d(theta1, theta2) (the five-bar block
     of eq. (J_leg), see :func:`five_bar_jacobian`), on floats, at a configuration of
-    :func:`_closure_point` (link angles phi of a4 and psi of a3), without raising: (regular, J11, J12,
-    J21, J22), ``regular`` False at the type-2 singularity sin(phi - psi) = 0."""
-    det = math.sin(phi - psi)
+    :func:`_closure_point` (its ``links``: cosines and sines of theta1, theta2, phi of a4 and psi of a3),
+    without raising: (regular, J11, J12, J21, J22), ``regular`` False at the type-2 singularity
+    sin(phi - psi) = 0. The sines of the angle differences by their addition formulas."""
+    c1, s1, c2, s2, c_phi, s_phi, c_psi, s_psi = links
+    det = s_phi * c_psi - c_phi * s_psi  # sin(phi - psi)
     if not abs(det) >= _SINGULAR_TOL:
         return False, 0.0, 0.0, 0.0, 0.0
-    k1 = a1 * math.sin(psi - theta1) / det  # a1 sin(theta4) / sin(phi - psi)
-    k2 = a2 * math.sin(phi - theta2) / det  # a2 sin(theta5) / sin(phi - psi)
-    return True, k1 * math.sin(phi), -(k2 * math.sin(psi)), -k1 * math.cos(phi), k2 * math.cos(psi)
+    k1 = a1 * (s_psi * c1 - c_psi * s1) / det  # a1 sin(theta4) / sin(phi - psi), theta4 = psi - theta1
+    k2 = a2 * (s_phi * c2 - c_phi * s2) / det  # a2 sin(theta5) / sin(phi - psi), theta5 = phi - theta2
+    return True, k1 * s_phi, -(k2 * s_psi), -k1 * c_phi, k2 * c_psi
 
 
-def _five_bar_rates(theta1: float, theta2: float, phi: float, psi: float, a1: float,
+def _five_bar_rates(theta1: float, theta2: float, links: Tuple[float, ...], a1: float,
                     a2: float) -> Tuple[float, float, float, float]:
-    """:func:`_five_bar_rates_core`, raising :class:`UnreachableError` at the singularity."""
-    regular, j11, j12, j21, j22 = _five_bar_rates_core(theta1, theta2, phi, psi, a1, a2)
+    """:func:`_five_bar_rates_core`, raising :class:`UnreachableError` at the singularity (at the
+    actuated angles theta1, theta2)."""
+    regular, j11, j12, j21, j22 = _five_bar_rates_core(links, a1, a2)
     if not regular:
         raise UnreachableError("five-bar singular at theta1=%.2f deg, theta2=%.2f deg: passive links aligned"
                                % (math.degrees(theta1), math.degrees(theta2)))
@@ -277,8 +299,8 @@ def five_bar_jacobian(theta1: float, theta2: float, geometry: FiveBar) -> np.nda
     singularity sin(phi - psi) = 0 (passive links aligned), where the foot velocity is undefined.
     Computed by the float cores :func:`_five_bar_closure` and :func:`_five_bar_rates`.
     """
-    _, _, phi, psi = _checked_closure(theta1, theta2, geometry)
-    j11, j12, j21, j22 = _five_bar_rates(theta1, theta2, phi, psi, geometry.a1, geometry.a2)
+    _, _, links = _checked_closure(theta1, theta2, geometry)
+    j11, j12, j21, j22 = _five_bar_rates(theta1, theta2, links, geometry.a1, geometry.a2)
     return np.array([[j11, j12], [j21, j22]])
 
 
@@ -334,7 +356,7 @@ def _ee_body(frame: Tuple[float, ...], px: float, py: float, pz: float) -> Tuple
 def leg_fk(q: ArrayLike, params: RobotParams) -> np.ndarray:
     """Foot position p_e^L in the leg frame for q = (theta1, theta2, theta3), eq. (fk_T)."""
     t1, t2, t3 = _q3(q)
-    x_d, y_prime, _, _ = _checked_closure(t1, t2, params.five_bar)
+    x_d, y_prime, _ = _checked_closure(t1, t2, params.five_bar)
     return np.array(_leg_point(x_d, y_prime, math.cos(t3), math.sin(t3), params.l_y, params.l_z))
 
 
@@ -342,7 +364,7 @@ def foot_position(q: ArrayLike, leg: int, params: RobotParams) -> np.ndarray:
     """Foot position r_e,i^B = o_i^B + M_i p_e^L in the body frame, eq. (ee_body), legs 1..4."""
     _check_leg(leg)
     t1, t2, t3 = _q3(q)
-    x_d, y_prime, _, _ = _checked_closure(t1, t2, params.five_bar)
+    x_d, y_prime, _ = _checked_closure(t1, t2, params.five_bar)
     px, py, pz = _leg_point(x_d, y_prime, math.cos(t3), math.sin(t3), params.l_y, params.l_z)
     return np.array(_ee_body(_geometry(params)[0][leg], px, py, pz))
 
@@ -373,6 +395,17 @@ def leg_ik_full(p: ArrayLike, params: RobotParams, leg: Optional[int] = None) ->
         raise UnreachableError(exc.reason, leg) from None
 
 
+@jitable
+def _hip_solution(y_d: float, z_d: float, radius: float, l_y: float, l_z: float) -> Tuple[float, float]:
+    """eq. (ik_theta3) for a leg-frame target with (y_d, z_d) at ``radius`` >= l_z from the hip axis:
+    (theta3 before wrapping into the servo range, the five-bar's y'). The root of R_x(theta3) (l_y + y',
+    l_z) = (y_d, z_d) with l_y + y' = -sqrt(R^2 - l_z^2) (module docstring); y' from that root, not from
+    the rotation by theta3 (two sines and cosines fewer on the controller's path)."""
+    # min() guards l_z / R against rounding just above 1 at R == l_z, max() the root at the same point
+    theta3 = math.atan2(z_d, y_d) - math.acos(min(l_z / radius, 1.0)) - 0.5 * math.pi
+    return theta3, -math.sqrt(max(y_d * y_d + z_d * z_d - l_z * l_z, 0.0)) - l_y
+
+
 def _leg_ik_full(x_d: float, y_d: float, z_d: float, params: RobotParams) -> np.ndarray:
     if not (math.isfinite(x_d) and math.isfinite(y_d) and math.isfinite(z_d)):
         raise UnreachableError("target (%r, %r, %r) is not finite" % (x_d, y_d, z_d))
@@ -381,15 +414,13 @@ def _leg_ik_full(x_d: float, y_d: float, z_d: float, params: RobotParams) -> np.
     if radius < l_z:
         raise UnreachableError("target (%.4f, %.4f, %.4f) m is %.4f m from the hip axis, closer than the "
                                "five-bar plane offset l_z = %.4f m" % (x_d, y_d, z_d, radius, l_z))
-    # eq. (ik_theta3); min() guards l_z / R against rounding just above 1 at R == l_z.
-    theta3_raw = math.atan2(z_d, y_d) - math.acos(min(l_z / radius, 1.0)) - 0.5 * math.pi
+    theta3_raw, y_prime = _hip_solution(y_d, z_d, radius, params.l_y, l_z)
     limits = params.joint_limits
     theta3 = wrap_into_range(theta3_raw, limits.theta3[0], limits.theta3[1])
     if theta3 is None:
         raise UnreachableError("hip angle %.2f deg (mod 360) is outside the hip servo range [%.1f, %.1f] deg"
                                % (math.degrees(wrap_angle(theta3_raw)), math.degrees(limits.theta3[0]),
                                   math.degrees(limits.theta3[1])))
-    y_prime = y_d * math.cos(theta3) + z_d * math.sin(theta3) - params.l_y
     theta1_raw, theta2_raw, theta4, theta5 = five_bar_ik(x_d, y_prime, params.five_bar)
     theta1 = wrap_into_range(theta1_raw, limits.theta1[0], limits.theta1[1])
     if theta1 is None:
@@ -500,10 +531,9 @@ def ik_row(rx: float, ry: float, rz: float, frame: Sequence[float],
     radius = hypot2(y_d, z_d)
     if radius >= l_z and math.isfinite(x_d + radius):  # also rejects NaN
         # eq. (ik_theta3), then wrap_into_range into the hip servo range
-        theta3 = math.atan2(z_d, y_d) - math.acos(min(l_z / radius, 1.0)) - 0.5 * math.pi
+        theta3, y_prime = _hip_solution(y_d, z_d, radius, l_y, l_z)
         theta3 = theta3 + math.ceil((low3 - _ANGLE_TOL - theta3) / TWO_PI) * TWO_PI
         if theta3 <= high3 + _ANGLE_TOL:
-            y_prime = y_d * math.cos(theta3) + z_d * math.sin(theta3) - l_y
             # five_bar_ik without theta4, theta5 (their arccos arguments are only range-checked)
             d13 = hypot2(x_d, y_prime)
             d24 = hypot2(x_d - c, y_prime)
@@ -533,8 +563,8 @@ def foot_jacobian(q: ArrayLike, leg: int, params: RobotParams) -> np.ndarray:
     _check_leg(leg)
     t1, t2, t3 = _q3(q)
     fb = params.five_bar
-    x_d, y_prime, phi, psi = _checked_closure(t1, t2, fb)
-    j11, j12, j21, j22 = _five_bar_rates(t1, t2, phi, psi, fb.a1, fb.a2)
+    x_d, y_prime, links = _checked_closure(t1, t2, fb)
+    j11, j12, j21, j22 = _five_bar_rates(t1, t2, links, fb.a1, fb.a2)
     c3, s3 = math.cos(t3), math.sin(t3)
     _, py, pz = _leg_point(x_d, y_prime, c3, s3, params.l_y, params.l_z)
     columns = [_leg_rate(j11, j12, j21, j22, c3, s3, py, pz, d1, d2, d3)
@@ -617,7 +647,7 @@ def leg_kinematics_flat(q: Sequence[Sequence[float]], q_dot: Sequence[Sequence[f
     for (t1, t2, t3), (d1, d2, d3), frame in zip(q, q_dot, frames):
         ok, x, y, z, vx, vy, vz = leg_row(t1, t2, t3, d1, d2, d3, frame, a1, a2, a3, a4, c, l_y, l_z)
         if not ok:  # say why, with the raising forms of the same cores
-            _five_bar_rates(t1, t2, *_five_bar_closure(t1, t2, a1, a2, a3, a4, c)[2:], a1, a2)
+            _five_bar_rates(t1, t2, _five_bar_closure(t1, t2, a1, a2, a3, a4, c)[2], a1, a2)
         out += (x, y, z, vx, vy, vz)
     return out
 
@@ -630,8 +660,8 @@ def leg_row(t1: float, t2: float, t3: float, d1: float, d2: float, d3: float, fr
     J_P,i^B q_dot_i) for joint angles (t1, t2, t3), rates (d1, d2, d3) and the leg ``frame`` (o_x, o_y,
     o_z, m_x, m_y, m_z) of :func:`_geometry`; ``ok`` False where the five-bar cannot close or is singular
     (the values are then meaningless). eq. (fk_EFG), (fk_phi), (fk_planar), (fk_T), (J_leg), (ee_body)."""
-    closes, x_d, y_prime, phi, psi, _, _ = _closure_point(t1, t2, a1, a2, a3, a4, c)
-    regular, j11, j12, j21, j22 = _five_bar_rates_core(t1, t2, phi, psi, a1, a2)
+    closes, x_d, y_prime, links, _, _ = _closure_point(t1, t2, a1, a2, a3, a4, c)
+    regular, j11, j12, j21, j22 = _five_bar_rates_core(links, a1, a2)
     c3, s3 = math.cos(t3), math.sin(t3)
     px, py, pz = _leg_point(x_d, y_prime, c3, s3, l_y, l_z)
     vx, vy, vz = _leg_rate(j11, j12, j21, j22, c3, s3, py, pz, d1, d2, d3)

@@ -31,22 +31,28 @@ Vec3 = Tuple[float, float, float]
 
 NUM_LEGS = len(LEGS)
 
-#: Below this rotation-vector norm the series forms of the SO(3) chart coefficients are used.
-SMALL_ANGLE = 1e-4
+#: Below this rotation-vector norm (rad) the SO(3) chart coefficients are their Taylor series through
+#: t^6 (:func:`chart_coefficients`): the first omitted term is below 1e-20 there, so the series are
+#: exact to rounding, and they avoid the cancellation of 1/t^2 - (1 + cos t) / (2 t sin t) at small t.
+#: The integrator's stage coordinates are about omega dt / 2 (0.005 rad at 1 rad/s), so its stages run
+#: without a sine or cosine.
+SERIES_ANGLE = 0.02
 
 __all__ = [
     "DynamicsError",
     "Mat3",
     "NUM_LEGS",
     "RigidBodyState",
-    "SMALL_ANGLE",
+    "SERIES_ANGLE",
     "StateDerivative",
     "StepContext",
     "as_mat3",
+    "chart_coefficients",
     "chart_point",
     "chart_rate",
     "chart_step_end",
     "check_dt",
+    "inverse_jacobian_rate",
     "diverged",
     "exp_rotation",
     "joint_array",
@@ -158,20 +164,33 @@ def check_dt(dt: float) -> float:
 # --------------------------------------------------------------------------------------------------
 
 @jitable
-def exp_rotation(x: float, y: float, z: float) -> Mat3:
-    """exp(hat(xi)) by Rodrigues' formula (the maths of so3.exp_so3, on floats and without input checks)."""
-    t2 = x * x + y * y + z * z
-    if t2 < SMALL_ANGLE * SMALL_ANGLE:
-        a = 1.0 - t2 / 6.0     # sin(t) / t
-        b = 0.5 - t2 / 24.0    # (1 - cos(t)) / t^2
-    else:
-        t = math.sqrt(t2)
-        a = math.sin(t) / t
-        b = (1.0 - math.cos(t)) / t2
+def chart_coefficients(t2: float) -> Tuple[float, float, float]:
+    """(sin t / t, (1 - cos t) / t^2, 1/t^2 - (1 + cos t) / (2 t sin t)) for t^2 = |xi|^2 = ``t2``: the
+    coefficients of Rodrigues' formula (:func:`exp_rotation`) and of the inverse right Jacobian
+    (:func:`chart_rate`); their Taylor series below :data:`SERIES_ANGLE`."""
+    if t2 < SERIES_ANGLE * SERIES_ANGLE:
+        return (1.0 - t2 / 6.0 * (1.0 - t2 / 20.0 * (1.0 - t2 / 42.0)),
+                0.5 - t2 / 24.0 * (1.0 - t2 / 30.0 * (1.0 - t2 / 56.0)),
+                1.0 / 12.0 + t2 * (1.0 / 720.0 + t2 * (1.0 / 30240.0 + t2 / 1209600.0)))
+    t = math.sqrt(t2)
+    sin_t, cos_t = math.sin(t), math.cos(t)
+    return sin_t / t, (1.0 - cos_t) / t2, 1.0 / t2 - (1.0 + cos_t) / (2.0 * t * sin_t)
+
+
+@jitable
+def rodrigues(x: float, y: float, z: float, a: float, b: float) -> Mat3:
+    """exp(hat(xi)) = I + a hat(xi) + b hat(xi)^2 with the coefficients a, b of :func:`chart_coefficients`."""
     bxy, bxz, byz = b * x * y, b * x * z, b * y * z
     return (1.0 - b * (y * y + z * z), bxy - a * z, bxz + a * y,
             bxy + a * z, 1.0 - b * (x * x + z * z), byz - a * x,
             bxz - a * y, byz + a * x, 1.0 - b * (x * x + y * y))
+
+
+@jitable
+def exp_rotation(x: float, y: float, z: float) -> Mat3:
+    """exp(hat(xi)) by Rodrigues' formula (the maths of so3.exp_so3, on floats and without input checks)."""
+    a, b, _ = chart_coefficients(x * x + y * y + z * z)
+    return rodrigues(x, y, z, a, b)
 
 
 @jitable
@@ -190,30 +209,32 @@ def as_mat3(M: ArrayLike) -> Mat3:
 
 
 @jitable
-def chart_rate(x: float, y: float, z: float, wx: float, wy: float, wz: float) -> Vec3:
-    """d xi / dt = J_r(xi)^-1 omega for R = R_0 exp(hat(xi)) with R^T dR/dt = hat(omega).
-
-    J_r^-1(xi) = I + 1/2 hat(xi) + c(t) hat(xi)^2, c(t) = 1/t^2 - (1 + cos t) / (2 t sin t), t = |xi|.
-    """
-    t2 = x * x + y * y + z * z
-    if t2 < SMALL_ANGLE * SMALL_ANGLE:
-        c = 1.0 / 12.0 + t2 / 720.0
-    else:
-        t = math.sqrt(t2)
-        c = 1.0 / t2 - (1.0 + math.cos(t)) / (2.0 * t * math.sin(t))
+def inverse_jacobian_rate(x: float, y: float, z: float, wx: float, wy: float, wz: float, c: float) -> Vec3:
+    """J_r^-1(xi) omega = omega + 1/2 xi x omega + c xi x (xi x omega), with c of :func:`chart_coefficients`."""
     ax, ay, az = y * wz - z * wy, z * wx - x * wz, x * wy - y * wx        # xi x omega
     bx, by, bz = y * az - z * ay, z * ax - x * az, x * ay - y * ax        # xi x (xi x omega)
     return wx + 0.5 * ax + c * bx, wy + 0.5 * ay + c * by, wz + 0.5 * az + c * bz
 
 
 @jitable
+def chart_rate(x: float, y: float, z: float, wx: float, wy: float, wz: float) -> Vec3:
+    """d xi / dt = J_r(xi)^-1 omega for R = R_0 exp(hat(xi)) with R^T dR/dt = hat(omega).
+
+    J_r^-1(xi) = I + 1/2 hat(xi) + c(t) hat(xi)^2, c(t) = 1/t^2 - (1 + cos t) / (2 t sin t), t = |xi|.
+    """
+    return inverse_jacobian_rate(x, y, z, wx, wy, wz, chart_coefficients(x * x + y * y + z * z)[2])
+
+
+@jitable
 def chart_point(R0: Mat3, x: float, y: float, z: float, wx: float, wy: float, wz: float) -> Tuple[Mat3, Vec3]:
     """(R, d xi/dt) at chart coordinate xi = (x, y, z) around R0: R = R0 exp(hat(xi)) and the rate
-    :func:`chart_rate` of the body rate omega. At xi = 0 (the first Runge-Kutta stage) exp(hat(xi)) = I
-    and J_r^-1 = I, so (R0, omega) is returned without the products (the same values)."""
+    :func:`chart_rate` of the body rate omega, the coefficients computed once for both. At xi = 0 (the
+    first Runge-Kutta stage) exp(hat(xi)) = I and J_r^-1 = I, so (R0, omega) is returned without the
+    products (the same values)."""
     if x == 0.0 and y == 0.0 and z == 0.0:
         return R0, (wx, wy, wz)
-    return matmul(R0, exp_rotation(x, y, z)), chart_rate(x, y, z, wx, wy, wz)
+    a, b, c = chart_coefficients(x * x + y * y + z * z)
+    return matmul(R0, rodrigues(x, y, z, a, b)), inverse_jacobian_rate(x, y, z, wx, wy, wz, c)
 
 
 @jitable

@@ -545,8 +545,8 @@ def test_leg_row_flags_five_bars_that_cannot_close_where_the_float_cores_raise()
     for t1, t2, t3 in rng.uniform(-math.pi, math.pi, (300, 3)):
         ok = leg_row(t1, t2, t3, 0.1, -0.2, 0.3, frame, a1, a2, a3, a4, c, PARAMS.l_y, PARAMS.l_z)[0]
         try:
-            _, _, phi, psi = _five_bar_closure(t1, t2, a1, a2, a3, a4, c)
-            _five_bar_rates(t1, t2, phi, psi, a1, a2)  # the singularity check
+            _, _, links = _five_bar_closure(t1, t2, a1, a2, a3, a4, c)
+            _five_bar_rates(t1, t2, links, a1, a2)  # the singularity check
             closes = True
         except UnreachableError:
             closes = False

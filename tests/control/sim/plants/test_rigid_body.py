@@ -1,5 +1,6 @@
 """Tests of quadruped_control.sim.plants.rigid_body: the plants' shared state, input checks, SO(3) chart
 helpers and step context, each against its readable counterpart."""
+import decimal
 import math
 
 import numpy as np
@@ -12,15 +13,45 @@ from quadruped_common.so3 import exp_so3, hat
 from quadruped_control.model import hydrodynamics as hd
 from quadruped_control.model.kinematics import joint_angles, leg_kinematics, leg_kinematics_flat
 from quadruped_control.model.params import load_robot_params
-from quadruped_control.sim.plants.rigid_body import (DynamicsError, RigidBodyState, StepContext, as_mat3, chart_point,
-                                                     chart_rate, chart_step_end, check_dt, exp_rotation, joint_array,
-                                                     matmul)
+from quadruped_control.sim.plants.rigid_body import (SERIES_ANGLE, DynamicsError, RigidBodyState, StepContext, as_mat3,
+                                                     chart_coefficients, chart_point, chart_rate, chart_step_end,
+                                                     check_dt, exp_rotation, joint_array, matmul)
 
 PARAMS = load_robot_params()
 Q0 = np.array([joint_angles(PARAMS.nominal_foot_body(leg), leg, PARAMS) for leg in LEGS])
 
-#: Rotation vectors of these norms, on both sides of the series threshold SMALL_ANGLE = 1e-4.
-xi_norms = st.sampled_from([0.0, 1e-7, 5e-5, 2e-4, 0.3, 2.0, 3.0])
+#: Rotation vectors of these norms, on both sides of the series threshold SERIES_ANGLE = 0.02.
+xi_norms = st.sampled_from([0.0, 1e-7, 5e-5, 2e-4, 0.005, 0.0199, 0.0201, 0.3, 2.0, 3.0])
+
+
+def _closed_forms_exactly(t):
+    """(sin t / t, (1 - cos t) / t^2, 1/t^2 - (1 + cos t) / (2 t sin t)) in 60-digit decimal arithmetic
+    (sine and cosine by their Taylor sums): the closed forms without their cancellation."""
+    with decimal.localcontext() as context:
+        context.prec = 60
+        T = decimal.Decimal(t)
+        sin_t, cos_t, term = decimal.Decimal(0), decimal.Decimal(0), decimal.Decimal(1)
+        for k in range(60):  # term = t^k / k!
+            if k % 4 == 0:
+                cos_t += term
+            elif k % 4 == 1:
+                sin_t += term
+            elif k % 4 == 2:
+                cos_t -= term
+            else:
+                sin_t -= term
+            term = term * T / (k + 1)
+        return (float(sin_t / T), float((1 - cos_t) / (T * T)),
+                float(1 / (T * T) - (1 + cos_t) / (2 * T * sin_t)))
+
+
+@pytest.mark.parametrize("t", [1e-6, 1e-3, 0.005, 0.0199, 0.02, 0.05, 0.5, 3.0])
+def test_chart_coefficients_are_the_closed_forms_to_rounding(t):
+    """Below SERIES_ANGLE the series are exact to rounding; above it the closed forms carry their
+    cancellation (about eps / t^2) as before the series' threshold moved up to 0.02."""
+    exact = _closed_forms_exactly(t)
+    tolerance = 3e-16 if t < SERIES_ANGLE else max(3e-16, 4e-16 / (t * t))
+    np.testing.assert_allclose(chart_coefficients(t * t), exact, rtol=0, atol=tolerance)
 
 
 def random_rotation_vector(seed, norm):
