@@ -4,7 +4,7 @@ Parameters and their physically plausible bounds (:data:`PARAMETERS`; the reason
 docs/identification.md): the tank's uncertain estimates (centre of buoyancy, hook, net weight, rope
 length, torso added mass, servo speed, paw drag) and the candidate effects of
 :mod:`quadruped_control.sim.plants.tank` (appendage damping, linear and quadratic, roll/pitch and yaw;
-rope torsion; the paws' wake, fraction and time constant). Every set is run on the batched simulator (:mod:`quadruped_control.sim.batch`), the 15
+rope torsion; the paws' wake, fraction, time constant and the body's share). Every set is run on the batched simulator (:mod:`quadruped_control.sim.batch`), the 15
 experiments of Table 1 with the experiment gains and rate-limited servos, 160 s each.
 
 Objective (lower is better), summed over the experiments with the weights of :data:`WEIGHTS`
@@ -66,6 +66,7 @@ PARAMETERS: Tuple[Tuple[str, float, float], ...] = (
     ("torsion_damping", 0.0, 0.2),         # N m s/rad: the block turning in the water
     ("wake_fraction", 0.0, 0.8),           # share of the paw's velocity its near wake reaches (sphere: 0.5-0.8)
     ("wake_time_constant", 0.05, 1.0),     # s: from D/U (0.075 m at 0.3-1 m/s) to a whole stroke cycle
+    ("wake_body_share", 0.0, 1.0),         # the body's motion in the wake: none (steady C_D has it) to all
 )
 
 #: Weights of the objective's terms (module docstring).
@@ -94,7 +95,7 @@ def tank_overrides(values: Dict[str, float]) -> Tuple[Tuple[str, Any], ...]:
     for name in ("torsion_stiffness", "torsion_damping"):
         if name in values:
             out.append(("rope_" + name, float(values[name])))
-    for name in ("wake_fraction", "wake_time_constant"):
+    for name in ("wake_fraction", "wake_time_constant", "wake_body_share"):
         if name in values:
             out.append(("paw_" + name, float(values[name])))
     return tuple(out)
@@ -109,7 +110,8 @@ def nominal_values(tank: TankParams) -> Dict[str, float]:
            "appendage_quadratic_xy": tank.appendage_damping_quadratic[0],
            "appendage_quadratic_z": tank.appendage_damping_quadratic[2],
            "torsion_stiffness": tank.rope_torsion_stiffness, "torsion_damping": tank.rope_torsion_damping,
-           "wake_fraction": tank.paw_wake_fraction, "wake_time_constant": tank.paw_wake_time_constant}
+           "wake_fraction": tank.paw_wake_fraction, "wake_time_constant": tank.paw_wake_time_constant,
+           "wake_body_share": tank.paw_wake_body_share}
     return {name: float(min(high, max(low, raw[name]))) for name, low, high in PARAMETERS}
 
 
@@ -175,6 +177,7 @@ _YAML_KEYS = {
     "torsion_damping": ("suspension", "torsion_damping", "%.4f"),
     "wake_fraction": ("paw_wake", "fraction", "%.3f"),
     "wake_time_constant": ("paw_wake", "time_constant", "%.3f"),
+    "wake_body_share": ("paw_wake", "body_share", "%.3f"),
 }
 #: appendage damping: one line per kind, (xy, xy, z)
 _APPENDAGE_KEYS = {"linear": ("appendage_linear_xy", "appendage_linear_z"),

@@ -41,7 +41,11 @@ Candidate effects of the identification against Table 1, each zero (today's mode
   pushes water that already moves with it (less thrust), and the retracing recovery stroke meets that
   water head-on (more drag against the stroke), so the net torque of a stroke cycle, the small difference
   of the two impulses, drops; the body's own rotation builds the same wake, so its passive damping drops
-  too. A first-order "entrained water" model of the history effects of unsteady drag (the Basset
+  too. The share s_b (``paw_wake_body_share``, default 1) says how much of the body's motion enters the
+  velocity that builds the wake, dw_i/dt = (kappa (c_i + s_b (b + omega x r_i)) - w_i) / tau_w: s_b = 0
+  keeps the wake to the strokes, which reverse within a few paw diameters (the history effect), and
+  leaves the slow, steady motion of the body to the steady C_D, whose measurement already contains the
+  steady wake; the passive damping then stays as it is. A first-order "entrained water" model of the history effects of unsteady drag (the Basset
   history force of Maxey and Riley, Phys. Fluids 26 (1983); oscillating spheres at low Keulegan-Carpenter
   numbers, Sarpkaya and Isaacson, "Mechanics of Wave Forces on Offshore Structures" (1981), ch. 3).
   kappa = 0 is today's quasi-steady drag. The wake is integrated once per step with the legs and the body
@@ -110,6 +114,9 @@ class TankParams:
     #: paw wake: fraction kappa of the paw's velocity its wake reaches, and its time constant tau_w (s)
     paw_wake_fraction: float = 0.0
     paw_wake_time_constant: float = 0.3
+    #: paw wake: share s_b of the body's motion in the velocity that builds the wake (1: the paw's whole
+    #: velocity; 0: the stroke's alone, the body's steady motion leaving the quasi-steady drag as it is)
+    paw_wake_body_share: float = 1.0
 
     def __post_init__(self) -> None:
         for name in ("rope_length", "rope_stiffness"):
@@ -125,6 +132,8 @@ class TankParams:
             raise ParameterError("tank servo_speed_scale must be in (0, 1], got %r" % (self.servo_speed_scale,))
         if not (math.isfinite(self.paw_wake_fraction) and 0.0 <= self.paw_wake_fraction < 1.0):
             raise ParameterError("tank paw_wake_fraction must be in [0, 1), got %r" % (self.paw_wake_fraction,))
+        if not (math.isfinite(self.paw_wake_body_share) and 0.0 <= self.paw_wake_body_share <= 1.0):
+            raise ParameterError("tank paw_wake_body_share must be in [0, 1], got %r" % (self.paw_wake_body_share,))
         if not (math.isfinite(self.paw_wake_time_constant) and self.paw_wake_time_constant >= 0.02):
             raise ParameterError("tank paw_wake_time_constant must be >= 0.02 s (two steps), got %r"
                                  % (self.paw_wake_time_constant,))
@@ -169,7 +178,7 @@ def tank_params_from_dict(data: Mapping[str, Any]) -> TankParams:
     paw_drag = check_keys(_optional_section(data, "paw_drag"), "paw_drag", ("scale",))
     servos = check_keys(_optional_section(data, "servos"), "servos", ("speed_scale",))
     appendage = check_keys(_optional_section(data, "appendage_damping"), "appendage_damping", ("linear", "quadratic"))
-    wake = check_keys(_optional_section(data, "paw_wake"), "paw_wake", ("fraction", "time_constant"))
+    wake = check_keys(_optional_section(data, "paw_wake"), "paw_wake", ("fraction", "time_constant", "body_share"))
 
     def axes(section: Mapping[str, Any], key: str, high: float) -> Vec3:
         return tuple(vector(section.get(key, [0.0, 0.0, 0.0]), "appendage_damping." + key, 3,
@@ -198,7 +207,8 @@ def tank_params_from_dict(data: Mapping[str, Any]) -> TankParams:
         rope_torsion_stiffness=number(rope.get("torsion_stiffness", 0.0), "suspension.torsion_stiffness", 0.0, 1e4),
         rope_torsion_damping=number(rope.get("torsion_damping", 0.0), "suspension.torsion_damping", 0.0, 1e4),
         paw_wake_fraction=number(wake.get("fraction", 0.0), "paw_wake.fraction", 0.0, 0.95),
-        paw_wake_time_constant=number(wake.get("time_constant", 0.3), "paw_wake.time_constant", 0.02, 100.0))
+        paw_wake_time_constant=number(wake.get("time_constant", 0.3), "paw_wake.time_constant", 0.02, 100.0),
+        paw_wake_body_share=number(wake.get("body_share", 1.0), "paw_wake.body_share", 0.0, 1.0))
 
 
 def load_tank_params(path: Optional[str] = None, tree: Optional[Mapping[str, Any]] = None) -> TankParams:
@@ -329,7 +339,7 @@ class TankModel(FloatingBaseModel):
                 (float(tank.rope_torsion_stiffness), float(tank.rope_torsion_damping)), self._untwisted,
                 tuple(float(x) for x in tank.appendage_damping_linear),
                 tuple(float(x) for x in tank.appendage_damping_quadratic), self._body_m, float(self.paw_added_mass),
-                float(tank.paw_wake_fraction), float(tank.paw_wake_time_constant))
+                float(tank.paw_wake_fraction), float(tank.paw_wake_time_constant), float(tank.paw_wake_body_share))
 
     def _mass_solver(self, sr: Sequence[float], S: Sequence[float]) -> Tuple[Tuple[float, ...], ...]:
         """:func:`~.tank_dynamics.mass_solver` of this plant (ValueError if the matrix is singular)."""
@@ -362,6 +372,7 @@ class TankModel(FloatingBaseModel):
         wx, wy, wz = state.omega.tolist()
         # b = R^T v in the batch's order of operations (bit for bit with TankPlantBatch)
         paw_wake_update(context.feet, self.wake, self.tank.paw_wake_fraction, self.tank.paw_wake_time_constant,
+                        self.tank.paw_wake_body_share,
                         r0 * vx + r3 * vy + r6 * vz, r1 * vx + r4 * vy + r7 * vz, r2 * vx + r5 * vy + r8 * vz,
                         wx, wy, wz, dt, self._drag_feet)
         return tuple(map(tuple, self._drag_feet.tolist()))

@@ -32,7 +32,7 @@ __all__ = ["TankPlantBatch", "tank_batch_step", "tank_trial_step"]
 @trial_step
 def tank_trial_step(i, frames, five_bar, net_paw_buoyancy, drag_constant, drag, extra_lift, suspension, hook, anchor,
                     rope, torsion, untwisted, linear, quadratic, body_m, paw_added_mass, wake_fraction,
-                    wake_time_constant, restoring, wake, p, v, R, w, q, q_dot, dt, feet, drag_feet) -> bool:
+                    wake_time_constant, wake_body_share, restoring, wake, p, v, R, w, q, q_dot, dt, feet, drag_feet) -> bool:
     """One held-input RK4 step of eq. (tank) for trial ``i`` in place (its paws' ``wake[i]`` too, with the
     body's velocity at the step's start, as :class:`~quadruped_control.sim.plants.tank.TankModel`);
     False if it failed."""
@@ -43,11 +43,11 @@ def tank_trial_step(i, frames, five_bar, net_paw_buoyancy, drag_constant, drag, 
     solver = mass_solver(body_m[i], paw_added_mass[i], sums[0], sums[2])
     constants = (drag_constant[i], drag[i], extra_lift[i], suspension[i], hook[i], anchor[i], rope[i],
                  torsion[i], untwisted[i], linear[i], quadratic[i], body_m[i], paw_added_mass[i], wake_fraction[i],
-                 wake_time_constant[i])
+                 wake_time_constant[i], wake_body_share[i])
     rows = feet
     if wake_fraction[i] > 0.0:
         vx, vy, vz = v[i, 0], v[i, 1], v[i, 2]
-        paw_wake_update(feet, wake[i], wake_fraction[i], wake_time_constant[i],
+        paw_wake_update(feet, wake[i], wake_fraction[i], wake_time_constant[i], wake_body_share[i],
                         R0[0] * vx + R0[3] * vy + R0[6] * vz, R0[1] * vx + R0[4] * vy + R0[7] * vz,
                         R0[2] * vx + R0[5] * vy + R0[8] * vz, w[i, 0], w[i, 1], w[i, 2], dt, drag_feet)
         rows = drag_feet
@@ -59,7 +59,7 @@ def tank_trial_step(i, frames, five_bar, net_paw_buoyancy, drag_constant, drag, 
 @kernel
 def tank_batch_step(frames, five_bar, net_paw_buoyancy, drag_constant, drag, extra_lift, suspension, hook, anchor,
                     rope, torsion, untwisted, linear, quadratic, body_m, paw_added_mass, wake_fraction,
-                    wake_time_constant, restoring, wake, p, v, R, w, q, q_dot, dt, failed):
+                    wake_time_constant, wake_body_share, restoring, wake, p, v, R, w, q, q_dot, dt, failed):
     """One held-input RK4 step of eq. (tank) for every trial not yet ``failed``, in place on p, v, w
     (N, 3), R (N, 3, 3) and the paws' ``wake`` (N, 4, 3). The constants are the fields of
     :data:`~.tank_dynamics.TankConstants`, one row (or value) per trial, and ``restoring`` (N, 3, 3) each
@@ -70,7 +70,7 @@ def tank_batch_step(frames, five_bar, net_paw_buoyancy, drag_constant, drag, ext
         if not failed[i] and not tank_trial_step(i, frames, five_bar, net_paw_buoyancy, drag_constant, drag,
                                                  extra_lift, suspension, hook, anchor, rope, torsion, untwisted,
                                                  linear, quadratic, body_m, paw_added_mass, wake_fraction,
-                                                 wake_time_constant, restoring, wake, p, v, R, w, q, q_dot, dt,
+                                                 wake_time_constant, wake_body_share, restoring, wake, p, v, R, w, q, q_dot, dt,
                                                  feet, drag_feet):
             failed[i] = True
 
@@ -96,7 +96,8 @@ class TankPlantBatch:
         """The per-trial fields of TankConstants as arrays (one row per trial)."""
         columns = list(zip(*(m.constants() for m in self.models)))
         names = ("drag_constant", "drag", "extra_lift", "suspension", "hook", "anchor", "rope", "torsion",
-                 "untwisted", "linear", "quadratic", "body_m", "paw_added_mass", "wake_fraction", "wake_time_constant")
+                 "untwisted", "linear", "quadratic", "body_m", "paw_added_mass", "wake_fraction", "wake_time_constant",
+                 "wake_body_share")
         self.constants = {name: np.array(column, dtype=bool if name == "suspension" else float)
                           for name, column in zip(names, columns)}
 
@@ -116,6 +117,6 @@ class TankPlantBatch:
         tank_batch_step(self.frames, self.five_bar, self.net_paw_buoyancy, c["drag_constant"], c["drag"],
                         c["extra_lift"], c["suspension"], c["hook"], c["anchor"], c["rope"], c["torsion"],
                         c["untwisted"], c["linear"], c["quadratic"], c["body_m"], c["paw_added_mass"],
-                        c["wake_fraction"], c["wake_time_constant"], self.restoring, self.wake, p, v, R, w,
+                        c["wake_fraction"], c["wake_time_constant"], c["wake_body_share"], self.restoring, self.wake, p, v, R, w,
                         np.ascontiguousarray(q), np.ascontiguousarray(q_dot), float(dt), self.failed)
         return p, v, R, w

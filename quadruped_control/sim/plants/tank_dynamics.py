@@ -37,7 +37,7 @@ Vec3 = Tuple[float, float, float]
 #: (drag_constant, body drag coefficients (8), extra lift (torso buoyancy - weight, N), suspension (bool),
 #: hook (3, m), anchor (3, m, world), rope (length, stiffness, damping), torsion (stiffness, damping),
 #: untwisted R_0 (9), appendage damping linear (3), quadratic (3), M_RB + M_A (36), paw added mass m_a,
-#: paw wake (fraction kappa, time constant tau_w in s))
+#: paw wake (fraction kappa, time constant tau_w in s, body share s_b))
 TankConstants = Tuple[Any, ...]
 
 
@@ -98,20 +98,25 @@ def rope_torsion_torque(R: Sequence[float], R0: Sequence[float], omega: Sequence
 
 
 @jitable
-def paw_wake_update(feet: Sequence[Sequence[float]], wake: Any, fraction: float, time_constant: float, bx: float,
-                    by: float, bz: float, wx: float, wy: float, wz: float, dt: float, drag_feet: Any) -> None:
+def paw_wake_update(feet: Sequence[Sequence[float]], wake: Any, fraction: float, time_constant: float,
+                    body_share: float, bx: float, by: float, bz: float, wx: float, wy: float, wz: float, dt: float,
+                    drag_feet: Any) -> None:
     """Advance each paw's wake over a held step and write the rows its drag sees (:mod:`.tank`).
 
     ``wake`` (4 x 3, body axes, m/s, in place): the water each paw has set moving; it relaxes towards the
-    fraction kappa of the paw's velocity u_i (:func:`~quadruped_control.model.hydrodynamics.paw_velocity_f`,
-    held over the step, from the body velocity b, rate omega and the legs' rows ``feet``):
-    dw/dt = (kappa u_i - w) / tau_w, solved exactly, w <- kappa u_i + (w - kappa u_i) exp(-dt / tau_w).
+    fraction kappa of the paw's velocity that builds it, u_w,i = c_i + s_b (b + omega x r_i): the stroke's
+    own velocity c_i (the legs' rows ``feet``) and the share s_b (``body_share``) of the velocity the
+    body's motion gives the paw (body velocity b, rate omega; s_b = 1: the paw's whole velocity u_i of
+    :func:`~quadruped_control.model.hydrodynamics.paw_velocity_f`), held over the step:
+    dw/dt = (kappa u_w,i - w) / tau_w, solved exactly, w <- kappa u_w,i + (w - kappa u_w,i) exp(-dt / tau_w).
     ``drag_feet`` (4 x 6, out): the rows (r_i, c_i - w_i), so that the drag law sees u_i - w_i, the paw's
     velocity relative to its wake."""
     decay = math.exp(-dt / time_constant)
     for leg in range(4):
         px, py, pz, cx, cy, cz = feet[leg][0], feet[leg][1], feet[leg][2], feet[leg][3], feet[leg][4], feet[leg][5]
-        ux, uy, uz = paw_velocity_f(px, py, pz, cx, cy, cz, bx, by, bz, wx, wy, wz)
+        # the body's part of the paw's velocity; c + 1.0 * g is u of paw_velocity_f bit for bit
+        gx, gy, gz = paw_velocity_f(px, py, pz, 0.0, 0.0, 0.0, bx, by, bz, wx, wy, wz)
+        ux, uy, uz = cx + body_share * gx, cy + body_share * gy, cz + body_share * gz
         tx, ty, tz = fraction * ux, fraction * uy, fraction * uz
         wake[leg, 0] = tx + (wake[leg, 0] - tx) * decay
         wake[leg, 1] = ty + (wake[leg, 1] - ty) * decay
@@ -232,7 +237,7 @@ def tank_forces(k: TankConstants, feet: Sequence[Sequence[float]], drag_feet: Se
     the rows the paw drag sees: ``feet`` itself, or with each paw's wake taken off, :func:`paw_wake_update`)
     and the state p, v (world), R (row-major), omega (body)."""
     (drag_constant, drag, extra_lift, suspension, hook, anchor, rope, torsion, untwisted, linear, quadratic,
-     body_m, ma, _wake_fraction, _wake_time_constant) = k
+     body_m, ma, _wake_fraction, _wake_time_constant, _wake_body_share) = k
     r0, r1, r2, r3, r4, r5, r6, r7, r8 = R
     bx, by, bz = r0 * vx + r3 * vy + r6 * vz, r1 * vx + r4 * vy + r7 * vz, r2 * vx + r5 * vy + r8 * vz
     fx, fy, fz, tx, ty, tz = body_wrench_f(drag_feet, drag_constant, drag, up_torque, bx, by, bz, R, wx, wy, wz)

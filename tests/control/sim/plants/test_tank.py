@@ -405,7 +405,8 @@ def test_rope_torsion_turns_the_robot_back_with_its_period_and_keeps_the_energy(
 @pytest.mark.parametrize("section, key, value", [("appendage_damping", "linear", [0.0, -0.1, 0.0]),
                                                  ("suspension", "torsion_stiffness", -1.0),
                                                  ("paw_wake", "fraction", 1.0),
-                                                 ("paw_wake", "time_constant", 0.0)])
+                                                 ("paw_wake", "time_constant", 0.0),
+                                                 ("paw_wake", "body_share", 1.5)])
 def test_candidate_effect_keys_are_checked(tmp_path, section, key, value) -> None:
     import yaml
     with open(config_path("tank.yaml")) as stream:
@@ -419,7 +420,8 @@ def test_candidate_effect_keys_are_checked(tmp_path, section, key, value) -> Non
     path.write_text(yaml.safe_dump(tree))
     params = load_tank_params(str(path))
     assert params.appendage_damping_linear == (0.0, 0.1, 0.2) or 0.3 in (
-        params.rope_torsion_stiffness, params.paw_wake_fraction, params.paw_wake_time_constant)
+        params.rope_torsion_stiffness, params.paw_wake_fraction, params.paw_wake_time_constant,
+        params.paw_wake_body_share)
 
 
 def _wake_rows(u, wake, fraction, tau, dt):
@@ -427,7 +429,7 @@ def _wake_rows(u, wake, fraction, tau, dt):
     from quadruped_control.sim.plants.tank_dynamics import paw_wake_update
     feet = [(0.2, 0.1, -0.05) + tuple(u)] * 4
     rows = np.zeros((4, 6))
-    paw_wake_update(feet, wake, fraction, tau, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, dt, rows)
+    paw_wake_update(feet, wake, fraction, tau, 1.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, dt, rows)
     return rows
 
 
@@ -472,3 +474,25 @@ def test_a_passive_spin_builds_a_wake_that_lowers_its_damping_and_kappa_zero_is_
     waked = _spin(TankModel(ROBOT, drag.with_values(paw_wake_fraction=0.5, paw_wake_time_constant=0.1)), start,
                   2.0)[-1].omega[2]
     assert plain < waked < 1.5
+
+
+def test_a_wake_of_the_strokes_alone_leaves_the_passive_damping_and_body_share_one_is_the_whole_velocity() -> None:
+    """paw_wake_body_share 0: the body's motion builds no wake, so a passive spin (legs still) slows down
+    exactly as without a wake; share 1 is the paw's whole velocity of paw_velocity_f, bit for bit; a share
+    in between builds the wake from c_i + s_b (b + omega x r_i)."""
+    from quadruped_control.model.hydrodynamics import paw_velocity_f
+    from quadruped_control.sim.plants.tank_dynamics import paw_wake_update
+    drag = BARE.with_values(drag=True)
+    start = RigidBodyState(omega=np.array([0.0, 0.0, 1.5]))
+    plain = _spin(TankModel(ROBOT, drag), start, 2.0)[-1].omega[2]
+    strokes_only = drag.with_values(paw_wake_fraction=0.5, paw_wake_time_constant=0.1, paw_wake_body_share=0.0)
+    assert _spin(TankModel(ROBOT, strokes_only), start, 2.0)[-1].omega[2] == plain
+    row = (0.2, 0.1, -0.05, 0.3, -0.4, 0.2)
+    body = (0.05, -0.02, 0.01, 0.3, -0.7, 1.1)  # b, omega
+    for share in (1.0, 0.25):
+        wake, rows = np.zeros((4, 3)), np.zeros((4, 6))
+        paw_wake_update([row] * 4, wake, 0.4, 0.2, share, *body, 0.01, rows)
+        u = np.array(paw_velocity_f(*row, *body))
+        g = np.array(paw_velocity_f(*row[:3], 0.0, 0.0, 0.0, *body))
+        target = u if share == 1.0 else np.array(row[3:]) + share * g
+        np.testing.assert_array_equal(wake[0], 0.4 * target + (0.0 - 0.4 * target) * math.exp(-0.01 / 0.2))
