@@ -553,6 +553,30 @@ def ik_row(rx: float, ry: float, rz: float, frame: Sequence[float],
     return False, 0.0, 0.0, 0.0
 
 
+@jitable
+def _jacobian_entries(j11: float, j12: float, j21: float, j22: float, c3: float, s3: float, p_y: float, p_z: float,
+                      m_x: float, m_y: float, m_z: float) -> Tuple[float, ...]:
+    """J_P,i^B = M_i [columns], row-major: the columns are the leg-frame foot velocities of :func:`_leg_rate`
+    for unit joint rates, M_i = diag(m_x, m_y, m_z) the leg's mirror (eq. (J_leg), (ee_body))."""
+    a = _leg_rate(j11, j12, j21, j22, c3, s3, p_y, p_z, 1.0, 0.0, 0.0)
+    b = _leg_rate(j11, j12, j21, j22, c3, s3, p_y, p_z, 0.0, 1.0, 0.0)
+    d = _leg_rate(j11, j12, j21, j22, c3, s3, p_y, p_z, 0.0, 0.0, 1.0)
+    return (m_x * a[0], m_x * b[0], m_x * d[0], m_y * a[1], m_y * b[1], m_y * d[1], m_z * a[2], m_z * b[2], m_z * d[2])
+
+
+@jitable
+def leg_jacobian_row(t1: float, t2: float, t3: float, frame: Sequence[float], a1: float, a2: float, a3: float,
+                     a4: float, c: float, l_y: float, l_z: float) -> Tuple[bool, Tuple[float, ...]]:
+    """:func:`foot_jacobian` on floats, without raising (compiled code calls it too): (ok, J_P,i^B row-major)
+    for joint angles (t1, t2, t3) and the leg ``frame`` (o_x, o_y, o_z, m_x, m_y, m_z) of :func:`_geometry`;
+    ``ok`` False where the five-bar cannot close or is singular (the values are then meaningless)."""
+    closes, x_d, y_prime, links, _, _ = _closure_point(t1, t2, a1, a2, a3, a4, c)
+    regular, j11, j12, j21, j22 = _five_bar_rates_core(links, a1, a2)
+    c3, s3 = math.cos(t3), math.sin(t3)
+    _, py, pz = _leg_point(x_d, y_prime, c3, s3, l_y, l_z)
+    return closes and regular, _jacobian_entries(j11, j12, j21, j22, c3, s3, py, pz, frame[3], frame[4], frame[5])
+
+
 def foot_jacobian(q: ArrayLike, leg: int, params: RobotParams) -> np.ndarray:
     """Translational leg Jacobian J_P,i^B = d r_e,i^B / d(theta1, theta2, theta3), eq. (J_leg), 3x3.
 
@@ -567,9 +591,7 @@ def foot_jacobian(q: ArrayLike, leg: int, params: RobotParams) -> np.ndarray:
     j11, j12, j21, j22 = _five_bar_rates(t1, t2, links, fb.a1, fb.a2)
     c3, s3 = math.cos(t3), math.sin(t3)
     _, py, pz = _leg_point(x_d, y_prime, c3, s3, params.l_y, params.l_z)
-    columns = [_leg_rate(j11, j12, j21, j22, c3, s3, py, pz, d1, d2, d3)
-               for d1, d2, d3 in ((1.0, 0.0, 0.0), (0.0, 1.0, 0.0), (0.0, 0.0, 1.0))]
-    return np.array(MIRROR_DIAG[leg])[:, None] * np.array(columns).T
+    return np.array(_jacobian_entries(j11, j12, j21, j22, c3, s3, py, pz, *MIRROR_DIAG[leg])).reshape(3, 3)
 
 
 def floating_base_jacobian(q: ArrayLike, leg: int, R: ArrayLike, params: RobotParams) -> np.ndarray:

@@ -41,6 +41,7 @@ __all__ = [
     "ServoModel",
     "ServoParams",
     "load_servo_params",
+    "loaded_speed",
     "rate_limited_lag_step",
     "servo_batch_step",
     "make_servo_model",
@@ -58,10 +59,13 @@ def _joints(value: ArrayLike, name: str) -> np.ndarray:
 
 @dataclass(frozen=True)
 class ServoParams:
-    """Parameters of :class:`RateLimitedServo`: ``max_speed`` w_max (rad/s), ``time_constant`` T (s)."""
+    """Parameters of :class:`RateLimitedServo`: ``max_speed`` w_max (rad/s), ``time_constant`` T (s) and
+    ``stall_torque`` tau_stall (N m) of the loaded-servo speed :func:`loaded_speed` (0: the speed does not
+    depend on the load)."""
 
     max_speed: float
     time_constant: float
+    stall_torque: float = 0.0
 
     def __post_init__(self) -> None:
         if not (math.isfinite(self.max_speed) and self.max_speed > 0.0):
@@ -69,6 +73,9 @@ class ServoParams:
         if not (math.isfinite(self.time_constant) and self.time_constant >= 0.0):
             raise ParameterError("servo time_constant must be a finite number >= 0 s, got %r"
                                  % (self.time_constant,))
+        if not (math.isfinite(self.stall_torque) and self.stall_torque >= 0.0):
+            raise ParameterError("servo stall_torque must be a finite number >= 0 N m (0: off), got %r"
+                                 % (self.stall_torque,))
 
 
 class ServoModel:
@@ -129,7 +136,10 @@ class RateLimitedServo(ServoModel):
     """First-order lag with a speed limit, dq/dt = clip((q_cmd - q) / T, -w_max, w_max), exact per step.
 
     With the command held over the step and error e = q_cmd - q, the joint moves at w_max while
-    |e| > w_max T, then decays as exp(-t / T). T = 0 is a pure rate limiter.
+    |e| > w_max T, then decays as exp(-t / T). T = 0 is a pure rate limiter. With a ``stall_torque``
+    (:class:`ServoParams`) and the plant's joint ``loads`` (set by the simulator after each plant step,
+    :attr:`~quadruped_control.sim.plants.tank.TankModel.joint_loads`) the speed limit of each joint is
+    its loaded speed, :func:`loaded_speed`.
     """
 
     name = "rate-limited"
@@ -137,11 +147,38 @@ class RateLimitedServo(ServoModel):
     def __init__(self, params: ServoParams) -> None:
         super().__init__()
         self.params = params
+        #: the external torque on each joint (4 x 3 floats, N m) at the last plant step, or None
+        self.loads: Optional[Sequence[Sequence[float]]] = None
+
+    def reset(self, q: ArrayLike) -> None:
+        super().reset(q)
+        self.loads = None
 
     def _advance(self, q: np.ndarray, command: np.ndarray, dt: float) -> np.ndarray:
-        w_max, tau = self.params.max_speed, self.params.time_constant
-        return np.array([rate_limited_lag_step(x, c, w_max, tau, dt)
-                         for x, c in zip(q.ravel().tolist(), command.ravel().tolist())]).reshape(q.shape)
+        w_max, tau, stall = self.params.max_speed, self.params.time_constant, self.params.stall_torque
+        if stall <= 0.0 or self.loads is None:
+            return np.array([rate_limited_lag_step(x, c, w_max, tau, dt)
+                             for x, c in zip(q.ravel().tolist(), command.ravel().tolist())]).reshape(q.shape)
+        loads = [value for row in self.loads for value in row]
+        return np.array([rate_limited_lag_step(x, c, loaded_speed(w_max, c - x, load, stall), tau, dt)
+                         for x, c, load in zip(q.ravel().tolist(), command.ravel().tolist(), loads)]).reshape(q.shape)
+
+
+@jitable
+def loaded_speed(max_speed: float, error: float, load: float, stall_torque: float) -> float:
+    """The speed limit of a servo that moves a joint towards ``error`` = q_cmd - q against the external
+    torque ``load`` (N m, positive along the joint angle): the DC motor's torque-speed line,
+    w = w_max (1 - tau_opp / tau_stall), with tau_opp the part of the load that opposes the motion (a load
+    that helps does not speed the servo beyond its no-load speed: its gearbox and position loop hold it).
+    ``stall_torque`` <= 0: no load dependence (w_max). At or beyond the stall torque the joint stops
+    (a floor of 1e-6 w_max keeps the lag's arithmetic finite)."""
+    if stall_torque <= 0.0:
+        return max_speed
+    opposing = -load if error > 0.0 else (load if error < 0.0 else 0.0)
+    if opposing <= 0.0:
+        return max_speed
+    fraction = 1.0 - opposing / stall_torque
+    return max_speed * (fraction if fraction > 1e-6 else 1e-6)
 
 
 @jitable
@@ -179,10 +216,12 @@ def rate_limited_lag_step(q: float, command: float, max_speed: float, time_const
 
 
 @kernel
-def servo_batch_step(q, command, ideal, max_speed, time_constant, dt, out, mid, rate):
+def servo_batch_step(q, command, ideal, max_speed, time_constant, stall_torque, loads, dt, out, mid, rate):
     """Every trial's servos after ``dt`` s with ``command`` held, into ``out`` (N, 4, 3): the command itself
     for an ``ideal`` trial, else :func:`rate_limited_lag_step` per joint with the trial's ``max_speed``
-    and ``time_constant`` (N,): the per-trial function in a compiled loop (:mod:`quadruped_common.jit`).
+    and ``time_constant`` (N,), the speed the :func:`loaded_speed` against the joint ``loads`` (N, 4, 3)
+    where the trial's ``stall_torque`` (N,) is positive: the per-trial functions in a compiled loop
+    (:mod:`quadruped_common.jit`).
     Also the joints as the plant holds them over the step
     (:class:`~quadruped_control.sim.simulation.PlantSimulator`), into ``mid`` (q + out) / 2 and ``rate``
     (out - q) / dt, in the same loop (``out``, ``mid``, ``rate`` must not alias ``q``)."""
@@ -193,7 +232,10 @@ def servo_batch_step(q, command, ideal, max_speed, time_constant, dt, out, mid, 
                 if ideal[i]:
                     end = command[i, leg, joint]
                 else:
-                    end = rate_limited_lag_step(start, command[i, leg, joint], max_speed[i], time_constant[i], dt)
+                    target = command[i, leg, joint]
+                    speed = max_speed[i] if stall_torque[i] <= 0.0 else \
+                        loaded_speed(max_speed[i], target - start, loads[i, leg, joint], stall_torque[i])
+                    end = rate_limited_lag_step(start, target, speed, time_constant[i], dt)
                 out[i, leg, joint] = end
                 mid[i, leg, joint] = 0.5 * (start + end)
                 rate[i, leg, joint] = (end - start) / dt

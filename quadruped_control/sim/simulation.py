@@ -40,7 +40,8 @@ from quadruped_control.control.controller_config import ControllerConfig
 from quadruped_control.model.kinematics import UnreachableError, joint_angles
 from quadruped_control.model.params import RobotParams
 from quadruped_control.sim.plants.paper import FloatingBaseModel, RigidBodyState
-from quadruped_control.sim.servo_model import IdealServo, ServoModel, ServoParams, make_servo_model, servo_params_from_dict
+from quadruped_control.sim.servo_model import (IdealServo, RateLimitedServo, ServoModel, ServoParams, make_servo_model,
+                                              servo_params_from_dict)
 
 ArrayLike = Union[Sequence[float], Sequence[Sequence[float]], np.ndarray]
 
@@ -283,6 +284,9 @@ class PlantSimulator:
             self.servo.reset(servo_before)
             raise SimulationError("plant step at t = %.3f s failed: %s" % (self.time, exc)) from None
         self.clamped_joints += count
+        loads = getattr(self.model, "joint_loads", None)
+        if loads is not None and isinstance(self.servo, RateLimitedServo):
+            self.servo.loads = loads  # what the servos work against in their next step (loaded servos)
         self._state = new_state
         self._q = q_end
         self._q_rows = end_rows

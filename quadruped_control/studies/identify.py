@@ -4,7 +4,7 @@ Parameters and their physically plausible bounds (:data:`PARAMETERS`; the reason
 docs/identification.md): the tank's uncertain estimates (centre of buoyancy, hook, net weight, rope
 length, torso added mass, servo speed, paw drag) and the candidate effects of
 :mod:`quadruped_control.sim.plants.tank` (appendage damping, linear and quadratic, roll/pitch and yaw;
-rope torsion; the paws' wake, fraction, time constant and the body's share). Every set is run on the batched simulator (:mod:`quadruped_control.sim.batch`), the 15
+rope torsion; the paws' wake, fraction, time constant and the body's share; loaded servos). Every set is run on the batched simulator (:mod:`quadruped_control.sim.batch`), the 15
 experiments of Table 1 with the experiment gains and rate-limited servos, 160 s each.
 
 Objective (lower is better), summed over the experiments with the weights of :data:`WEIGHTS`
@@ -67,6 +67,7 @@ PARAMETERS: Tuple[Tuple[str, float, float], ...] = (
     ("wake_fraction", 0.0, 0.8),           # share of the paw's velocity its near wake reaches (sphere: 0.5-0.8)
     ("wake_time_constant", 0.05, 1.0),     # s: from D/U (0.075 m at 0.3-1 m/s) to a whole stroke cycle
     ("wake_body_share", 0.0, 1.0),         # the body's motion in the wake: none (steady C_D has it) to all
+    ("servo_load_slope", 0.0, 1.0),        # 1/N m: 1 / stall torque of loaded servos, off to 1 N m (rated 3.9)
 )
 
 #: Weights of the objective's terms (module docstring).
@@ -98,7 +99,15 @@ def tank_overrides(values: Dict[str, float]) -> Tuple[Tuple[str, Any], ...]:
     for name in ("wake_fraction", "wake_time_constant", "wake_body_share"):
         if name in values:
             out.append(("paw_" + name, float(values[name])))
+    if "servo_load_slope" in values:
+        out.append(("servo_stall_torque", stall_torque_of(values["servo_load_slope"])))
     return tuple(out)
+
+
+def stall_torque_of(slope: float) -> float:
+    """The loaded servos' stall torque (N m) of the parameter ``servo_load_slope`` = 1 / tau_stall (1/N m),
+    0 (off) for a zero slope: fitted as the slope so that "off" is inside its bounds."""
+    return 1.0 / float(slope) if slope > 0.0 else 0.0
 
 
 def nominal_values(tank: TankParams) -> Dict[str, float]:
@@ -111,7 +120,8 @@ def nominal_values(tank: TankParams) -> Dict[str, float]:
            "appendage_quadratic_z": tank.appendage_damping_quadratic[2],
            "torsion_stiffness": tank.rope_torsion_stiffness, "torsion_damping": tank.rope_torsion_damping,
            "wake_fraction": tank.paw_wake_fraction, "wake_time_constant": tank.paw_wake_time_constant,
-           "wake_body_share": tank.paw_wake_body_share}
+           "wake_body_share": tank.paw_wake_body_share,
+           "servo_load_slope": 1.0 / tank.servo_stall_torque if tank.servo_stall_torque > 0.0 else 0.0}
     return {name: float(min(high, max(low, raw[name]))) for name, low, high in PARAMETERS}
 
 
@@ -178,6 +188,7 @@ _YAML_KEYS = {
     "wake_fraction": ("paw_wake", "fraction", "%.3f"),
     "wake_time_constant": ("paw_wake", "time_constant", "%.3f"),
     "wake_body_share": ("paw_wake", "body_share", "%.3f"),
+    "servo_load_slope": ("servos", "stall_torque", "%.3f"),  # written as the stall torque, 1 / slope
 }
 #: appendage damping: one line per kind, (xy, xy, z)
 _APPENDAGE_KEYS = {"linear": ("appendage_linear_xy", "appendage_linear_z"),
@@ -198,7 +209,8 @@ def update_tank_yaml(text: str, values: Dict[str, float], note: str) -> str:
         indent = line[:len(line) - len(line.lstrip())]
         for name, (sec, key, fmt) in _YAML_KEYS.items():
             if name in values and sec == section and stripped.startswith(key + ":"):
-                lines[i] = "%s%s: %s  # [identified] %s" % (indent, key, fmt % values[name], note)
+                value = stall_torque_of(values[name]) if name == "servo_load_slope" else values[name]
+                lines[i] = "%s%s: %s  # [identified] %s" % (indent, key, fmt % value, note)
                 done.add(name)
         for kind, (xy, z) in _APPENDAGE_KEYS.items():
             if section == "appendage_damping" and stripped.startswith(kind + ":") and (xy in values or z in values):

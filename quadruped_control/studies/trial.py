@@ -129,7 +129,8 @@ def trial_setup(spec: TrialSpec) -> TrialSetup:
         if spec.tank_overrides:
             tank = tank.with_values(**{k: (tuple(v) if isinstance(v, list) else v) for k, v in spec.tank_overrides})
         model = make_plant(spec.plant, robot, tank)
-        servo_params = dataclasses.replace(servo_params, max_speed=servo_params.max_speed * tank.servo_speed_scale)
+        servo_params = dataclasses.replace(servo_params, max_speed=servo_params.max_speed * tank.servo_speed_scale,
+                                           stall_torque=tank.servo_stall_torque)
     return TrialSetup(robot=robot, config=config, servo_params=servo_params, model=model)
 
 

@@ -51,6 +51,14 @@ Candidate effects of the identification against Table 1, each zero (today's mode
   kappa = 0 is today's quasi-steady drag. The wake is integrated once per step with the legs and the body
   velocity of the step's start held (exact for the linear relaxation), and held through the step's RK4
   stages: tau_w >= 0.05 s against the 10 ms step.
+- ``loaded servos`` (``servo_stall_torque``, :func:`paw_joint_loads`,
+  :func:`~quadruped_control.sim.servo_model.loaded_speed`): a servo's DC motor slows along its
+  torque-speed line, w = w_max (1 - tau_opp / tau_stall), against the part tau_opp of its joint's load
+  that opposes the motion. The load is the paw's drag seen at the joint, tau = J_P,i^T F_i (virtual
+  work), computed at each step's start and used by the servos' next step (10 ms later). The power
+  stroke, which pushes the water, is slowed more than the recovery, which the drag opposes less. The
+  rated stall torque is 3.9 N m (the paper, section "Robot Design"); 0 (the default) leaves the rate
+  limit alone. Motor torque-speed line: e.g. Hughes and Drury, "Electric Motors and Drives" (2019), ch. 3.
 
 Each effect has a switch (:class:`TankParams`); with all four off the equations reduce to the paper's
 eq. (trans), (rot) (tested). Parameters: ``config/tank.yaml``.
@@ -67,15 +75,15 @@ import numpy as np
 
 from quadruped_common.config import ParameterError, boolean, check_keys, load_config, number, vector
 from quadruped_control.model import hydrodynamics
-from quadruped_control.model.kinematics import leg_kinematics_flat
+from quadruped_control.model.kinematics import _geometry, leg_kinematics_flat
 from quadruped_control.model.params import RobotParams
 from quadruped_control.sim.plants.added_mass import ellipsoid_added_mass, point_mass_matrix, sphere_added_mass
 from quadruped_control.sim.plants.paper import FloatingBaseModel
 from quadruped_control.sim.plants.rigid_body import (Mat3, RigidBodyState, StepContext, as_mat3, chart_step_end,
                                                      check_dt, diverged, joint_array)
 from quadruped_control.sim.plants.tank_dynamics import (TankConstants, appendage_damping_torque, leg_sums, mass_solver,
-                                                        paw_wake_update, rope_force, rope_torsion_torque, rope_twist,
-                                                        tank_forces, tank_rk4)
+                                                        paw_joint_loads, paw_wake_update, rope_force, rope_torsion_torque,
+                                                        rope_twist, tank_forces, tank_rk4)
 
 __all__ = ["TankModel", "TankParams", "appendage_damping_torque", "hydrostatic_wrench", "load_tank_params",
            "rope_force", "rope_torsion_torque", "rope_twist", "torso_ellipsoid"]
@@ -105,6 +113,9 @@ class TankParams:
     paw_drag_scale: float = 1.0
     #: servo speed relative to robot.yaml's no-load speed (loaded servos in water are slower)
     servo_speed_scale: float = 1.0
+    #: loaded servos: stall torque tau_stall (N m) of the servos' torque-speed line; 0: the speed does not
+    #: depend on the load (:func:`~quadruped_control.sim.servo_model.loaded_speed`)
+    servo_stall_torque: float = 0.0
     #: rotational damping of appendages per body axis: linear (N m s/rad), quadratic (N m s^2/rad^2)
     appendage_damping_linear: Vec3 = (0.0, 0.0, 0.0)
     appendage_damping_quadratic: Vec3 = (0.0, 0.0, 0.0)
@@ -128,6 +139,9 @@ class TankParams:
             value = getattr(self, name)
             if not (math.isfinite(value) and value >= 0.0):
                 raise ParameterError("tank %s must be finite and >= 0, got %r" % (name, value))
+        if not (math.isfinite(self.servo_stall_torque) and self.servo_stall_torque >= 0.0):
+            raise ParameterError("tank servo_stall_torque must be finite and >= 0 (0: off), got %r"
+                                 % (self.servo_stall_torque,))
         if not (math.isfinite(self.servo_speed_scale) and 0.0 < self.servo_speed_scale <= 1.0):
             raise ParameterError("tank servo_speed_scale must be in (0, 1], got %r" % (self.servo_speed_scale,))
         if not (math.isfinite(self.paw_wake_fraction) and 0.0 <= self.paw_wake_fraction < 1.0):
@@ -176,7 +190,7 @@ def tank_params_from_dict(data: Mapping[str, Any]) -> TankParams:
                        required=("net_weight", "center_of_buoyancy"))
     added = check_keys(data["added_mass"], "added_mass", ("scale", "paw_scale"), required=("scale", "paw_scale"))
     paw_drag = check_keys(_optional_section(data, "paw_drag"), "paw_drag", ("scale",))
-    servos = check_keys(_optional_section(data, "servos"), "servos", ("speed_scale",))
+    servos = check_keys(_optional_section(data, "servos"), "servos", ("speed_scale", "stall_torque"))
     appendage = check_keys(_optional_section(data, "appendage_damping"), "appendage_damping", ("linear", "quadratic"))
     wake = check_keys(_optional_section(data, "paw_wake"), "paw_wake", ("fraction", "time_constant", "body_share"))
 
@@ -202,6 +216,7 @@ def tank_params_from_dict(data: Mapping[str, Any]) -> TankParams:
         paw_added_mass_scale=number(added["paw_scale"], "added_mass.paw_scale", 0.0, 10.0),
         paw_drag_scale=number(paw_drag.get("scale", 1.0), "paw_drag.scale", 0.0, 10.0),
         servo_speed_scale=number(servos.get("speed_scale", 1.0), "servos.speed_scale", 0.0, 10.0, low_open=True),
+        servo_stall_torque=number(servos.get("stall_torque", 0.0), "servos.stall_torque", 0.0, 100.0),
         appendage_damping_linear=axes(appendage, "linear", 100.0),
         appendage_damping_quadratic=axes(appendage, "quadratic", 100.0),
         rope_torsion_stiffness=number(rope.get("torsion_stiffness", 0.0), "suspension.torsion_stiffness", 0.0, 1e4),
@@ -292,6 +307,13 @@ class TankModel(FloatingBaseModel):
         #: beside the rigid body's, zero at :meth:`attach`.
         self.wake = np.zeros((4, 3))
         self._drag_feet = np.zeros((4, 6))
+        #: The torque each joint felt from its paw's drag at the last step's start (4 x 3, N m;
+        #: :func:`~.tank_dynamics.paw_joint_loads`) when the loaded-servo effect is on, else None; the
+        #: simulator hands it to the servo model for its next step.
+        self.joint_loads: Optional[np.ndarray] = None
+        geometry = _geometry(params)
+        self._frames = np.array(geometry[1], dtype=float)
+        self._five_bar = tuple(float(x) for x in geometry[2:9])
         if np.any(self.body_mass_matrix[:3, :3] != np.diag(np.diag(self.body_mass_matrix[:3, :3]))) \
                 or np.any(self.body_mass_matrix[:3, 3:] != 0.0):
             raise ValueError("the torso's translational mass block must be diagonal and uncoupled (mass matrix "
@@ -307,6 +329,7 @@ class TankModel(FloatingBaseModel):
 
     def attach(self, state: RigidBodyState) -> None:
         """Place the anchor straight above the hook of ``state``, the rope stretched by its static load."""
+        self.joint_loads = None
         hook = state.position + state.rotation @ self.hook
         stretch = self.static_rope_tension() / self.tank.rope_stiffness
         self.anchor = hook + np.array([0.0, 0.0, self.tank.rope_length + stretch])
@@ -385,11 +408,26 @@ class TankModel(FloatingBaseModel):
         context.mass_solver = self._mass_solver(context.leg_sums[0], context.leg_sums[2])
         return context
 
-    def _rk4_tank(self, state: RigidBodyState, dt: float, context: "_TankContext") -> RigidBodyState:
+    def _update_joint_loads(self, state: RigidBodyState, drag_feet: Sequence[Sequence[float]], q: Any) -> None:
+        """:attr:`joint_loads` at the state at a step's start, the legs at ``q`` (the held joints), the paws
+        seen through the rows ``drag_feet`` that the step's drag sees."""
+        r0, r1, r2, r3, r4, r5, r6, r7, r8 = state.rotation.ravel().tolist()
+        vx, vy, vz = state.velocity.tolist()
+        wx, wy, wz = state.omega.tolist()
+        loads = np.zeros((4, 3))
+        paw_joint_loads(np.asarray(q, dtype=float), self._frames, self._five_bar,
+                        np.asarray(drag_feet, dtype=float), self._constants[0],
+                        r0 * vx + r3 * vy + r6 * vz, r1 * vx + r4 * vy + r7 * vz, r2 * vx + r5 * vy + r8 * vz,
+                        wx, wy, wz, loads)
+        self.joint_loads = loads
+
+    def _rk4_tank(self, state: RigidBodyState, dt: float, context: "_TankContext", q: Any = None) -> RigidBodyState:
         R0 = tuple(state.rotation.ravel().tolist())
         y0 = tuple(state.position.tolist() + state.velocity.tolist() + [0.0, 0.0, 0.0] + state.omega.tolist())
         try:
             drag_feet = self._advance_wake(state, dt, context)
+            if self.tank.servo_stall_torque > 0.0 and q is not None:
+                self._update_joint_loads(state, drag_feet, q)
             y = tank_rk4(self._constants, context.feet, drag_feet, context.lift, context.up_torque, context.leg_sums,
                          context.mass_solver, R0, y0, dt)
         except (ValueError, OverflowError) as exc:  # math.sin(inf) etc. once the state has blown up
@@ -399,11 +437,12 @@ class TankModel(FloatingBaseModel):
     def step(self, state: RigidBodyState, q: Any, q_dot: Any, dt: float) -> RigidBodyState:
         dt = check_dt(dt)
         state = state.validate()
-        context = self._step_context(joint_array(q, "q"), joint_array(q_dot, "q_dot"))
-        return self._rk4_tank(state, dt, context)
+        q = joint_array(q, "q")
+        context = self._step_context(q, joint_array(q_dot, "q_dot"))
+        return self._rk4_tank(state, dt, context, q)
 
     def step_trusted(self, state: RigidBodyState, q: Any, q_dot: Any, dt: float) -> RigidBodyState:
-        return self._rk4_tank(state, dt, self._step_context(q, q_dot))
+        return self._rk4_tank(state, dt, self._step_context(q, q_dot), q)
 
     # ---- energy ------------------------------------------------------------------------------
 

@@ -24,7 +24,7 @@ from quadruped_control.model.params import RobotParams
 from quadruped_control.sim.plants.paper_batch import held_step_inputs, leg_geometry, store_step_end
 from quadruped_control.sim.plants.rigid_body import RigidBodyState
 from quadruped_control.sim.plants.tank import TankModel, TankParams
-from quadruped_control.sim.plants.tank_dynamics import leg_sums, mass_solver, paw_wake_update, tank_rk4
+from quadruped_control.sim.plants.tank_dynamics import leg_sums, mass_solver, paw_joint_loads, paw_wake_update, tank_rk4
 
 __all__ = ["TankPlantBatch", "tank_batch_step", "tank_trial_step"]
 
@@ -32,7 +32,8 @@ __all__ = ["TankPlantBatch", "tank_batch_step", "tank_trial_step"]
 @trial_step
 def tank_trial_step(i, frames, five_bar, net_paw_buoyancy, drag_constant, drag, extra_lift, suspension, hook, anchor,
                     rope, torsion, untwisted, linear, quadratic, body_m, paw_added_mass, wake_fraction,
-                    wake_time_constant, wake_body_share, restoring, wake, p, v, R, w, q, q_dot, dt, feet, drag_feet) -> bool:
+                    wake_time_constant, wake_body_share, restoring, wake, p, v, R, w, q, q_dot, dt, feet, drag_feet,
+                    stall_torque, loads) -> bool:
     """One held-input RK4 step of eq. (tank) for trial ``i`` in place (its paws' ``wake[i]`` too, with the
     body's velocity at the step's start, as :class:`~quadruped_control.sim.plants.tank.TankModel`);
     False if it failed."""
@@ -51,6 +52,11 @@ def tank_trial_step(i, frames, five_bar, net_paw_buoyancy, drag_constant, drag, 
                         R0[0] * vx + R0[3] * vy + R0[6] * vz, R0[1] * vx + R0[4] * vy + R0[7] * vz,
                         R0[2] * vx + R0[5] * vy + R0[8] * vz, w[i, 0], w[i, 1], w[i, 2], dt, drag_feet)
         rows = drag_feet
+    if stall_torque[i] > 0.0:
+        vx, vy, vz = v[i, 0], v[i, 1], v[i, 2]
+        paw_joint_loads(q[i], frames, five_bar, rows, drag_constant[i], R0[0] * vx + R0[3] * vy + R0[6] * vz,
+                        R0[1] * vx + R0[4] * vy + R0[7] * vz, R0[2] * vx + R0[5] * vy + R0[8] * vz, w[i, 0], w[i, 1],
+                        w[i, 2], loads[i])
     y0 = (p[i, 0], p[i, 1], p[i, 2], v[i, 0], v[i, 1], v[i, 2], 0.0, 0.0, 0.0, w[i, 0], w[i, 1], w[i, 2])
     y = tank_rk4(constants, feet, rows, lift, up, sums, solver, R0, y0, dt)
     return store_step_end(y, R0, i, p, v, R, w)
@@ -59,7 +65,8 @@ def tank_trial_step(i, frames, five_bar, net_paw_buoyancy, drag_constant, drag, 
 @kernel
 def tank_batch_step(frames, five_bar, net_paw_buoyancy, drag_constant, drag, extra_lift, suspension, hook, anchor,
                     rope, torsion, untwisted, linear, quadratic, body_m, paw_added_mass, wake_fraction,
-                    wake_time_constant, wake_body_share, restoring, wake, p, v, R, w, q, q_dot, dt, failed):
+                    wake_time_constant, wake_body_share, restoring, wake, p, v, R, w, q, q_dot, dt, failed,
+                    stall_torque, loads):
     """One held-input RK4 step of eq. (tank) for every trial not yet ``failed``, in place on p, v, w
     (N, 3), R (N, 3, 3) and the paws' ``wake`` (N, 4, 3). The constants are the fields of
     :data:`~.tank_dynamics.TankConstants`, one row (or value) per trial, and ``restoring`` (N, 3, 3) each
@@ -71,7 +78,7 @@ def tank_batch_step(frames, five_bar, net_paw_buoyancy, drag_constant, drag, ext
                                                  extra_lift, suspension, hook, anchor, rope, torsion, untwisted,
                                                  linear, quadratic, body_m, paw_added_mass, wake_fraction,
                                                  wake_time_constant, wake_body_share, restoring, wake, p, v, R, w, q, q_dot, dt,
-                                                 feet, drag_feet):
+                                                 feet, drag_feet, stall_torque, loads):
             failed[i] = True
 
 
@@ -90,6 +97,10 @@ class TankPlantBatch:
         self.failed = np.zeros(self.n, dtype=bool)
         #: Each trial's paws' wake velocity (N, 4, 3), body axes: TankModel.wake for N trials.
         self.wake = np.zeros((self.n, 4, 3))
+        #: Each trial's servos' stall torque (N,; 0: no loaded servos) and joint loads (N, 4, 3): TankModel's
+        #: servo_stall_torque and joint_loads for N trials, read by the batch's servo step.
+        self.stall_torque = np.array([float(tank.servo_stall_torque) for tank in tanks])
+        self.loads = np.zeros((self.n, 4, 3))
         self._load_constants()
 
     def _load_constants(self) -> None:
@@ -107,6 +118,7 @@ class TankPlantBatch:
             model.attach(RigidBodyState(np.array(position[i], dtype=float), np.zeros(3),
                                         np.array(rotation[i], dtype=float), np.zeros(3)))
         self.wake[:] = 0.0
+        self.loads[:] = 0.0
         self._load_constants()
 
     def step(self, p: np.ndarray, v: np.ndarray, R: np.ndarray, w: np.ndarray, q: np.ndarray, q_dot: np.ndarray,
@@ -118,5 +130,6 @@ class TankPlantBatch:
                         c["extra_lift"], c["suspension"], c["hook"], c["anchor"], c["rope"], c["torsion"],
                         c["untwisted"], c["linear"], c["quadratic"], c["body_m"], c["paw_added_mass"],
                         c["wake_fraction"], c["wake_time_constant"], c["wake_body_share"], self.restoring, self.wake, p, v, R, w,
-                        np.ascontiguousarray(q), np.ascontiguousarray(q_dot), float(dt), self.failed)
+                        np.ascontiguousarray(q), np.ascontiguousarray(q_dot), float(dt), self.failed,
+                        self.stall_torque, self.loads)
         return p, v, R, w

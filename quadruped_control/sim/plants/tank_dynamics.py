@@ -26,10 +26,12 @@ from typing import Any, Sequence, Tuple
 
 from quadruped_common.jit import jitable
 from quadruped_control.model.hydrodynamics import paw_velocity_f
+from quadruped_control.model.kinematics import leg_jacobian_row
 from quadruped_control.sim.plants.paper import body_wrench_f
 from quadruped_control.sim.plants.rigid_body import Mat3, chart_point
 
-__all__ = ["TankConstants", "appendage_damping_torque", "leg_sums", "mass_solver", "paw_wake_update", "rope_force",
+__all__ = ["TankConstants", "appendage_damping_torque", "leg_sums", "mass_solver", "paw_joint_loads", "paw_wake_update",
+           "rope_force",
            "rope_torsion_torque", "rope_twist", "solve_mass", "tank_chart_derivative", "tank_forces", "tank_rk4"]
 
 Vec3 = Tuple[float, float, float]
@@ -127,6 +129,33 @@ def paw_wake_update(feet: Sequence[Sequence[float]], wake: Any, fraction: float,
         drag_feet[leg, 3] = cx - wake[leg, 0]
         drag_feet[leg, 4] = cy - wake[leg, 1]
         drag_feet[leg, 5] = cz - wake[leg, 2]
+
+
+@jitable
+def paw_joint_loads(q: Any, frames: Any, five_bar: Sequence[float], drag_rows: Any, drag_constant: float, bx: float,
+                    by: float, bz: float, wx: float, wy: float, wz: float, loads: Any) -> bool:
+    """The torque each joint feels from its paw's drag, tau_j = J_P,i^B[:, j] . F_i (N m, along the joint
+    angle; J from :func:`~quadruped_control.model.kinematics.leg_jacobian_row` at the joint angles ``q``
+    (4 x 3), F_i = -k |u_i| u_i the paw drag of eq. (drag) in body axes with u_i from the rows the drag
+    sees, ``drag_rows`` (r_i, c_i or c_i - w_i), the body velocity b and rate omega), into ``loads``
+    (4 x 3 array). What a loaded servo works against
+    (:func:`~quadruped_control.sim.servo_model.loaded_speed`). False, with the loads zero, if a five-bar
+    cannot close or is singular."""
+    a1, a2, a3, a4, c, l_y, l_z = five_bar
+    for leg in range(4):
+        ok, J = leg_jacobian_row(q[leg, 0], q[leg, 1], q[leg, 2], frames[leg], a1, a2, a3, a4, c, l_y, l_z)
+        if not ok:
+            for other in range(4):
+                for k in range(3):
+                    loads[other, k] = 0.0
+            return False
+        ux, uy, uz = paw_velocity_f(drag_rows[leg, 0], drag_rows[leg, 1], drag_rows[leg, 2], drag_rows[leg, 3],
+                                    drag_rows[leg, 4], drag_rows[leg, 5], bx, by, bz, wx, wy, wz)
+        s = -drag_constant * math.sqrt(ux * ux + uy * uy + uz * uz)
+        fx, fy, fz = s * ux, s * uy, s * uz
+        for k in range(3):
+            loads[leg, k] = J[k] * fx + J[3 + k] * fy + J[6 + k] * fz
+    return True
 
 
 # --------------------------------------------------------------------------------------------------

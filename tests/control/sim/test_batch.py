@@ -3,6 +3,7 @@
 against the per-trial engine, trial by trial."""
 from __future__ import annotations
 
+import dataclasses
 import math
 
 import numpy as np
@@ -163,8 +164,9 @@ def test_tank_batch_agrees_with_the_per_trial_tank_plant_bit_for_bit_over_10_s(r
     tanks = [base,
              base.with_values(appendage_damping_linear=(0.02, 0.03, 0.01), appendage_damping_quadratic=(0.05, 0.05, 0.1)),
              base.with_values(rope_torsion_stiffness=0.05, rope_torsion_damping=0.02, paw_drag_scale=0.6,
-                              paw_wake_fraction=0.5, paw_wake_time_constant=0.2, paw_wake_body_share=0.3),
-             base.with_values(added_mass_scale=3.0, paw_added_mass_scale=2.0, net_weight=2.0),
+                              paw_wake_fraction=0.5, paw_wake_time_constant=0.2, paw_wake_body_share=0.3,
+                              servo_stall_torque=3.9),
+             base.with_values(added_mass_scale=3.0, paw_added_mass_scale=2.0, net_weight=2.0, servo_stall_torque=1.5),
              base.with_values(suspension=False, hydrostatics=False)]
     trials, sims = [], []
     for spec, tank in zip(specs, tanks):
@@ -173,10 +175,12 @@ def test_tank_batch_agrees_with_the_per_trial_tank_plant_bit_for_bit_over_10_s(r
         model = TankModel(setup.robot, tank)
         initial = rpy_to_rot(*np.radians(spec.initial_rpy_deg))
         setpoint = rpy_to_rot(*np.radians(spec.setpoint_rpy_deg))
+        # as trial_setup passes a tank's loaded servos to the servo model
+        servo_params = dataclasses.replace(setup.servo_params, stall_torque=tank.servo_stall_torque)
         trials.append(BatchTrial(config=setup.config, setpoint=setpoint, initial=initial,
-                                 servo_model=spec.servo_model, servo_params=setup.servo_params, tank=tank))
+                                 servo_model=spec.servo_model, servo_params=servo_params, tank=tank))
         sims.append(ClosedLoopSimulation(setup.robot, setup.config,
-                                         make_servo_model(spec.servo_model, setup.servo_params),
+                                         make_servo_model(spec.servo_model, servo_params),
                                          initial_R=initial, setpoint_R=setpoint, model=model))
     result = BatchSimulation(robot, trials).run(10.0, record_states=1001)
     assert not result.failed.any() and not result.refused.any()
@@ -198,9 +202,11 @@ def test_compiled_loops_compute_what_their_plain_python_computes(robot, plant, p
     from quadruped_control.sim.servo_model import load_servo_params
 
     config = load_controller_config(None, "experiment")
-    tank = load_tank_params() if plant == "tank" else None
+    # the tank with its loaded servos on (the plant computes the joint loads, the servo step reads them)
+    tank = load_tank_params().with_values(servo_stall_torque=2.0) if plant == "tank" else None
+    servo_params = dataclasses.replace(load_servo_params(), stall_torque=2.0 if plant == "tank" else 0.0)
     trials = [BatchTrial(config=config, setpoint=rpy_to_rot(*np.radians(rpy)), tank=tank, servo_model=servo,
-                         servo_params=load_servo_params())
+                         servo_params=servo_params)
               for rpy, servo in (((45.0, 0.0, 0.0), "ideal"), ((0.0, 30.0, 20.0), "rate-limited"),
                                  ((10.0, -20.0, 60.0), "rate-limited"))]
     if plain == "plant":

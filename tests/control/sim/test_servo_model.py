@@ -184,13 +184,41 @@ def test_the_batch_servo_step_is_the_exact_float_step_per_joint_compiled_or_not(
     speed = rng.uniform(1.0, 12.0, 50)
     lag = rng.choice([0.0, 1e-13, 0.01, 0.03], 50)  # pure rate limiter included
     ideal = rng.random(50) < 0.2
+    stall = np.where(rng.random(50) < 0.5, 0.0, rng.uniform(0.5, 4.0, 50))  # loaded servos on half the trials
+    loads = rng.normal(0.0, 1.0, (50, 4, 3))
+
+    def speed_of(i, leg, j):
+        return servo_model.loaded_speed(speed[i], command[i, leg, j] - q[i, leg, j], loads[i, leg, j], stall[i])
+
     expected = np.array([[[command[i, leg, j] if ideal[i] else
-                           servo_model.rate_limited_lag_step(q[i, leg, j], command[i, leg, j], speed[i], lag[i], 0.01)
+                           servo_model.rate_limited_lag_step(q[i, leg, j], command[i, leg, j], speed_of(i, leg, j),
+                                                             lag[i], 0.01)
                            for j in range(3)] for leg in range(4)] for i in range(50)])
     for step in (servo_model.servo_batch_step, servo_model.servo_batch_step.py_func):
         out, mid, rate = np.empty_like(q), np.empty_like(q), np.empty_like(q)
-        step(q, command, ideal, speed, lag, 0.01, out, mid, rate)
+        step(q, command, ideal, speed, lag, stall, loads, 0.01, out, mid, rate)
         np.testing.assert_allclose(out, expected, rtol=0, atol=1e-15)
         # the held joints of PlantSimulator, bit for bit as numpy computes them
         assert np.array_equal(mid, 0.5 * (q + out), equal_nan=True)
         assert np.array_equal(rate, (out - q) / 0.01, equal_nan=True)
+
+
+def test_a_loaded_servo_follows_its_torque_speed_line_against_the_load_and_only_against_it():
+    """w = w_max (1 - tau_opp / tau_stall): half the stall torque against the motion halves the speed, in
+    either direction; a load along the motion or no stall torque leaves w_max; at or past the stall the
+    joint stops (a floor of 1e-6 w_max)."""
+    from quadruped_control.sim.servo_model import loaded_speed
+    assert loaded_speed(10.0, 0.3, -2.0, 4.0) == 5.0     # moving up, load pushing down
+    assert loaded_speed(10.0, -0.3, 2.0, 4.0) == 5.0     # moving down, load pushing up
+    assert loaded_speed(10.0, 0.3, 2.0, 4.0) == 10.0     # the load helps: no faster than no-load
+    assert loaded_speed(10.0, 0.0, -2.0, 4.0) == 10.0    # not moving
+    assert loaded_speed(10.0, 0.3, -2.0, 0.0) == 10.0    # no stall torque: the load does not matter
+    assert loaded_speed(10.0, 0.3, -5.0, 4.0) == 10.0 * 1e-6
+    # RateLimitedServo with loads: the joints pushed against run at half speed, the others at full
+    servo = RateLimitedServo(ServoParams(max_speed=10.0, time_constant=0.0, stall_torque=4.0))
+    servo.reset(np.zeros((4, 3)))
+    servo.loads = [[-2.0, 2.0, 0.0]] * 4
+    q = servo.update(np.full((4, 3), 1.0), 0.01)
+    np.testing.assert_allclose(q, [[0.05, 0.1, 0.1]] * 4)
+    servo.reset(np.zeros((4, 3)))
+    assert servo.loads is None

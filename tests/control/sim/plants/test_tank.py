@@ -328,7 +328,8 @@ def test_controller_off_holds_the_nominal_pose() -> None:
 
 def test_empty_optional_tank_section_means_defaults_but_a_wrong_type_is_refused(tmp_path) -> None:
     text = open(config_path("tank.yaml")).read()
-    assert "  speed_scale: 1.0" in text
+    assert "  speed_scale: 1.0" in text and "  stall_torque: 0.0 " in text
+    text = "\n".join(line for line in text.splitlines() if not line.startswith("  stall_torque:"))
     path = tmp_path / "tank.yaml"
     path.write_text(text.replace("  speed_scale: 1.0", "", 1))          # 'servos:' left empty (null)
     assert load_tank_params(str(path)).servo_speed_scale == 1.0
@@ -496,3 +497,53 @@ def test_a_wake_of_the_strokes_alone_leaves_the_passive_damping_and_body_share_o
         g = np.array(paw_velocity_f(*row[:3], 0.0, 0.0, 0.0, *body))
         target = u if share == 1.0 else np.array(row[3:]) + share * g
         np.testing.assert_array_equal(wake[0], 0.4 * target + (0.0 - 0.4 * target) * math.exp(-0.01 / 0.2))
+
+
+def test_paw_joint_loads_are_the_jacobian_transpose_of_the_paw_drag_and_drag_takes_power_from_the_stroke() -> None:
+    """tau_j = J_P,i^B[:, j] . F_i with J of foot_jacobian and F_i = -k |u_i| u_i; with the body at rest
+    a stroke's paw drag does negative work on its joints: tau . q_dot = F . J q_dot = -k |c|^3 < 0."""
+    from quadruped_control.model.kinematics import _geometry, foot_jacobian, leg_kinematics_flat
+    from quadruped_control.sim.plants.tank_dynamics import paw_joint_loads
+    q = np.array(nominal_joint_angles(ROBOT)) + 0.05
+    q_dot = np.array([[1.5, -2.0, 0.7]] * 4)
+    rows = np.array(leg_kinematics_flat(q.tolist(), q_dot.tolist(), ROBOT)).reshape(4, 6)
+    geometry = _geometry(ROBOT)
+    k, body = 1.4, (0.02, -0.01, 0.03, 0.2, -0.1, 0.3)
+    loads = np.zeros((4, 3))
+    assert paw_joint_loads(q, np.array(geometry[1]), tuple(geometry[2:9]), rows, k, *body, loads)
+    for leg in range(4):
+        J = foot_jacobian(q[leg], leg + 1, ROBOT)
+        r, c = rows[leg, :3], rows[leg, 3:]
+        u = np.array(body[:3]) + np.cross(body[3:], r) + c
+        np.testing.assert_allclose(loads[leg], J.T @ (-k * np.linalg.norm(u) * u), rtol=1e-12, atol=1e-15)
+    still = np.zeros((4, 3))
+    paw_joint_loads(q, np.array(geometry[1]), tuple(geometry[2:9]), rows, k, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, still)
+    for leg in range(4):
+        c = rows[leg, 3:]
+        assert float(still[leg] @ q_dot[leg]) == pytest.approx(-k * np.linalg.norm(c) ** 3, rel=1e-12)
+
+
+def test_loaded_servos_slow_the_strokes_and_no_stall_torque_is_todays_model() -> None:
+    """A tank trial with the experiment gains: stall torque 0 gives today's trajectory bit for bit (the
+    loads are not even computed); a stall torque slows the joints (their mean speed drops) and changes the
+    trajectory; the servo model receives the plant's loads."""
+    from quadruped_control.sim.servo_model import RateLimitedServo, load_servo_params
+    config = load_controller_config(None, "experiment")
+
+    def run(stall):
+        tank = load_tank_params().with_values(servo_stall_torque=stall)
+        servo = RateLimitedServo(dataclasses.replace(load_servo_params(), stall_torque=stall))
+        sim = ClosedLoopSimulation(ROBOT, config, servo, initial_R=np.eye(3), setpoint_R=rpy_to_rot(0.5, 0.0, 0.0),
+                                   model=TankModel(ROBOT, tank))
+        result = sim.run(6.0)
+        return result, servo, sim.plant.model.joint_loads
+
+    plain, plain_servo, plain_loads = run(0.0)
+    again, _, _ = run(0.0)
+    np.testing.assert_array_equal(plain.rpy, again.rpy)
+    assert plain_loads is None and plain_servo.loads is None
+    loaded, loaded_servo, loads = run(1.0)
+    assert loads is not None and loaded_servo.loads is loads and np.abs(loads).max() > 0.0
+    speed = lambda result: np.abs(np.diff(result.joint_positions, axis=0)).mean()  # noqa: E731
+    assert speed(loaded) < speed(plain)
+    assert not np.array_equal(plain.rpy, loaded.rpy)
