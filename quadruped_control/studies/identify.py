@@ -4,7 +4,7 @@ Parameters and their physically plausible bounds (:data:`PARAMETERS`; the reason
 docs/identification.md): the tank's uncertain estimates (centre of buoyancy, hook, net weight, rope
 length, torso added mass, servo speed, paw drag) and the candidate effects of
 :mod:`quadruped_control.sim.plants.tank` (appendage damping, linear and quadratic, roll/pitch and yaw;
-rope torsion; the paws' wake, fraction, time constant and the body's share; loaded servos). Every set is run on the batched simulator (:mod:`quadruped_control.sim.batch`), the 15
+rope torsion; the paws' wake, fraction, time constant and the body's share; loaded servos; the servos' lag). Every set is run on the batched simulator (:mod:`quadruped_control.sim.batch`), the 15
 experiments of Table 1 with the experiment gains and rate-limited servos, 160 s each.
 
 Objective (lower is better), summed over the experiments with the weights of :data:`WEIGHTS`
@@ -57,6 +57,7 @@ PARAMETERS: Tuple[Tuple[str, float, float], ...] = (
     ("rope_length", 0.2, 1.0),             # m: robot fully under water below the floating block
     ("added_mass_scale", 0.5, 2.0),        # open frame: half to twice the 4.9 L ellipsoid
     ("servo_speed_scale", 0.5, 1.0),       # loaded in water: half to full no-load speed
+    ("servo_lag_scale", 1.0, 8.0),         # the position loop's T (30 ms) in water: as estimated to 0.24 s
     ("paw_drag_scale", 0.6, 1.6),          # C_D 0.38..1.0 around the paper's CFD 0.64
     ("appendage_linear_xy", 0.0, 0.2),     # N m s/rad: skin friction of legs and housings, roll/pitch
     ("appendage_linear_z", 0.0, 0.2),      # N m s/rad: the same about yaw
@@ -81,7 +82,7 @@ GROUPS = ("roll", "pitch", "roll+pitch")
 def tank_overrides(values: Dict[str, float]) -> Tuple[Tuple[str, Any], ...]:
     """TankParams overrides of a (possibly partial) parameter set."""
     out: List[Tuple[str, Any]] = []
-    simple = ("net_weight", "rope_length", "added_mass_scale", "servo_speed_scale", "paw_drag_scale")
+    simple = ("net_weight", "rope_length", "added_mass_scale", "servo_speed_scale", "servo_lag_scale", "paw_drag_scale")
     for name in simple:
         if name in values:
             out.append((name, float(values[name])))
@@ -114,7 +115,8 @@ def nominal_values(tank: TankParams) -> Dict[str, float]:
     """The parameters' values in ``tank`` (config/tank.yaml), clipped into their bounds."""
     raw = {"cob_z": tank.center_of_buoyancy[2], "hook_z": tank.hook[2], "net_weight": tank.net_weight,
            "rope_length": tank.rope_length, "added_mass_scale": tank.added_mass_scale,
-           "servo_speed_scale": tank.servo_speed_scale, "paw_drag_scale": tank.paw_drag_scale,
+           "servo_speed_scale": tank.servo_speed_scale, "servo_lag_scale": tank.servo_lag_scale,
+           "paw_drag_scale": tank.paw_drag_scale,
            "appendage_linear_xy": tank.appendage_damping_linear[0], "appendage_linear_z": tank.appendage_damping_linear[2],
            "appendage_quadratic_xy": tank.appendage_damping_quadratic[0],
            "appendage_quadratic_z": tank.appendage_damping_quadratic[2],
@@ -182,6 +184,7 @@ _YAML_KEYS = {
     "rope_length": ("suspension", "length", "%.3f"),
     "added_mass_scale": ("added_mass", "scale", "%.3f"),
     "servo_speed_scale": ("servos", "speed_scale", "%.3f"),
+    "servo_lag_scale": ("servos", "lag_scale", "%.3f"),
     "paw_drag_scale": ("paw_drag", "scale", "%.3f"),
     "torsion_stiffness": ("suspension", "torsion_stiffness", "%.4f"),
     "torsion_damping": ("suspension", "torsion_damping", "%.4f"),

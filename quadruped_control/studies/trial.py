@@ -130,6 +130,7 @@ def trial_setup(spec: TrialSpec) -> TrialSetup:
             tank = tank.with_values(**{k: (tuple(v) if isinstance(v, list) else v) for k, v in spec.tank_overrides})
         model = make_plant(spec.plant, robot, tank)
         servo_params = dataclasses.replace(servo_params, max_speed=servo_params.max_speed * tank.servo_speed_scale,
+                                           time_constant=servo_params.time_constant * tank.servo_lag_scale,
                                            stall_torque=tank.servo_stall_torque)
     return TrialSetup(robot=robot, config=config, servo_params=servo_params, model=model)
 

@@ -113,6 +113,8 @@ class TankParams:
     paw_drag_scale: float = 1.0
     #: servo speed relative to robot.yaml's no-load speed (loaded servos in water are slower)
     servo_speed_scale: float = 1.0
+    #: servo bandwidth: factor on the position loop's time constant T of config/simulation.yaml (1: as there)
+    servo_lag_scale: float = 1.0
     #: loaded servos: stall torque tau_stall (N m) of the servos' torque-speed line; 0: the speed does not
     #: depend on the load (:func:`~quadruped_control.sim.servo_model.loaded_speed`)
     servo_stall_torque: float = 0.0
@@ -142,6 +144,8 @@ class TankParams:
         if not (math.isfinite(self.servo_stall_torque) and self.servo_stall_torque >= 0.0):
             raise ParameterError("tank servo_stall_torque must be finite and >= 0 (0: off), got %r"
                                  % (self.servo_stall_torque,))
+        if not (math.isfinite(self.servo_lag_scale) and self.servo_lag_scale > 0.0):
+            raise ParameterError("tank servo_lag_scale must be finite and > 0, got %r" % (self.servo_lag_scale,))
         if not (math.isfinite(self.servo_speed_scale) and 0.0 < self.servo_speed_scale <= 1.0):
             raise ParameterError("tank servo_speed_scale must be in (0, 1], got %r" % (self.servo_speed_scale,))
         if not (math.isfinite(self.paw_wake_fraction) and 0.0 <= self.paw_wake_fraction < 1.0):
@@ -190,7 +194,7 @@ def tank_params_from_dict(data: Mapping[str, Any]) -> TankParams:
                        required=("net_weight", "center_of_buoyancy"))
     added = check_keys(data["added_mass"], "added_mass", ("scale", "paw_scale"), required=("scale", "paw_scale"))
     paw_drag = check_keys(_optional_section(data, "paw_drag"), "paw_drag", ("scale",))
-    servos = check_keys(_optional_section(data, "servos"), "servos", ("speed_scale", "stall_torque"))
+    servos = check_keys(_optional_section(data, "servos"), "servos", ("speed_scale", "lag_scale", "stall_torque"))
     appendage = check_keys(_optional_section(data, "appendage_damping"), "appendage_damping", ("linear", "quadratic"))
     wake = check_keys(_optional_section(data, "paw_wake"), "paw_wake", ("fraction", "time_constant", "body_share"))
 
@@ -217,6 +221,7 @@ def tank_params_from_dict(data: Mapping[str, Any]) -> TankParams:
         paw_drag_scale=number(paw_drag.get("scale", 1.0), "paw_drag.scale", 0.0, 10.0),
         servo_speed_scale=number(servos.get("speed_scale", 1.0), "servos.speed_scale", 0.0, 10.0, low_open=True),
         servo_stall_torque=number(servos.get("stall_torque", 0.0), "servos.stall_torque", 0.0, 100.0),
+        servo_lag_scale=number(servos.get("lag_scale", 1.0), "servos.lag_scale", 0.0, 100.0, low_open=True),
         appendage_damping_linear=axes(appendage, "linear", 100.0),
         appendage_damping_quadratic=axes(appendage, "quadratic", 100.0),
         rope_torsion_stiffness=number(rope.get("torsion_stiffness", 0.0), "suspension.torsion_stiffness", 0.0, 1e4),

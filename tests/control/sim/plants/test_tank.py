@@ -329,7 +329,7 @@ def test_controller_off_holds_the_nominal_pose() -> None:
 def test_empty_optional_tank_section_means_defaults_but_a_wrong_type_is_refused(tmp_path) -> None:
     text = open(config_path("tank.yaml")).read()
     assert "  speed_scale: 1.0" in text and "  stall_torque: 0.0 " in text
-    text = "\n".join(line for line in text.splitlines() if not line.startswith("  stall_torque:"))
+    text = "\n".join(line for line in text.splitlines() if not line.startswith(("  stall_torque:", "  lag_scale:")))
     path = tmp_path / "tank.yaml"
     path.write_text(text.replace("  speed_scale: 1.0", "", 1))          # 'servos:' left empty (null)
     assert load_tank_params(str(path)).servo_speed_scale == 1.0
@@ -547,3 +547,18 @@ def test_loaded_servos_slow_the_strokes_and_no_stall_torque_is_todays_model() ->
     speed = lambda result: np.abs(np.diff(result.joint_positions, axis=0)).mean()  # noqa: E731
     assert speed(loaded) < speed(plain)
     assert not np.array_equal(plain.rpy, loaded.rpy)
+
+
+def test_the_tank_servos_lag_and_speed_scales_reach_the_servo_model() -> None:
+    """servos.speed_scale and servos.lag_scale of the tank scale simulation.yaml's servo (trial_setup, the
+    one place both engines take their servo parameters from); stall_torque is passed on as it is."""
+    import argparse
+    from quadruped_control.studies.paper_experiments import experiment_specs
+    from quadruped_control.studies.trial import trial_setup
+    args = argparse.Namespace(seed=0, tank_yaml=None, robot_yaml=None)
+    spec = experiment_specs(args, "tank", "experiment", "rate-limited", 10.0, keep_trace=False)[0][0]
+    plain = trial_setup(spec).servo_params
+    scaled = trial_setup(dataclasses.replace(spec, tank_overrides=(("servo_lag_scale", 4.0), ("servo_speed_scale", 0.5),
+                                                                   ("servo_stall_torque", 2.0)))).servo_params
+    assert scaled.time_constant == 4.0 * plain.time_constant and scaled.max_speed == 0.5 * plain.max_speed
+    assert scaled.stall_torque == 2.0 and plain.stall_torque == 0.0
