@@ -72,7 +72,7 @@ from quadruped_common.so3 import rot_to_quat, rpy_to_rot
 from quadruped_common.ros.diagnostics import Updater
 from quadruped_control.model.params import load_robot_params
 from quadruped_control.sim.plants import load_tank_params, make_plant
-from quadruped_control.sim.servo_model import make_servo_model
+from quadruped_control.sim.servo_model import make_servo_model, tank_servo_params
 from quadruped_control.sim.simulation import PlantSimulator, SimulationError, load_simulation_settings
 from quadruped_drivers.bus_bridge import BusBridgeServer
 from quadruped_drivers.calibration import load_servo_calibration
@@ -103,11 +103,14 @@ class SimNode:
         roll, pitch, yaw = [math.radians(v) for v in rospy.get_param("~initial_rpy_deg", [0.0, 0.0, 0.0])]
         offset = rospy.get_param("~restoring_offset", [])
         settings = load_simulation_settings(optional("~simulation_yaml"))
-        servo = make_servo_model(rospy.get_param("~servo_model", "rate-limited"), settings.servo)
         plant = str(rospy.get_param("~plant", "paper"))
         model = None
+        servo_params = settings.servo
         if plant != "paper":
-            model = make_plant(plant, self.robot, load_tank_params(optional("~tank_yaml")))
+            tank = load_tank_params(optional("~tank_yaml"))
+            model = make_plant(plant, self.robot, tank)
+            servo_params = tank_servo_params(servo_params, tank)  # the tank's servos, as the offline trials
+        servo = make_servo_model(rospy.get_param("~servo_model", "rate-limited"), servo_params)
         self.plant = PlantSimulator(self.robot, servo,
                                     initial_rotation=rpy_to_rot(roll, pitch, yaw),
                                     restoring_offset=offset if offset else None, model=model)

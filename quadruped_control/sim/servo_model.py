@@ -20,7 +20,7 @@ Joint arrays are (12,) in the :data:`~quadruped_common.robot.JOINT_NAMES` order 
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from typing import Any, Mapping, Optional, Sequence, Union
 
 import numpy as np
@@ -44,6 +44,7 @@ __all__ = [
     "loaded_speed",
     "rate_limited_lag_step",
     "servo_batch_step",
+    "tank_servo_params",
     "make_servo_model",
 ]
 
@@ -239,6 +240,15 @@ def servo_batch_step(q, command, ideal, max_speed, time_constant, stall_torque, 
                 out[i, leg, joint] = end
                 mid[i, leg, joint] = 0.5 * (start + end)
                 rate[i, leg, joint] = (end - start) / dt
+
+
+def tank_servo_params(params: ServoParams, tank: Any) -> ServoParams:
+    """The servos on the tank plant: ``params`` with the tank's ``servo_speed_scale`` and
+    ``servo_lag_scale`` applied and its loaded-servo ``servo_stall_torque``
+    (:class:`~quadruped_control.sim.plants.tank.TankParams`, the ``servos`` section of tank.yaml). The one
+    place both the offline trials and the simulated robot (sim_node) take them from."""
+    return replace(params, max_speed=params.max_speed * tank.servo_speed_scale,
+                   time_constant=params.time_constant * tank.servo_lag_scale, stall_torque=tank.servo_stall_torque)
 
 
 def servo_params_from_dict(tree: Mapping[str, Any], robot_yaml: Optional[str] = None) -> ServoParams:

@@ -21,7 +21,7 @@ from quadruped_common.so3 import rpy_to_rot
 from quadruped_control.control.controller_config import load_controller_config
 from quadruped_control.model.params import load_robot_params
 from quadruped_control.sim.plants import load_tank_params, make_plant
-from quadruped_control.sim.servo_model import load_servo_params, make_servo_model
+from quadruped_control.sim.servo_model import load_servo_params, make_servo_model, tank_servo_params
 from quadruped_control.sim.simulation import ClosedLoopSimulation, SimulationResult, load_simulation_settings
 from quadruped_control.studies.runner import run_trial_batches, run_trials
 
@@ -129,9 +129,7 @@ def trial_setup(spec: TrialSpec) -> TrialSetup:
         if spec.tank_overrides:
             tank = tank.with_values(**{k: (tuple(v) if isinstance(v, list) else v) for k, v in spec.tank_overrides})
         model = make_plant(spec.plant, robot, tank)
-        servo_params = dataclasses.replace(servo_params, max_speed=servo_params.max_speed * tank.servo_speed_scale,
-                                           time_constant=servo_params.time_constant * tank.servo_lag_scale,
-                                           stall_torque=tank.servo_stall_torque)
+        servo_params = tank_servo_params(servo_params, tank)
     return TrialSetup(robot=robot, config=config, servo_params=servo_params, model=model)
 
 
