@@ -389,15 +389,26 @@ def _bag_stamps(bag_dir: str):
     return [(min(stamps) if stamps else None, stamp_keys(stamps)) for stamps in (data.imu_t, data.state_t)]
 
 
-def _lost_before(received_imu, received_state, bag, start: float, since: float) -> Optional[int]:
+#: The publisher of each recorded topic the campaign compares, by the fault kind that kills it.
+_PUBLISHER_KILLS = ("kill_vn100_node", "kill_attitude_controller")  # /imu/data, /controller_state
+#: s: a message stamped this shortly before its publisher's SIGKILL can still be in the dying process's
+#: socket to the recorder (while its copy to the campaign got through): lost by the fault, not by the
+#: record. Stamps precede sending by the driver's and controller's latency (IMU-to-PWM p99 about 4 ms).
+IN_FLIGHT_S = 0.05
+
+
+def _lost_before(received_imu, received_state, bag, start: float, since: float, kind: str = "") -> Optional[int]:
     """Messages of /imu/data and /controller_state stamped in [since, start) that the campaign received
     and the bag lacks (matched by stamp). ``since``: 5 s before the fault, but not before the recording
     began nor before the previous fault was over (a respawned publisher reaches the recorder a little
-    after the campaign's own subscriber: that gap belongs to the fault before)."""
+    after the campaign's own subscriber: that gap belongs to the fault before). A topic whose publisher
+    this ``kind`` kills ends :data:`IN_FLIGHT_S` before the kill."""
     if bag is None:
         return None
-    return sum(lost_messages(received, keys, max(since, first), start)
-               for received, (first, keys) in zip((received_imu, received_state), bag) if first is not None)
+    ends = [start - IN_FLIGHT_S if kind == killer else start for killer in _PUBLISHER_KILLS]
+    return sum(lost_messages(received, keys, max(since, first), end)
+               for received, (first, keys), end in zip((received_imu, received_state), bag, ends)
+               if first is not None)
 
 
 def run_graph(kinds: Sequence[str], out: str, seed: int, log=print, ready_timeout: float = 120.0) -> List[dict]:
@@ -474,7 +485,7 @@ def judge_graph(out: str) -> List[dict]:
         result = judge_injection(timeline, record, min_us, max_us, hardware.actual_pwm_frequency_hz,
                                  settle_window=RECOVERY_LIMIT)
         result.lost_before = _lost_before(imu_stamps, state_stamps, bag, record.start,
-                                          since=max(record.start - 5.0, previous_end + 1.0))
+                                          since=max(record.start - 5.0, previous_end + 1.0), kind=record.kind)
         previous_end = record.end
         entry = asdict(result)
         entry.update(end=record.end, expect=record.expect, note=record.note)

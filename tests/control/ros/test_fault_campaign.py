@@ -52,3 +52,20 @@ def test_a_recorded_graph_is_judged_again_from_disk(tmp_path):
     assert results[0]["time_to_recovery"] is not None and results[0]["lost_before"] is None  # no bag here
     assert results[1] == {"kind": "error", "error": "e #0: x"}
     assert "i2c_stuck_0.1" in fc.format_table(fc.summarise(results, ["i2c_stuck_0.1"]))
+
+
+def test_a_message_in_flight_when_its_publisher_is_killed_is_the_faults_not_the_records():
+    """Stamps received by the campaign, the bag missing the last IMU sample before the fault: a loss for an
+    I2C fault, not for a kill of the VN-100 node, whose socket to the recorder died with it (within
+    IN_FLIGHT_S of the kill); an older missing sample is a loss for every kind."""
+    from quadruped_control.analysis.fault_metrics import stamp_keys
+    imu = np.arange(0.0, 10.0, 0.01)
+    state = np.arange(0.0, 10.0, 0.01)
+    start = 10.0
+    bag = [(0.0, stamp_keys(imu[:-1])), (0.0, stamp_keys(state))]  # 9.99 s missing
+    assert fc._lost_before(imu, state, bag, start, since=5.0, kind="i2c_stuck_0.1") == 1
+    assert fc._lost_before(imu, state, bag, start, since=5.0, kind="kill_vn100_node") == 0
+    assert fc._lost_before(imu, state, bag, start, since=5.0, kind="kill_attitude_controller") == 1
+    older = [(0.0, stamp_keys(np.delete(imu, 900))), (0.0, stamp_keys(state))]  # 9.00 s missing
+    assert fc._lost_before(imu, state, older, start, since=5.0, kind="kill_vn100_node") == 1
+    assert fc.IN_FLIGHT_S < 0.1  # within the 0.11 s safe-state limit, far inside the 5 s window
