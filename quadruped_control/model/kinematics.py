@@ -193,7 +193,8 @@ def _five_bar_closure(theta1: float, theta2: float, a1: float, a2: float, a3: fl
     :func:`five_bar_jacobian`, :func:`foot_position` and :func:`foot_jacobian`.
 
     Returns ``(x_d, y_prime, links)``: the foot in F_P and the cosines and sines of theta1, theta2 and of
-    the absolute angles of the passive links a4 (phi, the "+" root of eq. (fk_phi)) and a3 (psi). ``theta1``, ``theta2`` must be
+    the absolute angles of the passive links a4 (phi, the "+" root of eq. (fk_phi)) and a3 (psi).
+    ``theta1``, ``theta2`` must be
     finite (the callers check). Raises :class:`UnreachableError` if E^2 + F^2 - G^2 < 0 (the passive
     links cannot close) or if the two elbows coincide (phi undefined).
     """

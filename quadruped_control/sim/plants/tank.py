@@ -45,9 +45,10 @@ Candidate effects of the identification against Table 1, each zero (today's mode
   velocity that builds the wake, dw_i/dt = (kappa (c_i + s_b (b + omega x r_i)) - w_i) / tau_w: s_b = 0
   keeps the wake to the strokes, which reverse within a few paw diameters (the history effect), and
   leaves the slow, steady motion of the body to the steady C_D, whose measurement already contains the
-  steady wake; the passive damping then stays as it is. A first-order "entrained water" model of the history effects of unsteady drag (the Basset
-  history force of Maxey and Riley, Phys. Fluids 26 (1983); oscillating spheres at low Keulegan-Carpenter
-  numbers, Sarpkaya and Isaacson, "Mechanics of Wave Forces on Offshore Structures" (1981), ch. 3).
+  steady wake; the passive damping then stays as it is. A first-order "entrained water" model of the
+  history effects of unsteady drag (the Basset history force of Maxey and Riley, Phys. Fluids 26 (1983);
+  oscillating spheres at low Keulegan-Carpenter numbers, Sarpkaya and Isaacson, "Mechanics of Wave
+  Forces on Offshore Structures" (1981), ch. 3).
   kappa = 0 is today's quasi-steady drag. The wake is integrated once per step with the legs and the body
   velocity of the step's start held (exact for the linear relaxation), and held through the step's RK4
   stages: tau_w >= 0.05 s against the 10 ms step.
@@ -82,8 +83,8 @@ from quadruped_control.sim.plants.paper import FloatingBaseModel
 from quadruped_control.sim.plants.rigid_body import (Mat3, RigidBodyState, StepContext, as_mat3, chart_step_end,
                                                      check_dt, diverged, joint_array)
 from quadruped_control.sim.plants.tank_dynamics import (TankConstants, appendage_damping_torque, leg_sums, mass_solver,
-                                                        paw_joint_loads, paw_wake_update, rope_force, rope_torsion_torque,
-                                                        rope_twist, tank_forces, tank_rk4)
+                                                        paw_joint_loads, paw_wake_update, rope_force,
+                                                        rope_torsion_torque, rope_twist, tank_forces, tank_rk4)
 
 __all__ = ["TankModel", "TankParams", "appendage_damping_torque", "hydrostatic_wrench", "load_tank_params",
            "rope_force", "rope_torsion_torque", "rope_twist", "torso_ellipsoid"]

@@ -77,8 +77,8 @@ def tank_batch_step(frames, five_bar, net_paw_buoyancy, drag_constant, drag, ext
         if not failed[i] and not tank_trial_step(i, frames, five_bar, net_paw_buoyancy, drag_constant, drag,
                                                  extra_lift, suspension, hook, anchor, rope, torsion, untwisted,
                                                  linear, quadratic, body_m, paw_added_mass, wake_fraction,
-                                                 wake_time_constant, wake_body_share, restoring, wake, p, v, R, w, q, q_dot, dt,
-                                                 feet, drag_feet, stall_torque, loads):
+                                                 wake_time_constant, wake_body_share, restoring, wake, p, v, R, w,
+                                                 q, q_dot, dt, feet, drag_feet, stall_torque, loads):
             failed[i] = True
 
 
@@ -129,7 +129,7 @@ class TankPlantBatch:
         tank_batch_step(self.frames, self.five_bar, self.net_paw_buoyancy, c["drag_constant"], c["drag"],
                         c["extra_lift"], c["suspension"], c["hook"], c["anchor"], c["rope"], c["torsion"],
                         c["untwisted"], c["linear"], c["quadratic"], c["body_m"], c["paw_added_mass"],
-                        c["wake_fraction"], c["wake_time_constant"], c["wake_body_share"], self.restoring, self.wake, p, v, R, w,
-                        np.ascontiguousarray(q), np.ascontiguousarray(q_dot), float(dt), self.failed,
+                        c["wake_fraction"], c["wake_time_constant"], c["wake_body_share"], self.restoring, self.wake,
+                        p, v, R, w, np.ascontiguousarray(q), np.ascontiguousarray(q_dot), float(dt), self.failed,
                         self.stall_torque, self.loads)
         return p, v, R, w
