@@ -32,7 +32,7 @@ from quadruped_control.control.controller_config import load_controller_config  
 from quadruped_control.model.params import load_robot_params  # noqa: E402
 from quadruped_control.sim.batch import BatchSimulation, BatchTrial  # noqa: E402
 from quadruped_control.sim.plants import TankModel, load_tank_params  # noqa: E402
-from quadruped_control.sim.servo_model import load_servo_params, make_servo_model  # noqa: E402
+from quadruped_control.sim.servo_model import load_servo_params, make_servo_model, tank_servo_params  # noqa: E402
 from quadruped_control.sim.simulation import ClosedLoopSimulation  # noqa: E402
 from quadruped_control.studies.paper_experiments import PAPER_TABLE, initial_attitude, setpoint_rpy_deg  # noqa: E402
 
@@ -42,7 +42,7 @@ def _trials(n, plant, scheme):
     servo = load_servo_params()
     tank = load_tank_params() if plant == "tank" else None
     if tank is not None:
-        servo = dataclasses.replace(servo, max_speed=servo.max_speed * tank.servo_speed_scale)
+        servo = tank_servo_params(servo, tank)
     cases = [(setpoint_rpy_deg(row), initial_attitude(setpoint_rpy_deg(row), row["theta_init"], row["psi_init"])[0])
              for row in PAPER_TABLE]
     trials = []

@@ -52,6 +52,7 @@ __all__ = [
     "paw_buoyancy",
     "paw_buoyancy_f",
     "paw_drag_force",
+    "paw_drag_f",
     "paw_drag_force_unchecked",
     "paw_drag_wrench_f",
     "paw_velocity_f",
@@ -136,6 +137,17 @@ def paw_velocity_f(px: float, py: float, pz: float, cx: float, cy: float, cz: fl
 
 
 @jitable
+def paw_drag_f(px: float, py: float, pz: float, cx: float, cy: float, cz: float, drag_constant: float, bx: float,
+               by: float, bz: float, wx: float, wy: float, wz: float) -> Tuple[float, float, float]:
+    """eq. (drag), (force_leg) on floats, body axes: R^T F_i^W = -k |u_i| u_i for the paw's velocity
+    u_i of :func:`paw_velocity_f` (foot r_i = (px, py, pz), joint-induced velocity c_i, body velocity b,
+    rate omega); the drag is rotation invariant. The one implementation of the paw drag on floats."""
+    ux, uy, uz = paw_velocity_f(px, py, pz, cx, cy, cz, bx, by, bz, wx, wy, wz)
+    s = -drag_constant * math.sqrt(ux * ux + uy * uy + uz * uz)
+    return s * ux, s * uy, s * uz
+
+
+@jitable
 def paw_drag_wrench_f(feet: Iterable[FootRow], drag_constant: float, bx: float, by: float, bz: float,
                       wx: float, wy: float, wz: float) -> Wrench6:
     """Fast path of :func:`leg_wrench` summed over the legs, on floats: eq. (drag), (force_leg),
@@ -148,12 +160,9 @@ def paw_drag_wrench_f(feet: Iterable[FootRow], drag_constant: float, bx: float, 
     and tau_i^B = r_i x (R^T F_i^W). No input checks (the integrator's stages and the controller's
     torque estimate call it on values they built).
     """
-    sqrt = math.sqrt
     fx = fy = fz = tx = ty = tz = 0.0
     for px, py, pz, cx, cy, cz in feet:
-        ux, uy, uz = paw_velocity_f(px, py, pz, cx, cy, cz, bx, by, bz, wx, wy, wz)
-        s = -drag_constant * sqrt(ux * ux + uy * uy + uz * uz)
-        gx, gy, gz = s * ux, s * uy, s * uz                   # eq. (drag), (force_leg), body axes
+        gx, gy, gz = paw_drag_f(px, py, pz, cx, cy, cz, drag_constant, bx, by, bz, wx, wy, wz)
         fx += gx
         fy += gy
         fz += gz

@@ -234,8 +234,7 @@ def servo_batch_step(q, command, ideal, max_speed, time_constant, stall_torque, 
                     end = command[i, leg, joint]
                 else:
                     target = command[i, leg, joint]
-                    speed = max_speed[i] if stall_torque[i] <= 0.0 else \
-                        loaded_speed(max_speed[i], target - start, loads[i, leg, joint], stall_torque[i])
+                    speed = loaded_speed(max_speed[i], target - start, loads[i, leg, joint], stall_torque[i])
                     end = rate_limited_lag_step(start, target, speed, time_constant[i], dt)
                 out[i, leg, joint] = end
                 mid[i, leg, joint] = 0.5 * (start + end)

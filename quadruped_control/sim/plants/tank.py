@@ -392,18 +392,22 @@ class TankModel(FloatingBaseModel):
         feet = np.asarray(context.feet, dtype=float)
         return tuple(map(tuple, np.concatenate((feet[:, :3], feet[:, 3:] - self.wake), axis=1).tolist()))
 
-    def _advance_wake(self, state: RigidBodyState, dt: float, context: "_TankContext") -> Sequence[Sequence[float]]:
-        """:func:`~.tank_dynamics.paw_wake_update` over this step (state at its start): the drag rows."""
-        if self.tank.paw_wake_fraction <= 0.0:
-            return context.feet
+    @staticmethod
+    def _body_motion(state: RigidBodyState) -> Tuple[float, ...]:
+        """(b, omega) of ``state`` as six floats, b = R^T v in the batch's order of operations (bit for bit
+        with TankPlantBatch): what the paws' wake and the joint loads see at a step's start."""
         r0, r1, r2, r3, r4, r5, r6, r7, r8 = state.rotation.ravel().tolist()
         vx, vy, vz = state.velocity.tolist()
         wx, wy, wz = state.omega.tolist()
-        # b = R^T v in the batch's order of operations (bit for bit with TankPlantBatch)
+        return r0 * vx + r3 * vy + r6 * vz, r1 * vx + r4 * vy + r7 * vz, r2 * vx + r5 * vy + r8 * vz, wx, wy, wz
+
+    def _advance_wake(self, motion: Tuple[float, ...], dt: float, context: "_TankContext") -> Sequence[Sequence[float]]:
+        """:func:`~.tank_dynamics.paw_wake_update` over this step (``motion``: :meth:`_body_motion` at its
+        start): the drag rows."""
+        if self.tank.paw_wake_fraction <= 0.0:
+            return context.feet
         paw_wake_update(context.feet, self.wake, self.tank.paw_wake_fraction, self.tank.paw_wake_time_constant,
-                        self.tank.paw_wake_body_share,
-                        r0 * vx + r3 * vy + r6 * vz, r1 * vx + r4 * vy + r7 * vz, r2 * vx + r5 * vy + r8 * vz,
-                        wx, wy, wz, dt, self._drag_feet)
+                        self.tank.paw_wake_body_share, *motion, dt, self._drag_feet)
         return tuple(map(tuple, self._drag_feet.tolist()))
 
     def _step_context(self, q: Any, q_dot: Any) -> "_TankContext":
@@ -414,26 +418,23 @@ class TankModel(FloatingBaseModel):
         context.mass_solver = self._mass_solver(context.leg_sums[0], context.leg_sums[2])
         return context
 
-    def _update_joint_loads(self, state: RigidBodyState, drag_feet: Sequence[Sequence[float]], q: Any) -> None:
-        """:attr:`joint_loads` at the state at a step's start, the legs at ``q`` (the held joints), the paws
-        seen through the rows ``drag_feet`` that the step's drag sees."""
-        r0, r1, r2, r3, r4, r5, r6, r7, r8 = state.rotation.ravel().tolist()
-        vx, vy, vz = state.velocity.tolist()
-        wx, wy, wz = state.omega.tolist()
+    def _update_joint_loads(self, motion: Tuple[float, ...], drag_feet: Sequence[Sequence[float]], q: Any) -> None:
+        """:attr:`joint_loads` at a step's start (``motion``: :meth:`_body_motion`), the legs at ``q`` (the
+        held joints), the paws seen through the rows ``drag_feet`` that the step's drag sees."""
         loads = np.zeros((4, 3))
         paw_joint_loads(np.asarray(q, dtype=float), self._frames, self._five_bar,
-                        np.asarray(drag_feet, dtype=float), self._constants[0],
-                        r0 * vx + r3 * vy + r6 * vz, r1 * vx + r4 * vy + r7 * vz, r2 * vx + r5 * vy + r8 * vz,
-                        wx, wy, wz, loads)
+                        np.asarray(drag_feet, dtype=float), self._constants[0], *motion, loads)
         self.joint_loads = loads
 
     def _rk4_tank(self, state: RigidBodyState, dt: float, context: "_TankContext", q: Any = None) -> RigidBodyState:
         R0 = tuple(state.rotation.ravel().tolist())
         y0 = tuple(state.position.tolist() + state.velocity.tolist() + [0.0, 0.0, 0.0] + state.omega.tolist())
         try:
-            drag_feet = self._advance_wake(state, dt, context)
-            if self.tank.servo_stall_torque > 0.0 and q is not None:
-                self._update_joint_loads(state, drag_feet, q)
+            loaded = self.tank.servo_stall_torque > 0.0 and q is not None
+            motion = self._body_motion(state) if loaded or self.tank.paw_wake_fraction > 0.0 else ()
+            drag_feet = self._advance_wake(motion, dt, context)
+            if loaded:
+                self._update_joint_loads(motion, drag_feet, q)
             y = tank_rk4(self._constants, context.feet, drag_feet, context.lift, context.up_torque, context.leg_sums,
                          context.mass_solver, R0, y0, dt)
         except (ValueError, OverflowError) as exc:  # math.sin(inf) etc. once the state has blown up

@@ -46,17 +46,17 @@ def tank_trial_step(i, frames, five_bar, net_paw_buoyancy, drag_constant, drag, 
                  torsion[i], untwisted[i], linear[i], quadratic[i], body_m[i], paw_added_mass[i], wake_fraction[i],
                  wake_time_constant[i], wake_body_share[i])
     rows = feet
-    if wake_fraction[i] > 0.0:
-        vx, vy, vz = v[i, 0], v[i, 1], v[i, 2]
-        paw_wake_update(feet, wake[i], wake_fraction[i], wake_time_constant[i], wake_body_share[i],
-                        R0[0] * vx + R0[3] * vy + R0[6] * vz, R0[1] * vx + R0[4] * vy + R0[7] * vz,
-                        R0[2] * vx + R0[5] * vy + R0[8] * vz, w[i, 0], w[i, 1], w[i, 2], dt, drag_feet)
-        rows = drag_feet
-    if stall_torque[i] > 0.0:
-        vx, vy, vz = v[i, 0], v[i, 1], v[i, 2]
-        paw_joint_loads(q[i], frames, five_bar, rows, drag_constant[i], R0[0] * vx + R0[3] * vy + R0[6] * vz,
-                        R0[1] * vx + R0[4] * vy + R0[7] * vz, R0[2] * vx + R0[5] * vy + R0[8] * vz, w[i, 0], w[i, 1],
-                        w[i, 2], loads[i])
+    if wake_fraction[i] > 0.0 or stall_torque[i] > 0.0:
+        vx, vy, vz = v[i, 0], v[i, 1], v[i, 2]  # b = R^T v at the step's start, as TankModel._body_motion
+        bx, by, bz = R0[0] * vx + R0[3] * vy + R0[6] * vz, R0[1] * vx + R0[4] * vy + R0[7] * vz, \
+            R0[2] * vx + R0[5] * vy + R0[8] * vz
+        if wake_fraction[i] > 0.0:
+            paw_wake_update(feet, wake[i], wake_fraction[i], wake_time_constant[i], wake_body_share[i], bx, by, bz,
+                            w[i, 0], w[i, 1], w[i, 2], dt, drag_feet)
+            rows = drag_feet
+        if stall_torque[i] > 0.0:
+            paw_joint_loads(q[i], frames, five_bar, rows, drag_constant[i], bx, by, bz, w[i, 0], w[i, 1], w[i, 2],
+                            loads[i])
     y0 = (p[i, 0], p[i, 1], p[i, 2], v[i, 0], v[i, 1], v[i, 2], 0.0, 0.0, 0.0, w[i, 0], w[i, 1], w[i, 2])
     y = tank_rk4(constants, feet, rows, lift, up, sums, solver, R0, y0, dt)
     return store_step_end(y, R0, i, p, v, R, w)

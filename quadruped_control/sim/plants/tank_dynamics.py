@@ -25,7 +25,7 @@ import math
 from typing import Any, Sequence, Tuple
 
 from quadruped_common.jit import jitable
-from quadruped_control.model.hydrodynamics import paw_velocity_f
+from quadruped_control.model.hydrodynamics import paw_drag_f, paw_velocity_f
 from quadruped_control.model.kinematics import leg_jacobian_row
 from quadruped_control.sim.plants.paper import body_wrench_f
 from quadruped_control.sim.plants.rigid_body import Mat3, chart_point
@@ -149,10 +149,8 @@ def paw_joint_loads(q: Any, frames: Any, five_bar: Sequence[float], drag_rows: A
                 for k in range(3):
                     loads[other, k] = 0.0
             return False
-        ux, uy, uz = paw_velocity_f(drag_rows[leg, 0], drag_rows[leg, 1], drag_rows[leg, 2], drag_rows[leg, 3],
-                                    drag_rows[leg, 4], drag_rows[leg, 5], bx, by, bz, wx, wy, wz)
-        s = -drag_constant * math.sqrt(ux * ux + uy * uy + uz * uz)
-        fx, fy, fz = s * ux, s * uy, s * uz
+        fx, fy, fz = paw_drag_f(drag_rows[leg, 0], drag_rows[leg, 1], drag_rows[leg, 2], drag_rows[leg, 3],
+                                drag_rows[leg, 4], drag_rows[leg, 5], drag_constant, bx, by, bz, wx, wy, wz)
         for k in range(3):
             loads[leg, k] = J[k] * fx + J[3 + k] * fy + J[6 + k] * fz
     return True
