@@ -47,7 +47,7 @@ from quadruped_control.studies import paper_experiments as pe
 from quadruped_control.studies.paper_experiments import experiment_specs
 from quadruped_control.studies.trial import TrialSpec, run_batch, run_many
 
-__all__ = ["GROUPS", "PARAMETERS", "WEIGHTS", "case_cost", "morris_sets", "nominal_values", "objective", "plot_report",
+__all__ = ["GROUPS", "PARAMETERS", "WEIGHTS", "best_on", "case_cost", "morris_sets", "nominal_values", "objective", "plot_report",
            "targets", "tank_overrides", "update_tank_yaml"]
 
 #: (name, low, high): bounds with their physical reason in docs/identification.md
@@ -308,7 +308,15 @@ def screen(evaluate: Callable, nominal: Dict[str, float], trajectories: int, see
     analysis = morris_analyze.analyze(problem, X, Y, num_levels=4, seed=seed)
     finite = [float(v) if math.isfinite(v) else None for v in analysis["sigma"]]  # one trajectory: no spread
     return {"names": names, "mu_star": [float(v) for v in analysis["mu_star"]], "sigma": finite, "sets": len(sets),
-            "best": min(results, key=lambda r: r["objective"])}
+            "best": min(results, key=lambda r: r["objective"]), "results": results}
+
+
+def best_on(results: Sequence[Dict[str, Any]], cases: Sequence[int], subset: Sequence[int]) -> Dict[str, Any]:
+    """The result whose objective over the experiments ``subset`` is lowest; each result's rows are those of
+    ``cases``. A fold's fit starts from the screening's best set *on its training groups*: the best on all
+    experiments would let the held-out group choose the start."""
+    position = {case: i for i, case in enumerate(cases)}
+    return min(results, key=lambda r: objective([r["rows"][position[k]] for k in subset]))
 
 
 def fit(evaluate: Callable, names: Sequence[str], fixed: Dict[str, float], start: Dict[str, float], budget: int,
@@ -365,7 +373,8 @@ def main_study(args: argparse.Namespace) -> int:
     for group in GROUPS:
         train = _cases([g for g in GROUPS if g != group])
         held = _cases([group])
-        fold_fit = fit(evaluate, chosen, fixed, start, args.cv_evaluations, args.popsize, args.seed + 1, train,
+        fold_start = best_on(screening["results"], everything, train)["values"]
+        fold_fit = fit(evaluate, chosen, fixed, fold_start, args.cv_evaluations, args.popsize, args.seed + 1, train,
                        "cv-" + group)[0]
         slow = baseline(evaluate, nominal, train, args.popsize, "base-" + group)
         predicted, slow_predicted = evaluate([fold_fit["values"], slow["values"]], held, "held-" + group)
@@ -392,7 +401,7 @@ def main_study(args: argparse.Namespace) -> int:
         paths.append(path)
     report = {"study": "identify", "duration": duration, "servo_model": servo, "seed": args.seed,
               "weights": WEIGHTS, "parameters": [list(p) for p in PARAMETERS], "nominal": nominal,
-              "screening": {k: v for k, v in screening.items() if k != "best"}, "identified": chosen,
+              "screening": {k: v for k, v in screening.items() if k not in ("best", "results")}, "identified": chosen,
               "fit": {"evaluations": len(full), "best": best, "ensemble": [_without_rows(r) for r in ensemble]},
               "cross_validation": folds, "trials": evaluate.trials, "wall_time": wall, "ensemble_files": paths}
     with open(os.path.join(args.out, "identify.json"), "w") as stream:

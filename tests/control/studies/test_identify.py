@@ -44,6 +44,17 @@ def test_targets_count_the_issue_figures() -> None:
                       "yaw_t_s_within_2x": 3, "yaw_t_s_reported": 4}
 
 
+def test_a_folds_start_is_the_best_screening_set_on_its_training_groups_only() -> None:
+    """best_on judges each set on the chosen experiments: the held-out group must not pick the start."""
+    good, bad = _row(), _row(sim_ts=200.0)
+    first = {"values": {"name": "first"}, "rows": [good, bad, bad]}    # best on case 7 alone
+    second = {"values": {"name": "second"}, "rows": [bad, good, good]}  # best on all, and on 9 and 12
+    results = [first, second]
+    assert idf.best_on(results, [7, 9, 12], [7, 9, 12]) is second
+    assert idf.best_on(results, [7, 9, 12], [7]) is first
+    assert idf.best_on(results, [7, 9, 12], [9, 12]) is second
+
+
 def _values():
     return {"cob_z": -0.0012, "hook_z": 0.06, "net_weight": 0.5, "rope_length": 0.8, "added_mass_scale": 1.5,
             "servo_speed_scale": 0.7, "servo_lag_scale": 3.0, "paw_drag_scale": 1.1, "appendage_linear_xy": 0.01,
