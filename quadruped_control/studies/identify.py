@@ -53,6 +53,8 @@ __all__ = ["GROUPS", "PARAMETERS", "WEIGHTS", "best_on", "case_cost", "morris_se
 #: (name, low, high): bounds with their physical reason in docs/identification.md
 PARAMETERS: Tuple[Tuple[str, float, float], ...] = (
     ("cob_z", -0.004, 0.004),              # m: trimmed by foam, within a few mm of the centre of mass
+    ("cob_x", -0.002, 0.002),              # m: a symmetric frame; off-centre parts move the centre of mass
+    ("cob_y", -0.002, 0.002),              #    by up to ~2 mm (50 g at 0.1 m of 4.9 kg: 1 mm)
     ("hook_z", 0.05, 0.10),                # m: on the enclosure top, 5-10 cm above the centre of mass
     ("net_weight", 0.2, 3.0),              # N: "slightly negatively buoyant"
     ("rope_length", 0.2, 1.0),             # m: robot fully under water below the floating block
@@ -76,6 +78,9 @@ PARAMETERS: Tuple[Tuple[str, float, float], ...] = (
 WEIGHTS: Dict[str, float] = {"outcome": 1.0, "t_s": 1.0, "t_r": 1.0, "e_ss": 1.0, "M_p": 1.0,
                              "yaw_t_s": 0.5, "yaw_t_r": 0.5}
 
+#: The centre of buoyancy's components, (x, y, z) of hydrostatics.center_of_buoyancy.
+_COB = ("cob_x", "cob_y", "cob_z")
+
 #: The three groups of Table 1 (the folds of the cross-validation).
 GROUPS = ("roll", "pitch", "roll+pitch")
 
@@ -87,8 +92,8 @@ def tank_overrides(values: Dict[str, float]) -> Tuple[Tuple[str, Any], ...]:
     for name in simple:
         if name in values:
             out.append((name, float(values[name])))
-    if "cob_z" in values:
-        out.append(("center_of_buoyancy", (0.0, 0.0, float(values["cob_z"]))))
+    if any(name in values for name in _COB):
+        out.append(("center_of_buoyancy", tuple(float(values.get(name, 0.0)) for name in _COB)))
     if "hook_z" in values:
         out.append(("hook", (0.0, 0.0, float(values["hook_z"]))))
     for kind in ("linear", "quadratic"):
@@ -114,7 +119,8 @@ def stall_torque_of(slope: float) -> float:
 
 def nominal_values(tank: TankParams) -> Dict[str, float]:
     """The parameters' values in ``tank`` (config/tank.yaml), clipped into their bounds."""
-    raw = {"cob_z": tank.center_of_buoyancy[2], "hook_z": tank.hook[2], "net_weight": tank.net_weight,
+    raw = {"cob_z": tank.center_of_buoyancy[2], "cob_x": tank.center_of_buoyancy[0], "cob_y": tank.center_of_buoyancy[1],
+           "hook_z": tank.hook[2], "net_weight": tank.net_weight,
            "rope_length": tank.rope_length, "added_mass_scale": tank.added_mass_scale,
            "servo_speed_scale": tank.servo_speed_scale, "servo_lag_scale": tank.servo_lag_scale,
            "paw_drag_scale": tank.paw_drag_scale,
@@ -197,7 +203,8 @@ _YAML_KEYS = {
     "servo_load_slope": ("servos", "stall_torque"),  # written as the stall torque, 1 / slope
 }
 _EXACT = "%.17g"
-_Z_OF_VECTOR = ("cob_z", "hook_z")
+#: vectors written whole: the line's key parameter -> the parameters of its x, y, z (None: 0)
+_VECTORS = {"cob_z": ("cob_x", "cob_y", "cob_z"), "hook_z": (None, None, "hook_z")}
 #: appendage damping: one line per kind, (xy, xy, z)
 _APPENDAGE_KEYS = {"linear": ("appendage_linear_xy", "appendage_linear_z"),
                    "quadratic": ("appendage_quadratic_xy", "appendage_quadratic_z")}
@@ -218,8 +225,10 @@ def update_tank_yaml(text: str, values: Dict[str, float], note: str) -> str:
         for name, (sec, key) in _YAML_KEYS.items():
             if name in values and sec == section and stripped.startswith(key + ":"):
                 value = _EXACT % (stall_torque_of(values[name]) if name == "servo_load_slope" else values[name])
-                if name in _Z_OF_VECTOR:
-                    value = "[0.0, 0.0, %s]" % value
+                if name in _VECTORS:
+                    parts = _VECTORS[name]
+                    value = "[%s]" % ", ".join(_EXACT % values.get(part, 0.0) if part else "0.0" for part in parts)
+                    done.update(part for part in parts if part in values)
                 lines[i] = "%s%s: %s  # [identified] %s" % (indent, key, value, note)
                 done.add(name)
         for kind, (xy, z) in _APPENDAGE_KEYS.items():
