@@ -47,8 +47,8 @@ from quadruped_control.studies import paper_experiments as pe
 from quadruped_control.studies.paper_experiments import experiment_specs
 from quadruped_control.studies.trial import TrialSpec, run_batch, run_many
 
-__all__ = ["GROUPS", "PARAMETERS", "WEIGHTS", "best_on", "case_cost", "morris_sets", "nominal_values", "objective", "plot_report",
-           "targets", "tank_overrides", "update_tank_yaml"]
+__all__ = ["GROUPS", "PARAMETERS", "WEIGHTS", "best_on", "case_cost", "morris_sets", "nominal_values", "objective",
+           "plot_report", "targets", "tank_overrides", "update_tank_yaml"]
 
 #: (name, low, high): bounds with their physical reason in docs/identification.md
 PARAMETERS: Tuple[Tuple[str, float, float], ...] = (
@@ -119,8 +119,8 @@ def stall_torque_of(slope: float) -> float:
 
 def nominal_values(tank: TankParams) -> Dict[str, float]:
     """The parameters' values in ``tank`` (config/tank.yaml), clipped into their bounds."""
-    raw = {"cob_z": tank.center_of_buoyancy[2], "cob_x": tank.center_of_buoyancy[0], "cob_y": tank.center_of_buoyancy[1],
-           "hook_z": tank.hook[2], "net_weight": tank.net_weight,
+    cob = tank.center_of_buoyancy
+    raw = {"cob_z": cob[2], "cob_x": cob[0], "cob_y": cob[1], "hook_z": tank.hook[2], "net_weight": tank.net_weight,
            "rope_length": tank.rope_length, "added_mass_scale": tank.added_mass_scale,
            "servo_speed_scale": tank.servo_speed_scale, "servo_lag_scale": tank.servo_lag_scale,
            "paw_drag_scale": tank.paw_drag_scale,

@@ -56,7 +56,8 @@ def test_a_folds_start_is_the_best_screening_set_on_its_training_groups_only() -
 
 
 def _values():
-    return {"cob_z": -0.0012, "cob_x": 0.0007, "cob_y": -0.0003, "hook_z": 0.06, "net_weight": 0.5, "rope_length": 0.8, "added_mass_scale": 1.5,
+    return {"cob_z": -0.0012, "cob_x": 0.0007, "cob_y": -0.0003, "hook_z": 0.06, "net_weight": 0.5, "rope_length": 0.8,
+            "added_mass_scale": 1.5,
             "servo_speed_scale": 0.7, "servo_lag_scale": 3.0, "paw_drag_scale": 1.1, "appendage_linear_xy": 0.01,
             "appendage_linear_z": 0.02,
             "appendage_quadratic_xy": 0.1, "appendage_quadratic_z": 0.2, "torsion_stiffness": 0.03,
@@ -79,7 +80,8 @@ def test_every_parameter_reaches_the_tank_plant_and_its_yaml_round_trips(tmp_pat
     assert tank.servo_stall_torque == 2.0 and idf.stall_torque_of(0.0) == 0.0
     assert idf.nominal_values(tank) == pytest.approx(values)
     assert tank.center_of_buoyancy == (0.0007, -0.0003, -0.0012)
-    assert text.count("[identified] test") == 16  # the centre of buoyancy's line carries three, two appendage lines four
+    # the centre of buoyancy's line carries three parameters, the two appendage lines four
+    assert text.count("[identified] test") == 16
     with pytest.raises(ValueError, match="no line for net_weight"):
         idf.update_tank_yaml("hydrostatics:\n  center_of_buoyancy: [0, 0, 0]\n", {"net_weight": 1.0}, "x")
 
