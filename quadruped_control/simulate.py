@@ -102,6 +102,9 @@ def build_parser() -> argparse.ArgumentParser:
     parser.add_argument("--include", nargs="+", default=[], metavar="PARAMETER",
                         help="identify: parameters fitted whatever the screening says (e.g. a candidate effect "
                              "under test: --include wake_fraction wake_time_constant)")
+    parser.add_argument("--parameters", nargs="+", default=[], metavar="PARAMETER",
+                        help="identify: fit exactly these parameters (the screening still runs and is "
+                             "reported; to repeat an earlier run's choice with another budget)")
     parser.add_argument("--study", choices=tuple(STUDIES),
                         default=None,
                         help="run a study (paper-experiments: Table 1's 15 experiments, default on the tank plant "
@@ -170,9 +173,12 @@ def main(argv: Optional[Sequence[str]] = None) -> int:
                          "--ensemble >= 1")
         if args.study == "identify":
             from quadruped_control.studies.identify import PARAMETERS
-            unknown = sorted(set(args.include) - {name for name, _, _ in PARAMETERS})
-            if unknown:
-                parser.error("--include: unknown parameter(s) %s" % ", ".join(unknown))
+            for option in ("include", "parameters"):
+                unknown = sorted(set(getattr(args, option)) - {name for name, _, _ in PARAMETERS})
+                if unknown:
+                    parser.error("--%s: unknown parameter(s) %s" % (option, ", ".join(unknown)))
+            if args.include and args.parameters:
+                parser.error("--include adds to the screening's choice, --parameters replaces it: give one")
         if args.study is not None:
             return STUDIES[args.study].main_study(args)
         spec = TrialSpec(label="setpoint %s deg" % " ".join("%g" % v for v in args.rpy),

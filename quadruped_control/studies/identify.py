@@ -373,7 +373,9 @@ def main_study(args: argparse.Namespace) -> int:
     screening = screen(evaluate, nominal, args.screen, args.seed, everything)
     largest = max(screening["mu_star"]) or 1.0
     include = set(getattr(args, "include", None) or ())
-    chosen = [n for n, m in zip(screening["names"], screening["mu_star"]) if m >= 0.1 * largest or n in include]
+    exactly = set(getattr(args, "parameters", None) or ())
+    chosen = [n for n, m in zip(screening["names"], screening["mu_star"])
+              if (n in exactly if exactly else m >= 0.1 * largest or n in include)]
     start = screening["best"]["values"]
     fixed = {n: (start[n] if n in chosen else nominal[n]) for n in nominal}
     full = fit(evaluate, chosen, fixed, start, args.evaluations, args.popsize, args.seed, everything, "fit")

@@ -126,3 +126,24 @@ def test_identify_cli_tiny_run(tmp_path) -> None:
     assert report["weights"] == idf.WEIGHTS
     with pytest.raises(SystemExit):  # a parameter the study does not know is refused by name
         simulate.main(["--study", "identify", "--include", "wake_speed", "--out", out])
+    with pytest.raises(SystemExit):
+        simulate.main(["--study", "identify", "--parameters", "wake_speed", "--out", out])
+    with pytest.raises(SystemExit):  # adding to the screening's choice and replacing it: one or the other
+        simulate.main(["--study", "identify", "--parameters", "cob_z", "--include", "hook_z", "--out", out])
+
+
+def test_identify_fits_exactly_the_parameters_given(tmp_path) -> None:
+    pytest.importorskip("cma")
+    pytest.importorskip("SALib")
+    out = str(tmp_path / "exact")
+    assert simulate.main(["--study", "identify", "--screen", "2", "--evaluations", "2", "--cv-evaluations", "2",
+                          "--popsize", "2", "--ensemble", "1", "--duration", "0.2", "--out", out, "--quiet",
+                          "--jobs", "1", "--parameters", "servo_lag_scale", "cob_z"]) == 0
+    with open(os.path.join(out, "identify.json")) as stream:
+        report = json.load(stream)
+    assert report["identified"] == ["cob_z", "servo_lag_scale"]  # in the order of PARAMETERS
+    fixed = idf.nominal_values(load_tank_params())
+    for result in report["fit"]["ensemble"] + [fold["fit"] for fold in report["cross_validation"]]:
+        for name, value in result["values"].items():
+            if name not in ("cob_z", "servo_lag_scale"):
+                assert value == fixed[name]
