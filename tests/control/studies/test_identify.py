@@ -104,15 +104,20 @@ def test_nominal_values_lie_within_the_bounds() -> None:
     assert nominal["net_weight"] == 3.0  # clipped to its plausible bound
 
 
-def test_identify_cli_tiny_run(tmp_path) -> None:
+def _tiny_identify(out: str, evaluations: int, ensemble: int, *choice: str) -> dict:
+    """A tiny identification (0.2 s trials, two screening trajectories) through the CLI; its report."""
     pytest.importorskip("cma")
     pytest.importorskip("SALib")
-    out = str(tmp_path / "id")
-    assert simulate.main(["--study", "identify", "--screen", "2", "--evaluations", "4", "--cv-evaluations", "2",
-                          "--popsize", "2", "--ensemble", "2", "--duration", "0.2", "--out", out, "--quiet",
-                          "--jobs", "1", "--include", "wake_fraction"]) == 0
+    assert simulate.main(["--study", "identify", "--screen", "2", "--evaluations", str(evaluations),
+                          "--cv-evaluations", "2", "--popsize", "2", "--ensemble", str(ensemble), "--duration", "0.2",
+                          "--out", out, "--quiet", "--jobs", "1", *choice]) == 0
     with open(os.path.join(out, "identify.json")) as stream:
-        report = json.load(stream)
+        return json.load(stream)
+
+
+def test_identify_cli_tiny_run(tmp_path) -> None:
+    out = str(tmp_path / "id")
+    report = _tiny_identify(out, 4, 2, "--include", "wake_fraction")
     names = [p[0] for p in idf.PARAMETERS]
     assert report["screening"]["names"] == names and report["screening"]["sets"] == 2 * (len(names) + 1)
     assert set(report["identified"]) <= set(names) and "wake_fraction" in report["identified"]
@@ -133,14 +138,7 @@ def test_identify_cli_tiny_run(tmp_path) -> None:
 
 
 def test_identify_fits_exactly_the_parameters_given(tmp_path) -> None:
-    pytest.importorskip("cma")
-    pytest.importorskip("SALib")
-    out = str(tmp_path / "exact")
-    assert simulate.main(["--study", "identify", "--screen", "2", "--evaluations", "2", "--cv-evaluations", "2",
-                          "--popsize", "2", "--ensemble", "1", "--duration", "0.2", "--out", out, "--quiet",
-                          "--jobs", "1", "--parameters", "servo_lag_scale", "cob_z"]) == 0
-    with open(os.path.join(out, "identify.json")) as stream:
-        report = json.load(stream)
+    report = _tiny_identify(str(tmp_path / "exact"), 2, 1, "--parameters", "servo_lag_scale", "cob_z")
     assert report["identified"] == ["cob_z", "servo_lag_scale"]  # in the order of PARAMETERS
     fixed = idf.nominal_values(load_tank_params())
     for result in report["fit"]["ensemble"] + [fold["fit"] for fold in report["cross_validation"]]:
