@@ -185,7 +185,7 @@ def targets(rows: Sequence[Dict[str, Any]]) -> Dict[str, int]:
 
 #: parameter -> (config/tank.yaml section, key). Every value is written with 17 significant digits, so
 #: that a written set reproduces the fit's trials bit for bit (their limit cycles turn a rounding in the
-#: fourth digit into other outcomes); cob_z and hook_z as the z of their vector.
+#: fourth digit into other outcomes); cob_z and hook_z stand for their vector's line (see _VECTORS).
 _YAML_KEYS = {
     "cob_z": ("hydrostatics", "center_of_buoyancy"),
     "hook_z": ("suspension", "hook"),
