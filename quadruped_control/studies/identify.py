@@ -78,60 +78,87 @@ PARAMETERS: Tuple[Tuple[str, float, float], ...] = (
 WEIGHTS: Dict[str, float] = {"outcome": 1.0, "t_s": 1.0, "t_r": 1.0, "e_ss": 1.0, "M_p": 1.0,
                              "yaw_t_s": 0.5, "yaw_t_r": 0.5}
 
-#: The centre of buoyancy's components, (x, y, z) of hydrostatics.center_of_buoyancy.
-_COB = ("cob_x", "cob_y", "cob_z")
-
 #: The three groups of Table 1 (the folds of the cross-validation).
 GROUPS = ("roll", "pitch", "roll+pitch")
 
 
+@dataclasses.dataclass(frozen=True)
+class _Place:
+    """Where a parameter lives: the :class:`TankParams` field, the components of that field it sets (``()``
+    for a scalar field; ``(0, 1)``: one value for x and y), and the line of config/tank.yaml that holds the
+    field, (section, key). ``reciprocal``: the field holds 1 / value (0 for 0; :func:`stall_torque_of`)."""
+
+    field: str
+    components: Tuple[int, ...]
+    section: str
+    key: str
+    reciprocal: bool = False
+
+
+#: Every parameter of :data:`PARAMETERS` -> its :class:`_Place`: the one table that :func:`tank_overrides`,
+#: :func:`nominal_values` and :func:`update_tank_yaml` read. A vector field's components that no given
+#: parameter sets are 0.
+_PLACES: Dict[str, _Place] = {
+    "cob_z": _Place("center_of_buoyancy", (2,), "hydrostatics", "center_of_buoyancy"),
+    "cob_x": _Place("center_of_buoyancy", (0,), "hydrostatics", "center_of_buoyancy"),
+    "cob_y": _Place("center_of_buoyancy", (1,), "hydrostatics", "center_of_buoyancy"),
+    "hook_z": _Place("hook", (2,), "suspension", "hook"),
+    "net_weight": _Place("net_weight", (), "hydrostatics", "net_weight"),
+    "rope_length": _Place("rope_length", (), "suspension", "length"),
+    "added_mass_scale": _Place("added_mass_scale", (), "added_mass", "scale"),
+    "servo_speed_scale": _Place("servo_speed_scale", (), "servos", "speed_scale"),
+    "servo_lag_scale": _Place("servo_lag_scale", (), "servos", "lag_scale"),
+    "paw_drag_scale": _Place("paw_drag_scale", (), "paw_drag", "scale"),
+    "appendage_linear_xy": _Place("appendage_damping_linear", (0, 1), "appendage_damping", "linear"),
+    "appendage_linear_z": _Place("appendage_damping_linear", (2,), "appendage_damping", "linear"),
+    "appendage_quadratic_xy": _Place("appendage_damping_quadratic", (0, 1), "appendage_damping", "quadratic"),
+    "appendage_quadratic_z": _Place("appendage_damping_quadratic", (2,), "appendage_damping", "quadratic"),
+    "torsion_stiffness": _Place("rope_torsion_stiffness", (), "suspension", "torsion_stiffness"),
+    "torsion_damping": _Place("rope_torsion_damping", (), "suspension", "torsion_damping"),
+    "wake_fraction": _Place("paw_wake_fraction", (), "paw_wake", "fraction"),
+    "wake_time_constant": _Place("paw_wake_time_constant", (), "paw_wake", "time_constant"),
+    "wake_body_share": _Place("paw_wake_body_share", (), "paw_wake", "body_share"),
+    "servo_load_slope": _Place("servo_stall_torque", (), "servos", "stall_torque", reciprocal=True),
+}
+
+
+def _field_value(name: str, value: float) -> float:
+    """What the field of parameter ``name`` holds for the parameter's ``value``."""
+    return stall_torque_of(value) if _PLACES[name].reciprocal else float(value)
+
+
 def tank_overrides(values: Dict[str, float]) -> Tuple[Tuple[str, Any], ...]:
-    """TankParams overrides of a (possibly partial) parameter set."""
-    out: List[Tuple[str, Any]] = []
-    simple = ("net_weight", "rope_length", "added_mass_scale", "servo_speed_scale", "servo_lag_scale", "paw_drag_scale")
-    for name in simple:
+    """TankParams overrides of a (possibly partial) parameter set (:data:`_PLACES`)."""
+    fields: Dict[str, Any] = {}
+    for name, _, _ in PARAMETERS:
         if name in values:
-            out.append((name, float(values[name])))
-    if any(name in values for name in _COB):
-        out.append(("center_of_buoyancy", tuple(float(values.get(name, 0.0)) for name in _COB)))
-    if "hook_z" in values:
-        out.append(("hook", (0.0, 0.0, float(values["hook_z"]))))
-    for kind in ("linear", "quadratic"):
-        xy, z = values.get("appendage_%s_xy" % kind), values.get("appendage_%s_z" % kind)
-        if xy is not None or z is not None:
-            out.append(("appendage_damping_" + kind, (float(xy or 0.0), float(xy or 0.0), float(z or 0.0))))
-    for name in ("torsion_stiffness", "torsion_damping"):
-        if name in values:
-            out.append(("rope_" + name, float(values[name])))
-    for name in ("wake_fraction", "wake_time_constant", "wake_body_share"):
-        if name in values:
-            out.append(("paw_" + name, float(values[name])))
-    if "servo_load_slope" in values:
-        out.append(("servo_stall_torque", stall_torque_of(values["servo_load_slope"])))
-    return tuple(out)
+            place = _PLACES[name]
+            value = _field_value(name, values[name])
+            if place.components:
+                vector = fields.setdefault(place.field, [0.0, 0.0, 0.0])
+                for component in place.components:
+                    vector[component] = value
+            else:
+                fields[place.field] = value
+    return tuple((field, tuple(value) if isinstance(value, list) else value) for field, value in fields.items())
 
 
 def stall_torque_of(slope: float) -> float:
     """The loaded servos' stall torque (N m) of the parameter ``servo_load_slope`` = 1 / tau_stall (1/N m),
-    0 (off) for a zero slope: fitted as the slope so that "off" is inside its bounds."""
+    0 (off) for a zero slope: fitted as the slope so that "off" is inside its bounds. Its own inverse."""
     return 1.0 / float(slope) if slope > 0.0 else 0.0
 
 
 def nominal_values(tank: TankParams) -> Dict[str, float]:
-    """The parameters' values in ``tank`` (config/tank.yaml), clipped into their bounds."""
-    cob = tank.center_of_buoyancy
-    raw = {"cob_z": cob[2], "cob_x": cob[0], "cob_y": cob[1], "hook_z": tank.hook[2], "net_weight": tank.net_weight,
-           "rope_length": tank.rope_length, "added_mass_scale": tank.added_mass_scale,
-           "servo_speed_scale": tank.servo_speed_scale, "servo_lag_scale": tank.servo_lag_scale,
-           "paw_drag_scale": tank.paw_drag_scale,
-           "appendage_linear_xy": tank.appendage_damping_linear[0], "appendage_linear_z": tank.appendage_damping_linear[2],
-           "appendage_quadratic_xy": tank.appendage_damping_quadratic[0],
-           "appendage_quadratic_z": tank.appendage_damping_quadratic[2],
-           "torsion_stiffness": tank.rope_torsion_stiffness, "torsion_damping": tank.rope_torsion_damping,
-           "wake_fraction": tank.paw_wake_fraction, "wake_time_constant": tank.paw_wake_time_constant,
-           "wake_body_share": tank.paw_wake_body_share,
-           "servo_load_slope": 1.0 / tank.servo_stall_torque if tank.servo_stall_torque > 0.0 else 0.0}
-    return {name: float(min(high, max(low, raw[name]))) for name, low, high in PARAMETERS}
+    """The parameters' values in ``tank`` (config/tank.yaml), clipped into their bounds (:data:`_PLACES`)."""
+    out = {}
+    for name, low, high in PARAMETERS:
+        place = _PLACES[name]
+        value = getattr(tank, place.field)
+        if place.components:
+            value = value[place.components[0]]
+        out[name] = float(min(high, max(low, _field_value(name, value))))
+    return out
 
 
 def _log_ratio(a: float, b: float) -> float:
@@ -183,36 +210,18 @@ def targets(rows: Sequence[Dict[str, Any]]) -> Dict[str, int]:
             "yaw_t_s_reported": sum(r["paper"]["yaw"]["t_s"] is not None for r in rows)}
 
 
-#: parameter -> (config/tank.yaml section, key). Every value is written with 17 significant digits, so
-#: that a written set reproduces the fit's trials bit for bit (their limit cycles turn a rounding in the
-#: fourth digit into other outcomes); cob_z and hook_z stand for their vector's line (see _VECTORS).
-_YAML_KEYS = {
-    "cob_z": ("hydrostatics", "center_of_buoyancy"),
-    "hook_z": ("suspension", "hook"),
-    "net_weight": ("hydrostatics", "net_weight"),
-    "rope_length": ("suspension", "length"),
-    "added_mass_scale": ("added_mass", "scale"),
-    "servo_speed_scale": ("servos", "speed_scale"),
-    "servo_lag_scale": ("servos", "lag_scale"),
-    "paw_drag_scale": ("paw_drag", "scale"),
-    "torsion_stiffness": ("suspension", "torsion_stiffness"),
-    "torsion_damping": ("suspension", "torsion_damping"),
-    "wake_fraction": ("paw_wake", "fraction"),
-    "wake_time_constant": ("paw_wake", "time_constant"),
-    "wake_body_share": ("paw_wake", "body_share"),
-    "servo_load_slope": ("servos", "stall_torque"),  # written as the stall torque, 1 / slope
-}
+#: Every value is written with 17 significant digits, so that a written set reproduces the fit's trials bit
+#: for bit (their limit cycles turn a rounding in the fourth digit into other outcomes).
 _EXACT = "%.17g"
-#: vectors written whole: the line's key parameter -> the parameters of its x, y, z (None: 0)
-_VECTORS = {"cob_z": ("cob_x", "cob_y", "cob_z"), "hook_z": (None, None, "hook_z")}
-#: appendage damping: one line per kind, (xy, xy, z)
-_APPENDAGE_KEYS = {"linear": ("appendage_linear_xy", "appendage_linear_z"),
-                   "quadratic": ("appendage_quadratic_xy", "appendage_quadratic_z")}
 
 
 def update_tank_yaml(text: str, values: Dict[str, float], note: str) -> str:
     """config/tank.yaml text with the identified values in place (comments of other lines kept); each
-    replaced line is marked ``# [identified] <note>``."""
+    replaced line is marked ``# [identified] <note>``. A vector's line is written whole: the components
+    that no parameter sets are 0.0, those of parameters not in ``values`` 0 (:data:`_PLACES`)."""
+    lines_of: Dict[Tuple[str, str], List[str]] = {}  # (section, key) -> the parameters on that line
+    for name, _, _ in PARAMETERS:
+        lines_of.setdefault((_PLACES[name].section, _PLACES[name].key), []).append(name)
     lines = text.splitlines()
     section = None
     done = set()
@@ -221,22 +230,21 @@ def update_tank_yaml(text: str, values: Dict[str, float], note: str) -> str:
         if line and not line[0].isspace() and stripped.endswith(":"):
             section = stripped[:-1]
             continue
+        names = lines_of.get((section or "", stripped.split(":", 1)[0]), [])
+        given = [name for name in names if name in values]
+        if not given:
+            continue
+        if _PLACES[given[0]].components:
+            parts = ["0.0"] * 3
+            for name in names:
+                for component in _PLACES[name].components:
+                    parts[component] = _EXACT % _field_value(name, values.get(name, 0.0))
+            value = "[%s]" % ", ".join(parts)
+        else:
+            value = _EXACT % _field_value(given[0], values[given[0]])
         indent = line[:len(line) - len(line.lstrip())]
-        for name, (sec, key) in _YAML_KEYS.items():
-            if name in values and sec == section and stripped.startswith(key + ":"):
-                value = _EXACT % (stall_torque_of(values[name]) if name == "servo_load_slope" else values[name])
-                if name in _VECTORS:
-                    parts = _VECTORS[name]
-                    value = "[%s]" % ", ".join(_EXACT % values.get(part, 0.0) if part else "0.0" for part in parts)
-                    done.update(part for part in parts if part in values)
-                lines[i] = "%s%s: %s  # [identified] %s" % (indent, key, value, note)
-                done.add(name)
-        for kind, (xy, z) in _APPENDAGE_KEYS.items():
-            if section == "appendage_damping" and stripped.startswith(kind + ":") and (xy in values or z in values):
-                a, b = values.get(xy, 0.0), values.get(z, 0.0)
-                lines[i] = "%s%s: [%s, %s, %s]  # [identified] %s" % (indent, kind, _EXACT % a, _EXACT % a, _EXACT % b,
-                                                                        note)
-                done.update(n for n in (xy, z) if n in values)
+        lines[i] = "%s%s: %s  # [identified] %s" % (indent, stripped.split(":", 1)[0], value, note)
+        done.update(given)
     missing = [n for n in values if n not in done]
     if missing:
         raise ValueError("tank.yaml has no line for %s" % ", ".join(missing))
