@@ -105,6 +105,9 @@ def build_parser() -> argparse.ArgumentParser:
     parser.add_argument("--parameters", nargs="+", default=[], metavar="PARAMETER",
                         help="identify: fit exactly these parameters (the screening still runs and is "
                              "reported; to repeat an earlier run's choice with another budget)")
+    parser.add_argument("--slow-recovery-check", action="store_true",
+                        help="identify: the paper's t_rec observation as three more experiments: pitch 75, 90 and "
+                             "roll+pitch 60 with t_rec = 1.5 s must not settle (the paper needed 1.0 s there)")
     parser.add_argument("--study", choices=tuple(STUDIES),
                         default=None,
                         help="run a study (paper-experiments: Table 1's 15 experiments, default on the tank plant "
@@ -179,6 +182,8 @@ def main(argv: Optional[Sequence[str]] = None) -> int:
                     parser.error("--%s: unknown parameter(s) %s" % (option, ", ".join(unknown)))
             if args.include and args.parameters:
                 parser.error("--include adds to the screening's choice, --parameters replaces it: give one")
+            if len(set(args.parameters)) == 1:  # pycma: "optimization in 1-D is not supported" (pycma issue 86)
+                parser.error("--parameters: CMA-ES fits two or more parameters; name a second one")
         if args.study is not None:
             return STUDIES[args.study].main_study(args)
         spec = TrialSpec(label="setpoint %s deg" % " ".join("%g" % v for v in args.rpy),

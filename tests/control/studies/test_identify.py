@@ -47,12 +47,18 @@ def test_targets_count_the_issue_figures() -> None:
 def test_a_folds_start_is_the_best_screening_set_on_its_training_groups_only() -> None:
     """best_on judges each set on the chosen experiments: the held-out group must not pick the start."""
     good, bad = _row(), _row(sim_ts=200.0)
-    first = {"values": {"name": "first"}, "rows": [good, bad, bad]}    # best on case 7 alone
-    second = {"values": {"name": "second"}, "rows": [bad, good, good]}  # best on all, and on 9 and 12
-    results = [first, second]
-    assert idf.best_on(results, [7, 9, 12], [7, 9, 12]) is second
-    assert idf.best_on(results, [7, 9, 12], [7]) is first
-    assert idf.best_on(results, [7, 9, 12], [9, 12]) is second
+    costs = [idf.case_cost(row) for row in (good, bad)]
+    first = {"values": {"name": "first"}, "cases": [7, 9, 12], "costs": [costs[0], costs[1], costs[1]]}
+    second = {"values": {"name": "second"}, "cases": [7, 9, 12], "costs": [costs[1], costs[0], costs[0]]}
+    results = [first, second]  # first: best on case 7 alone; second: best on all, and on 9 and 12
+    assert idf.best_on(results, [7, 9, 12]) is second
+    assert idf.best_on(results, [7]) is first
+    assert idf.best_on(results, [9, 12]) is second
+    # a slow-recovery check (numbered after Table 1's rows) counts like any experiment
+    second["cases"], second["costs"] = [7, 9, 12, 16], second["costs"] + [idf.slow_recovery_cost(True)]
+    first["cases"], first["costs"] = [7, 9, 12, 16], first["costs"] + [idf.slow_recovery_cost(False)]
+    assert idf.best_on(results, [9, 12]) is second and idf.best_on(results, [7, 16]) is first
+    assert idf.slow_recovery_cost(True) == idf.WEIGHTS["slow_recovery"] == 1.0 and idf.slow_recovery_cost(False) == 0.0
 
 
 def _values():
@@ -152,8 +158,32 @@ def test_identify_cli_tiny_run(tmp_path) -> None:
         simulate.main(["--study", "identify", "--include", "wake_speed", "--out", out])
     with pytest.raises(SystemExit):
         simulate.main(["--study", "identify", "--parameters", "wake_speed", "--out", out])
+    with pytest.raises(SystemExit):  # pycma does not fit one dimension: refused before any trial
+        simulate.main(["--study", "identify", "--parameters", "cob_z", "--out", out])
     with pytest.raises(SystemExit):  # adding to the screening's choice and replacing it: one or the other
         simulate.main(["--study", "identify", "--parameters", "cob_z", "--include", "hook_z", "--out", out])
+
+
+def test_the_slow_recovery_check_adds_the_papers_t_rec_cases_to_their_groups(tmp_path) -> None:
+    report = _tiny_identify(str(tmp_path / "slow"), 2, 1, "--parameters", "cob_z", "net_weight",
+                            "--slow-recovery-check")
+    assert report["slow_recovery_check"] is True
+    best = report["fit"]["best"]
+    assert [c["case"] for c in best["slow_recovery"]] == ["t_rec 1.5 pitch 75", "t_rec 1.5 pitch 90",
+                                                          "t_rec 1.5 roll+pitch 60"]
+    assert best["cases"] == list(range(18)) and len(best["rows"]) == 15
+    assert best["objective"] == pytest.approx(idf.objective(best["rows"]) + sum(
+        idf.slow_recovery_cost(c["settled_sim"]) for c in best["slow_recovery"]))
+    # 0.2 s trials settle nowhere: every check is met
+    assert best["targets"]["slow_recovery_checks"] == 3 == best["targets"]["slow_recovery_unsettled"]
+    for fold, checks in zip(report["cross_validation"], (0, 2, 1)):  # held out: roll, pitch, roll+pitch
+        assert fold["prediction"]["targets"]["slow_recovery_checks"] == checks
+        assert fold["prediction"]["targets"]["cases"] == (6, 6, 3)[idf.GROUPS.index(fold["held_out"])]
+    with open(os.path.join(str(tmp_path / "slow"), "identify.md")) as stream:
+        assert "t_rec 1.5 s not settled" in stream.read()
+    plain = _tiny_identify(str(tmp_path / "plain"), 2, 1, "--parameters", "cob_z", "net_weight")
+    assert plain["slow_recovery_check"] is False and plain["fit"]["best"]["cases"] == list(range(15))
+    assert plain["fit"]["best"]["targets"]["slow_recovery_checks"] == 0
 
 
 def test_identify_fits_exactly_the_parameters_given(tmp_path) -> None:

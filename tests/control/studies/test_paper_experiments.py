@@ -1,6 +1,8 @@
 """The paper-experiments study: Table 1 data, initial attitudes, worst-axis selection, table, CLI."""
 from __future__ import annotations
 
+import argparse
+import dataclasses
 import json
 import math
 import os
@@ -63,3 +65,15 @@ def test_study_cli_writes_the_table_json_and_figures(tmp_path) -> None:
         text = stream.read()
     assert "| roll+pitch | 60 (t_rec 1.0) |" in text and "(R)" in text
     assert all(os.path.exists(p) for p in study["figures"]) and len(study["figures"]) == 3
+
+
+def test_the_slow_recovery_trials_are_the_t_rec_cases_with_the_default_recovery() -> None:
+    """The paper needed t_rec = 1.0 s for pitch 75, 90 and roll+pitch 60; the checks run them at 1.5 s."""
+    args = argparse.Namespace(seed=0, tank_yaml=None, robot_yaml=None)
+    specs = pe.experiment_specs(args, "tank", "experiment", "rate-limited", 10.0, keep_trace=False)[0]
+    checks = pe.slow_recovery_specs(specs)
+    assert [k for k, _ in checks] == [10, 11, 14]
+    for k, check in checks:
+        assert specs[k].config_overrides == (("t_rec", 1.0),) and check.config_overrides == ()
+        assert check.label == "t_rec 1.5 " + specs[k].label
+        assert dataclasses.replace(check, label=specs[k].label, config_overrides=specs[k].config_overrides) == specs[k]
