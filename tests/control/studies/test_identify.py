@@ -11,6 +11,7 @@ import pytest
 from quadruped_common.config import config_path
 from quadruped_control import simulate
 from quadruped_control.sim.plants import TankParams, load_tank_params
+from quadruped_control.studies import StudyError
 from quadruped_control.studies import identify as idf
 
 
@@ -184,6 +185,27 @@ def test_the_slow_recovery_check_adds_the_papers_t_rec_cases_to_their_groups(tmp
     plain = _tiny_identify(str(tmp_path / "plain"), 2, 1, "--parameters", "cob_z", "net_weight")
     assert plain["slow_recovery_check"] is False and plain["fit"]["best"]["cases"] == list(range(15))
     assert plain["fit"]["best"]["targets"]["slow_recovery_checks"] == 0
+
+
+def test_a_screening_that_chooses_one_parameter_is_refused_by_name(tmp_path, monkeypatch) -> None:
+    """pycma does not fit one dimension: the study says so instead of failing inside the fit."""
+    class NoTrials:
+        trials, check_row = 0, {}
+
+        def __init__(self, *args: object) -> None:
+            pass
+
+        def cases(self, groups):
+            return [0]
+
+    names = [name for name, _, _ in idf.PARAMETERS]
+    monkeypatch.setattr(idf, "_Evaluator", NoTrials)
+    monkeypatch.setattr(idf, "screen", lambda *args: {"names": names, "best": {"values": {}}, "results": [],
+                                                      "mu_star": [1.0] + [0.0] * (len(names) - 1)})
+    args = simulate.build_parser().parse_args(["--study", "identify", "--out", str(tmp_path)])
+    args.duration_given, args.servo_model_given = False, None
+    with pytest.raises(StudyError, match="chose cob_z; CMA-ES fits two or more"):
+        idf.main_study(args)
 
 
 def test_identify_fits_exactly_the_parameters_given(tmp_path) -> None:
