@@ -1,5 +1,7 @@
-"""The robot's numbering that every layer shares: legs, joint names and order, the legs' mirror table and
-the servos' joint limits (paper "Underwater quadruped ...", section "Mathematical Modeling", eq. (M_legs)).
+"""The robot's numbering that every layer shares: legs, joint names and order, the legs' mirror table,
+the servos' joint limits (paper "Underwater quadruped ...", section "Mathematical Modeling", eq. (M_legs))
+and the leg pairs that stroke together (section "Power and Recovery Stroke Cycle"; the controller's
+``pairs``, which the bag analysis needs to read a record's pair phases).
 
 The drivers need the joint order (PWM channels, ADC map) and the joint limits (the calibration sweep);
 the controller and the model need all of it. It lives here, below both, so that neither imports the
@@ -83,3 +85,38 @@ def servo_no_load_speed_from_dict(tree: Mapping[str, Any]) -> float:
 def load_servo_no_load_speed(path: Optional[str] = None) -> float:
     """The servos' no-load speed (rad/s) of ``robot.yaml`` (default: the package's ``config/robot.yaml``)."""
     return load_config(path, "robot.yaml", servo_no_load_speed_from_dict)
+
+
+#: Two pairs of leg numbers; the controller's default (config/controller.yaml ``pairs``): the paper's intent,
+#: diagonal pairs, under its mirroring matrices (see quadruped_control.control.controller_config).
+LegPairs = Tuple[Tuple[int, int], Tuple[int, int]]
+DEFAULT_LEG_PAIRS: LegPairs = ((1, 3), (2, 4))
+
+
+def leg_pairs(pairs: Any) -> LegPairs:
+    """``pairs`` checked to be two pairs of leg numbers forming a partition of legs 1..4, as tuples;
+    :class:`ParameterError` otherwise."""
+    try:
+        as_tuples = tuple(tuple(pair) for pair in pairs)
+    except TypeError:
+        raise ParameterError("pairs must be two pairs of leg numbers, e.g. [[1, 3], [2, 4]], got %r"
+                             % (pairs,)) from None
+    if len(as_tuples) != 2 or any(len(pair) != 2 for pair in as_tuples):
+        raise ParameterError("pairs must be two pairs of leg numbers, e.g. [[1, 3], [2, 4]], got %r" % (pairs,))
+    legs = []
+    for pair in as_tuples:
+        for leg in pair:
+            if isinstance(leg, bool) or not isinstance(leg, int):
+                raise ParameterError("pairs must contain integer leg numbers, got %r" % (pairs,))
+            legs.append(int(leg))
+    if sorted(legs) != list(LEGS):
+        raise ParameterError("pairs %r must be a partition of the legs %s (each leg in exactly one pair)"
+                             % (pairs, LEGS))
+    first, second = as_tuples
+    return (int(first[0]), int(first[1])), (int(second[0]), int(second[1]))
+
+
+def load_leg_pairs(path: Optional[str] = None) -> LegPairs:
+    """The leg pairs of ``controller.yaml`` (default: the package's ``config/controller.yaml``), or
+    :data:`DEFAULT_LEG_PAIRS` where it names none."""
+    return load_config(path, "controller.yaml", lambda tree: leg_pairs(tree.get("pairs", DEFAULT_LEG_PAIRS)))

@@ -8,7 +8,10 @@ bags on any laptop). Uses:
 * ``/imu/data``: measured attitude (world ENU <- base_link), converted to roll, pitch, yaw;
 * ``/controller_state``: setpoint R_d, geodesic error, armed/holding;
 * ``/sim/pose`` (simulation only): true attitude, reported beside the measured one;
-* ``/diagnostics``: the last value of every node's figures (rates, jitter, latency, error counters).
+* ``/diagnostics``: the last value of every node's figures (rates, jitter, latency, error counters);
+* ``/joint_states`` (the measured servo angles) with the pair phases of ``/controller_state``: the
+  strokes the robot made, power-stroke length, paw excursion and speed
+  (:mod:`quadruped_control.analysis.strokes`), to set a real robot's strokes beside the simulator's.
 
 The trial analysed starts at the last change of the setpoint (the maneuver), or at the first armed
 controller step.
@@ -35,8 +38,11 @@ from typing import Dict, List, Optional, Sequence
 import numpy as np
 
 from quadruped_common.monitoring import STALE_IMU, hold_kind
+from quadruped_common.robot import JOINT_NAMES, load_leg_pairs
 from quadruped_common.so3 import geodesic_angle, geodesic_angles, quat_to_rot, rot_to_rpy, rotations_to_rpy
 from quadruped_control.analysis.metrics import compute_metrics
+from quadruped_control.analysis.strokes import format_spread, stroke_statistics
+from quadruped_control.model.params import load_robot_params
 
 #: Diagnostic values copied into the report (status name suffix -> keys).
 HEALTH_KEYS = {
@@ -103,6 +109,11 @@ class BagData:
     state_armed: List[bool] = field(default_factory=list)
     state_holding: List[bool] = field(default_factory=list)
     state_hold_reason: List[str] = field(default_factory=list)
+    #: per controller step, whether each leg pair was in its power phase
+    state_pair_power: List[Sequence[bool]] = field(default_factory=list)
+    joint_t: List[float] = field(default_factory=list)
+    #: measured joint angles in the order of JOINT_NAMES (NaN for a joint the message did not name)
+    joint_q: List[Sequence[float]] = field(default_factory=list)
     truth_t: List[float] = field(default_factory=list)
     truth_q: List[Sequence[float]] = field(default_factory=list)
     diagnostics: Dict[str, Dict[str, str]] = field(default_factory=dict)
@@ -160,7 +171,7 @@ def missing_spans(data: BagData, max_gap: float = MAX_RECORD_GAP) -> List[Dict[s
 def _read_into(data: BagData, reader) -> None:
     """The report's messages from an open AnyReader."""
     wanted = [c for c in reader.connections if c.topic in (
-        "/imu/data", "/controller_state", "/sim/pose", "/diagnostics")]
+        "/imu/data", "/controller_state", "/sim/pose", "/diagnostics", "/joint_states")]
     for connection, _timestamp, raw in reader.messages(connections=wanted):
         msg = reader.deserialize(raw, connection.msgtype)
         if connection.topic == "/imu/data":
@@ -175,6 +186,12 @@ def _read_into(data: BagData, reader) -> None:
             data.state_armed.append(bool(msg.armed))
             data.state_holding.append(bool(msg.holding))
             data.state_hold_reason.append(str(msg.hold_reason))
+            power = getattr(msg, "PHASE_POWER", 1)  # quadruped_msgs/ControllerState: PHASE_POWER=1
+            data.state_pair_power.append(tuple(int(code) == power for code in getattr(msg, "pair_phase", ())))
+        elif connection.topic == "/joint_states":
+            angles = dict(zip(msg.name, msg.position))
+            data.joint_t.append(_stamp(msg))
+            data.joint_q.append([float(angles.get(name, math.nan)) for name in JOINT_NAMES])
         elif connection.topic == "/sim/pose":
             o = msg.pose.orientation
             data.truth_t.append(_stamp(msg))
@@ -304,12 +321,37 @@ def analyse(data: BagData) -> Dict:
         errors = [geodesic_angle(truth_R[j], R_k) for j, R_k in zip(idx, R)]
         metrics["imu_vs_truth_deg"] = {"p50": math.degrees(float(np.percentile(errors, 50))),
                                        "max": math.degrees(float(np.max(errors)))}
+    strokes = stroke_figures(data, start)
+    metrics["strokes"] = strokes.as_dict() if strokes is not None else None
     metrics["health"] = health(data)
     metrics["record"] = {"files": [{"path": f.path, "start": f.start, "end": f.end, "messages": f.messages,
                                     "reindexed": f.reindexed} for f in data.files],
                          "missing_spans": missing_spans(data)}
     metrics["_series"] = (t, rpy, geodesic)
     return metrics
+
+
+def _sorted_unique(t: Sequence[float], values: Sequence) -> tuple:
+    """Samples in stamp order with repeated stamps dropped (split bags need not be in order)."""
+    order = np.argsort(np.array(t, dtype=float), kind="stable")
+    times = np.array(t, dtype=float)[order]
+    keep = np.concatenate(([True], np.diff(times) > 0)) if times.size else np.zeros(0, dtype=bool)
+    return times[keep], [values[i] for i, k in zip(order, keep) if k]
+
+
+def stroke_figures(data: BagData, start: float):
+    """:func:`~quadruped_control.analysis.strokes.stroke_statistics` of the trial (from ``start``), with the
+    package's robot.yaml and controller.yaml (leg pairs); None without joint angles, pair phases or a
+    complete stroke cycle."""
+    pairs = load_leg_pairs()
+    phase_t, power = _sorted_unique(data.state_t, data.state_pair_power)
+    joint_t, joints = _sorted_unique(data.joint_t, data.joint_q)
+    steps = [k for k, (t, p) in enumerate(zip(phase_t, power)) if t >= start and len(p) == len(pairs)]
+    samples = [k for k, t in enumerate(joint_t) if t >= start]
+    if len(steps) < 2 or len(samples) < 2:
+        return None
+    return stroke_statistics(phase_t[steps], [power[k] for k in steps], joint_t[samples],
+                             np.array([joints[k] for k in samples]), load_robot_params(), pairs)
 
 
 def _fmt(value) -> str:
@@ -356,6 +398,17 @@ def write_report(metrics: Dict, out_dir: str, title: str = "Simulated maneuver")
         lines.append("- missing: none" if not spans else "- missing: " + "; ".join(
             "%.2f s to %s (%s)" % (s["from"] - start, "the end" if s["to"] is None else "%.2f s" % (s["to"] - start),
                                    s["why"]) for s in spans))
+    strokes = metrics.get("strokes")
+    lines += ["", "## Strokes (measured joint angles)", ""]
+    if strokes:
+        lines.append("%d power strokes: power phase %s s; paw excursion %s cm; peak paw speed %s m/s (median "
+                     "(p10-p90) over %d leg strokes); corrupt joint samples skipped: %d." % (
+                         strokes["strokes"], format_spread(strokes["power_duration"]),
+                         format_spread(strokes["excursion"], 100.0, 1), format_spread(strokes["peak_speed"]),
+                         strokes["leg_strokes"], strokes["skipped_samples"]))
+    else:
+        lines.append("No complete stroke cycle with joint angles in the record (/joint_states and the pair "
+                     "phases of /controller_state).")
     lines += ["", "## Stack health (last diagnostics in the bag)", ""]
     for name, values in metrics["health"].items():
         lines.append("- **%s**: %s" % (name, ", ".join("%s %s" % kv for kv in values.items())))

@@ -28,10 +28,10 @@ from __future__ import annotations
 import dataclasses
 import math
 from dataclasses import dataclass
-from typing import Any, Mapping, Optional, Tuple
+from typing import Any, Mapping, Optional
 
 from quadruped_common.config import ParameterError, load_config, number
-from quadruped_common.robot import LEGS
+from quadruped_common.robot import DEFAULT_LEG_PAIRS, LegPairs, leg_pairs
 from quadruped_common.tunables import bounds as tunable_bounds
 from quadruped_control.control.strokes import SCHEMES, CoordinatedParams
 
@@ -102,28 +102,6 @@ class Gains:
         return dataclasses.replace(self, **changes)
 
 
-def _normalise_pairs(pairs: Any) -> Tuple[Tuple[int, int], Tuple[int, int]]:
-    """Check that ``pairs`` is two pairs of leg numbers forming a partition of legs 1..4."""
-    try:
-        as_tuples = tuple(tuple(pair) for pair in pairs)
-    except TypeError:
-        raise ParameterError("pairs must be two pairs of leg numbers, e.g. [[1, 3], [2, 4]], got %r"
-                             % (pairs,)) from None
-    if len(as_tuples) != 2 or any(len(pair) != 2 for pair in as_tuples):
-        raise ParameterError("pairs must be two pairs of leg numbers, e.g. [[1, 3], [2, 4]], got %r" % (pairs,))
-    legs = []
-    for pair in as_tuples:
-        for leg in pair:
-            if isinstance(leg, bool) or not isinstance(leg, int):
-                raise ParameterError("pairs must contain integer leg numbers, got %r" % (pairs,))
-            legs.append(int(leg))
-    if sorted(legs) != list(LEGS):
-        raise ParameterError("pairs %r must be a partition of the legs %s (each leg in exactly one pair)"
-                             % (pairs, LEGS))
-    first, second = as_tuples
-    return (int(first[0]), int(first[1])), (int(second[0]), int(second[1]))
-
-
 @dataclass(frozen=True)
 class ControllerConfig:
     """All parameters of the attitude controller (paper section "Attitude Controller Design").
@@ -156,7 +134,7 @@ class ControllerConfig:
     t_rec: float = 1.5
     t_pow_max: float = 0.5
     dt: float = 0.01
-    pairs: Tuple[Tuple[int, int], Tuple[int, int]] = ((1, 3), (2, 4))
+    pairs: LegPairs = DEFAULT_LEG_PAIRS
     normalize_force_direction: bool = False
     gyroscopic_feedforward: bool = True
     buoyancy_feedforward: bool = True
@@ -184,7 +162,7 @@ class ControllerConfig:
         if self.t_pow_max < self.dt - _TIMING_SLACK:
             raise ParameterError("t_pow_max = %g s is shorter than one control period dt = %g s"
                                  % (self.t_pow_max, self.dt))
-        set_(self, "pairs", _normalise_pairs(self.pairs))
+        set_(self, "pairs", leg_pairs(self.pairs))
         for name in ("normalize_force_direction", "gyroscopic_feedforward", "buoyancy_feedforward"):
             if not isinstance(getattr(self, name), bool):
                 raise ParameterError("%s must be true or false, got %r" % (name, getattr(self, name)))
@@ -267,7 +245,7 @@ def _config_for_set(tree: Mapping[str, Any], name: str, chosen: Any) -> Controll
             t_rec=timing("t_rec", 1.5),
             t_pow_max=timing("t_pow_max", 0.5),
             dt=tree.get("dt", 0.01),
-            pairs=tree.get("pairs", ((1, 3), (2, 4))),
+            pairs=tree.get("pairs", DEFAULT_LEG_PAIRS),
             normalize_force_direction=_bool(tree, "normalize_force_direction", False),
             gyroscopic_feedforward=_bool(tree, "gyroscopic_feedforward", True),
             buoyancy_feedforward=_bool(tree, "buoyancy_feedforward", True),

@@ -3,6 +3,7 @@ import math
 
 import pytest
 
+from quadruped_common import robot
 from quadruped_common.config import ParameterError
 from quadruped_common.robot import (JOINT_NAMES, LEGS, MIRROR_DIAG, joint_index, joint_limits_from_dict, load_joint_limits,
                                     load_servo_no_load_speed, servo_no_load_speed_from_dict)
@@ -41,3 +42,17 @@ def test_servo_no_load_speed_is_read_once_for_model_and_drivers():
     assert load_robot_params().servo_no_load_speed == load_servo_no_load_speed()
     with pytest.raises(ParameterError, match="servo.no_load_speed_rpm"):
         servo_no_load_speed_from_dict({"servo": {"no_load_speed_rpm": 0.0}})
+
+
+def test_leg_pairs_are_read_from_the_controller_config_for_every_layer(tmp_path):
+    """The bag analysis reads the pairs the controller strokes with (config/controller.yaml ``pairs``)."""
+    assert robot.load_leg_pairs() == robot.DEFAULT_LEG_PAIRS == ((1, 3), (2, 4))
+    path = tmp_path / "controller.yaml"
+    path.write_text("tau_max: 2.0\n")
+    assert robot.load_leg_pairs(str(path)) == robot.DEFAULT_LEG_PAIRS  # none named: the default
+    path.write_text("pairs: [[1, 2], [4, 3]]\n")
+    assert robot.load_leg_pairs(str(path)) == ((1, 2), (4, 3))
+    for bad, message in (([[1, 2], [2, 3]], "partition"), ([[1, 2, 3], [4]], "two pairs"), (3, "two pairs"),
+                         ([[1, 2.0], [3, 4]], "integer")):
+        with pytest.raises(ParameterError, match=message):
+            robot.leg_pairs(bad)

@@ -220,3 +220,51 @@ def test_a_gap_in_the_imu_stream_is_a_missing_span(tmp_path):
     assert (spans[0]["from"], spans[0]["to"]) == (pytest.approx(1011.99, abs=1e-6), pytest.approx(1014.0, abs=1e-6))
     assert missing_spans(read_bags([str(tmp_path / "run.bag")]), max_gap=5.0) == []
 
+
+
+def test_the_report_measures_the_strokes_of_the_record(tmp_path):
+    """/joint_states and the pair phases of /controller_state give the strokes' figures (analysis.strokes)."""
+    from quadruped_common.robot import JOINT_NAMES
+    from tests.control.analysis.test_strokes import POWER, REACH, SPEED, _record
+
+    _, _, in_power, t, joints = _record()
+    store = typestore()
+    Header, Time = store.types["std_msgs/msg/Header"], store.types["builtin_interfaces/msg/Time"]
+    Quaternion, Vector3 = store.types["geometry_msgs/msg/Quaternion"], store.types["geometry_msgs/msg/Vector3"]
+    Point, Imu = store.types["geometry_msgs/msg/Point"], store.types["sensor_msgs/msg/Imu"]
+    JointState, State = store.types["sensor_msgs/msg/JointState"], store.types[STATE_TYPE]
+    zero3, cov, level = Vector3(x=0.0, y=0.0, z=0.0), np.zeros(9), Quaternion(x=0.0, y=0.0, z=0.0, w=1.0)
+    bag = str(tmp_path / "strokes.bag")
+    with Writer(bag) as writer:
+        imu_c = writer.add_connection("/imu/data", Imu.__msgtype__, typestore=store)
+        state_c = writer.add_connection("/controller_state", STATE_TYPE, typestore=store)
+        joint_c = writer.add_connection("/joint_states", JointState.__msgtype__, typestore=store)
+        for k, tk in enumerate(t):
+            stamp = 1000.0 + tk
+            ns = int(round(stamp * 1e9))
+            header = Header(seq=k, stamp=Time(sec=int(stamp), nanosec=ns % 1000000000), frame_id="")
+            writer.write(imu_c, ns, store.serialize_ros1(Imu(
+                header=header, orientation=level, orientation_covariance=cov, angular_velocity=zero3,
+                angular_velocity_covariance=cov, linear_acceleration=zero3, linear_acceleration_covariance=cov),
+                Imu.__msgtype__))
+            phases = np.array([State.PHASE_POWER if p else State.PHASE_RECOVERY for p in in_power[k]], dtype=np.uint8)
+            writer.write(state_c, ns, store.serialize_ros1(State(
+                header=header, setpoint=level, attitude_error=zero3, geodesic_error=0.0, torque_command=zero3,
+                torque_saturated=zero3, integral=zero3, torque_estimated=zero3, armed=True, holding=False,
+                hold_reason="", pair_phase=phases, pair_phase_time=np.zeros(2),
+                foot_targets=[Point(x=0.0, y=0.0, z=0.0)] * 4), STATE_TYPE))
+            # the feedback node names its joints; their order in the message need not be JOINT_NAMES'
+            order = list(reversed(range(12)))
+            writer.write(joint_c, ns, store.serialize_ros1(JointState(
+                header=header, name=[JOINT_NAMES[i] for i in order], position=joints[k, order],
+                velocity=np.zeros(0), effort=np.zeros(0)), JointState.__msgtype__))
+    metrics = analyse(read_bags([bag]))
+    strokes = metrics["strokes"]
+    assert strokes["strokes"] == 4 and strokes["leg_strokes"] == 8 and strokes["skipped_samples"] == 0
+    assert strokes["power_duration"] == pytest.approx([POWER] * 3, abs=1e-6)
+    assert strokes["excursion"] == pytest.approx([REACH] * 3, abs=1e-6)
+    assert strokes["peak_speed"] == pytest.approx([SPEED] * 3, rel=1e-3)
+    out = tmp_path / "report"
+    assert main([bag, "--out", str(out)]) == 0
+    assert "4 power strokes: power phase 0.10 (0.10-0.10) s; paw excursion 3.0 (3.0-3.0) cm" in (
+        out / "report.md").read_text()
