@@ -87,7 +87,7 @@ from quadruped_control.sim.plants.tank_dynamics import (TankConstants, appendage
                                                         rope_torsion_torque, rope_twist, tank_forces, tank_rk4)
 
 __all__ = ["TankModel", "TankParams", "appendage_damping_torque", "hydrostatic_wrench", "load_tank_params",
-           "rope_force", "rope_torsion_torque", "rope_twist", "torso_ellipsoid"]
+           "restoring_torque", "rope_force", "rope_torsion_torque", "rope_twist", "torso_ellipsoid"]
 
 Vec3 = Tuple[float, float, float]
 
@@ -250,6 +250,11 @@ def hydrostatic_wrench(R: np.ndarray, weight: float, buoyancy: float,
     up_body = np.asarray(R, dtype=float)[2, :]
     return (np.array([0.0, 0.0, buoyancy - weight]),
             hydrodynamics.torso_buoyancy_torque_matrix(buoyancy, center_of_buoyancy) @ up_body)
+
+
+def restoring_torque(robot: RobotParams, tank: TankParams, rotation: Any, q: Any) -> np.ndarray:
+    """:meth:`TankModel.restoring_torque` on a fresh plant of ``robot`` in the tank ``tank``."""
+    return TankModel(robot, tank).restoring_torque(rotation, q)
 
 
 def torso_ellipsoid(params: RobotParams, scale: float = 1.0) -> Tuple[float, float, float]:
@@ -450,6 +455,21 @@ class TankModel(FloatingBaseModel):
 
     def step_trusted(self, state: RigidBodyState, q: Any, q_dot: Any, dt: float) -> RigidBodyState:
         return self._rk4_tank(state, dt, self._step_context(q, q_dot), q)
+
+    def restoring_torque(self, rotation: Any, q: Any) -> np.ndarray:
+        """The plant's moment about the centre of mass (N m, body axes) on the robot at rest in attitude
+        ``rotation`` (R_B^W) with its legs still at ``q`` (12 or 4 x 3 joint angles), the rope hanging
+        straight above the hook: eq. (tank)'s right-hand side at rest, where only the hydrostatics (torso
+        buoyancy at the centre of buoyancy, paw buoyancy at the feet) and the rope's static tension at
+        the hook act. A static pull that holds the robot at that attitude applies its opposite. Re-attaches
+        the rope to ``rotation`` (:meth:`attach`): call it on a plant that is not being stepped."""
+        state = RigidBodyState(rotation=np.asarray(rotation, dtype=float)).validate()
+        q = joint_array(q, "q")
+        self.attach(state)
+        context = self._step_context(q, np.zeros_like(q))
+        forces = self.generalized_forces(context, tuple(state.position.tolist()), (0.0, 0.0, 0.0),
+                                         as_mat3(state.rotation), (0.0, 0.0, 0.0))
+        return np.array(forces[3:6], dtype=float)
 
     # ---- energy ------------------------------------------------------------------------------
 
