@@ -292,13 +292,7 @@ def analyse(data: BagData) -> Dict:
         raise BagReportError("need /imu/data and /controller_state in the bag (got %d and %d messages)"
                              % (len(data.imu_t), len(data.state_t)))
     start = _trial_start(data)
-    # Bags need not be in stamp order (split bags, several publishers): sort, drop repeated stamps.
-    order = np.argsort(np.array(data.imu_t), kind="stable")
-    imu_t = np.array(data.imu_t)[order]
-    imu_q = [data.imu_q[i] for i in order]
-    unique = np.concatenate(([True], np.diff(imu_t) > 0))
-    imu_t = imu_t[unique]
-    imu_q = [q for q, u in zip(imu_q, unique) if u]
+    imu_t, imu_q = _sorted_unique(data.imu_t, data.imu_q)
     keep = imu_t >= start
     if np.count_nonzero(keep) < 10:
         raise BagReportError("fewer than 10 IMU samples after the maneuver started")
@@ -332,7 +326,8 @@ def analyse(data: BagData) -> Dict:
 
 
 def _sorted_unique(t: Sequence[float], values: Sequence) -> tuple:
-    """Samples in stamp order with repeated stamps dropped (split bags need not be in order)."""
+    """Samples in stamp order with repeated stamps dropped: bags need not be in stamp order (split bags,
+    several publishers)."""
     order = np.argsort(np.array(t, dtype=float), kind="stable")
     times = np.array(t, dtype=float)[order]
     keep = np.concatenate(([True], np.diff(times) > 0)) if times.size else np.zeros(0, dtype=bool)
