@@ -30,11 +30,11 @@ import numpy as np
 
 from quadruped_common.config import ParameterError
 from quadruped_common.so3 import rpy_to_rot
-from quadruped_control.model.kinematics import joint_angles
 from quadruped_control.model.params import RobotParams, load_robot_params
-from quadruped_control.sim.plants.tank import TankParams, load_tank_params, restoring_torque
+from quadruped_control.sim.plants.tank import TankModel, TankParams, load_tank_params
+from quadruped_control.sim.simulation import nominal_joint_angles
 
-__all__ = ["AXES", "TILTS_DEG", "cob_z_for_pull", "main", "nominal_joints", "restoring_curve"]
+__all__ = ["AXES", "TILTS_DEG", "cob_z_for_pull", "main", "restoring_curve"]
 
 #: Tilt axes: name -> body axis index (roll about x, pitch about y).
 AXES = {"roll": 0, "pitch": 1}
@@ -42,11 +42,6 @@ AXES = {"roll": 0, "pitch": 1}
 TILTS_DEG = (15.0, 30.0, 45.0, 60.0, 75.0, 90.0)
 #: Height of the centre of buoyancy that identify.PARAMETERS calls plausible (m): a trimmed robot.
 PLAUSIBLE_COB_Z = (-0.004, 0.004)
-
-
-def nominal_joints(robot: RobotParams) -> np.ndarray:
-    """Joint angles (4 x 3) of the legs at their nominal foot positions (robot.yaml ``nominal_foot_leg``)."""
-    return np.array([joint_angles(robot.nominal_foot_body(leg), leg, robot) for leg in (1, 2, 3, 4)])
 
 
 def _tilt(axis: str, tilt_deg: float) -> np.ndarray:
@@ -60,9 +55,10 @@ def _tilt(axis: str, tilt_deg: float) -> np.ndarray:
 
 
 def restoring_curve(robot: RobotParams, tank: TankParams, axis: str, tilts_deg: Sequence[float]) -> List[float]:
-    """The model's restoring torque about ``axis`` (N m) at each tilt (degrees), legs at the nominal stance."""
-    q = nominal_joints(robot)
-    return [float(restoring_torque(robot, tank, _tilt(axis, a), q)[AXES[axis]]) for a in tilts_deg]
+    """The model's restoring torque about ``axis`` (N m) at each tilt (degrees), legs at the nominal stance
+    (:func:`~quadruped_control.sim.simulation.nominal_joint_angles`)."""
+    model, q = TankModel(robot, tank), nominal_joint_angles(robot)
+    return [float(model.restoring_torque(_tilt(axis, a), q)[AXES[axis]]) for a in tilts_deg]
 
 
 def cob_z_for_pull(robot: RobotParams, tank: TankParams, axis: str, tilt_deg: float, held_torque: float) -> float:

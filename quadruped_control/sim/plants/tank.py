@@ -87,7 +87,7 @@ from quadruped_control.sim.plants.tank_dynamics import (TankConstants, appendage
                                                         rope_torsion_torque, rope_twist, tank_forces, tank_rk4)
 
 __all__ = ["TankModel", "TankParams", "appendage_damping_torque", "hydrostatic_wrench", "load_tank_params",
-           "restoring_torque", "rope_force", "rope_torsion_torque", "rope_twist", "torso_ellipsoid"]
+           "rope_force", "rope_torsion_torque", "rope_twist", "torso_ellipsoid"]
 
 Vec3 = Tuple[float, float, float]
 
@@ -250,11 +250,6 @@ def hydrostatic_wrench(R: np.ndarray, weight: float, buoyancy: float,
     up_body = np.asarray(R, dtype=float)[2, :]
     return (np.array([0.0, 0.0, buoyancy - weight]),
             hydrodynamics.torso_buoyancy_torque_matrix(buoyancy, center_of_buoyancy) @ up_body)
-
-
-def restoring_torque(robot: RobotParams, tank: TankParams, rotation: Any, q: Any) -> np.ndarray:
-    """:meth:`TankModel.restoring_torque` on a fresh plant of ``robot`` in the tank ``tank``."""
-    return TankModel(robot, tank).restoring_torque(rotation, q)
 
 
 def torso_ellipsoid(params: RobotParams, scale: float = 1.0) -> Tuple[float, float, float]:

@@ -8,14 +8,19 @@ import pytest
 
 from quadruped_common.so3 import rpy_to_rot
 from quadruped_control.model.params import load_robot_params
-from quadruped_control.sim.plants.tank import TankModel, TankParams, restoring_torque
+from quadruped_control.sim.plants.tank import TankModel, TankParams
+from quadruped_control.sim.simulation import nominal_joint_angles
 from quadruped_control.studies import trim
+
+
+def restoring_torque(robot, tank, R, q):
+    return TankModel(robot, tank).restoring_torque(R, q)
 
 
 def test_the_torque_is_the_plants_hydrostatics_and_rope_at_rest() -> None:
     """Each term against its closed form: the torso buoyancy's arm and the rope's tension at the hook."""
     robot = load_robot_params()
-    q = trim.nominal_joints(robot)
+    q = nominal_joint_angles(robot)
     base = TankParams(center_of_buoyancy=(0.0, 0.0, 0.001))
     higher = base.with_values(center_of_buoyancy=(0.0, 0.0, 0.003))
     theta = math.radians(40.0)
