@@ -79,6 +79,8 @@ PARAMETERS: Tuple[Tuple[str, float, float], ...] = (
     ("wake_time_constant", 0.05, 1.0),     # s: from D/U (0.075 m at 0.3-1 m/s) to a whole stroke cycle
     ("wake_body_share", 0.0, 1.0),         # the body's motion in the wake: none (steady C_D has it) to all
     ("servo_load_slope", 0.0, 1.0),        # 1/N m: 1 / stall torque of loaded servos, off to 1 N m (rated 3.9)
+    ("body_wake_fraction", 0.0, 0.8),      # share of the body's rate the water its appendages stir reaches
+    ("body_wake_time_constant", 0.5, 20.0),  # s: from a stroke cycle to the swirl a 0.6 m body leaves
 )
 
 #: Weights of the objective's terms (module docstring).
@@ -126,6 +128,8 @@ _PLACES: Dict[str, _Place] = {
     "wake_time_constant": _Place("paw_wake_time_constant", (), "paw_wake", "time_constant"),
     "wake_body_share": _Place("paw_wake_body_share", (), "paw_wake", "body_share"),
     "servo_load_slope": _Place("servo_stall_torque", (), "servos", "stall_torque", reciprocal=True),
+    "body_wake_fraction": _Place("body_wake_fraction", (), "appendage_damping", "wake_fraction"),
+    "body_wake_time_constant": _Place("body_wake_time_constant", (), "appendage_damping", "wake_time_constant"),
 }
 
 

@@ -52,6 +52,19 @@ Candidate effects of the identification against Table 1, each zero (today's mode
   kappa = 0 is today's quasi-steady drag. The wake is integrated once per step with the legs and the body
   velocity of the step's start held (exact for the linear relaxation), and held through the step's RK4
   stages: tau_w >= 0.05 s against the 10 ms step.
+- ``body wake`` (:func:`body_wake_update`): the legs, housings and corners that the appendage damping
+  stands for set the water around the body turning with it, and that water keeps turning after the body
+  slows. The water's rate W (world axes) relaxes towards a fraction kappa_b of the body's,
+  dW/dt = (kappa_b R omega - W) / tau_b, and the appendage damping acts on the body's rate relative to
+  it, -(c_lin + c_quad |omega - R^T W|) (omega - R^T W) per body axis. While the body turns steadily its
+  damping drops to (1 - kappa_b) of tau_appendage; when it slows, the water pushes it on, the
+  mechanism of an overshoot that only a fluid memory on the time scale of the manoeuvre (seconds, not the
+  paws' tenths) gives. The same first-order "entrained water" model as the paws' wake, applied to the
+  body's rotation: the history (memory) effects of unsteady flow around a body that starts and stops
+  (Sarpkaya and Isaacson, "Mechanics of Wave Forces on Offshore Structures" (1981), ch. 3; the
+  convolution (retardation) terms of Cummins' equation, Fossen (2011), section 5.4, whose simplest
+  state-space form is this one pole). kappa_b = 0 is today's damping. Held over a step like the paws'
+  wake: tau_b >= 0.05 s against the 10 ms step.
 - ``loaded servos`` (``servo_stall_torque``, :func:`paw_joint_loads`,
   :func:`~quadruped_control.sim.servo_model.loaded_speed`): a servo's DC motor slows along its
   torque-speed line, w = w_max (1 - tau_opp / tau_stall), against the part tau_opp of its joint's load
@@ -61,7 +74,7 @@ Candidate effects of the identification against Table 1, each zero (today's mode
   rated stall torque is 3.9 N m (the paper, section "Robot Design"); 0 (the default) leaves the rate
   limit alone. Motor torque-speed line: e.g. Hughes and Drury, "Electric Motors and Drives" (2019), ch. 3.
 
-Each effect has a switch (:class:`TankParams`); with all four off the equations reduce to the paper's
+Each effect has a switch (:class:`TankParams`); with all of them off the equations reduce to the paper's
 eq. (trans), (rot) (tested). Parameters: ``config/tank.yaml``.
 Integration: the model's generic RK4 on SO(3) (``_rk4`` with this class's ``_chart_derivative``, the
 chart helpers of :mod:`.rigid_body`).
@@ -83,13 +96,17 @@ from quadruped_control.sim.plants.paper import FloatingBaseModel
 from quadruped_control.sim.plants.rigid_body import (Mat3, RigidBodyState, StepContext, as_mat3, chart_step_end,
                                                      check_dt, diverged, joint_array)
 from quadruped_control.sim.plants.tank_dynamics import (TankConstants, appendage_damping_torque, leg_sums, mass_solver,
-                                                        paw_joint_loads, paw_wake_update, rope_force,
+                                                        body_wake_update, paw_joint_loads, paw_wake_update,
+                                                        rope_force,
                                                         rope_torsion_torque, rope_twist, tank_forces, tank_rk4)
 
 __all__ = ["TankModel", "TankParams", "appendage_damping_torque", "hydrostatic_wrench", "load_tank_params",
            "rope_force", "rope_torsion_torque", "rope_twist", "torso_ellipsoid"]
 
 Vec3 = Tuple[float, float, float]
+
+#: The water's rate without the body wake: the appendage damping sees omega itself.
+_STILL: Vec3 = (0.0, 0.0, 0.0)
 
 
 @dataclass(frozen=True)
@@ -131,6 +148,10 @@ class TankParams:
     #: paw wake: share s_b of the body's motion in the velocity that builds the wake (1: the paw's whole
     #: velocity; 0: the stroke's alone, the body's steady motion leaving the quasi-steady drag as it is)
     paw_wake_body_share: float = 1.0
+    #: body wake: fraction kappa_b of the body's rate the water turning with it reaches (0: off), and its time
+    #: constant tau_b (s)
+    body_wake_fraction: float = 0.0
+    body_wake_time_constant: float = 5.0
 
     def __post_init__(self) -> None:
         for name in ("rope_length", "rope_stiffness"):
@@ -156,6 +177,11 @@ class TankParams:
         if not (math.isfinite(self.paw_wake_time_constant) and self.paw_wake_time_constant >= 0.02):
             raise ParameterError("tank paw_wake_time_constant must be >= 0.02 s (two steps), got %r"
                                  % (self.paw_wake_time_constant,))
+        if not (math.isfinite(self.body_wake_fraction) and 0.0 <= self.body_wake_fraction < 1.0):
+            raise ParameterError("tank body_wake_fraction must be in [0, 1), got %r" % (self.body_wake_fraction,))
+        if not (math.isfinite(self.body_wake_time_constant) and self.body_wake_time_constant >= 0.05):
+            raise ParameterError("tank body_wake_time_constant must be >= 0.05 s (five steps), got %r"
+                                 % (self.body_wake_time_constant,))
         if not math.isfinite(self.net_weight):
             raise ParameterError("tank net_weight must be finite, got %r" % (self.net_weight,))
         for name in ("hook", "center_of_buoyancy"):
@@ -196,7 +222,8 @@ def tank_params_from_dict(data: Mapping[str, Any]) -> TankParams:
     added = check_keys(data["added_mass"], "added_mass", ("scale", "paw_scale"), required=("scale", "paw_scale"))
     paw_drag = check_keys(_optional_section(data, "paw_drag"), "paw_drag", ("scale",))
     servos = check_keys(_optional_section(data, "servos"), "servos", ("speed_scale", "lag_scale", "stall_torque"))
-    appendage = check_keys(_optional_section(data, "appendage_damping"), "appendage_damping", ("linear", "quadratic"))
+    appendage = check_keys(_optional_section(data, "appendage_damping"), "appendage_damping",
+                           ("linear", "quadratic", "wake_fraction", "wake_time_constant"))
     wake = check_keys(_optional_section(data, "paw_wake"), "paw_wake", ("fraction", "time_constant", "body_share"))
 
     def axes(section: Mapping[str, Any], key: str, high: float) -> Vec3:
@@ -229,7 +256,10 @@ def tank_params_from_dict(data: Mapping[str, Any]) -> TankParams:
         rope_torsion_damping=number(rope.get("torsion_damping", 0.0), "suspension.torsion_damping", 0.0, 1e4),
         paw_wake_fraction=number(wake.get("fraction", 0.0), "paw_wake.fraction", 0.0, 0.95),
         paw_wake_time_constant=number(wake.get("time_constant", 0.3), "paw_wake.time_constant", 0.02, 100.0),
-        paw_wake_body_share=number(wake.get("body_share", 1.0), "paw_wake.body_share", 0.0, 1.0))
+        paw_wake_body_share=number(wake.get("body_share", 1.0), "paw_wake.body_share", 0.0, 1.0),
+        body_wake_fraction=number(appendage.get("wake_fraction", 0.0), "appendage_damping.wake_fraction", 0.0, 0.95),
+        body_wake_time_constant=number(appendage.get("wake_time_constant", 5.0), "appendage_damping.wake_time_constant",
+                                       0.05, 1000.0))
 
 
 def load_tank_params(path: Optional[str] = None, tree: Optional[Mapping[str, Any]] = None) -> TankParams:
@@ -312,6 +342,9 @@ class TankModel(FloatingBaseModel):
         #: Each paw's wake velocity (body axes, m/s; :func:`~.tank_dynamics.paw_wake_update`): plant state
         #: beside the rigid body's, zero at :meth:`attach`.
         self.wake = np.zeros((4, 3))
+        #: The rate of the water turning with the body (world axes, rad/s; :func:`~.tank_dynamics.body_wake_update`):
+        #: plant state, zero at :meth:`attach`.
+        self.body_wake = np.zeros(3)
         self._drag_feet = np.zeros((4, 6))
         #: The torque each joint felt from its paw's drag at the last step's start (4 x 3, N m;
         #: :func:`~.tank_dynamics.paw_joint_loads`) when the loaded-servo effect is on, else None; the
@@ -344,6 +377,7 @@ class TankModel(FloatingBaseModel):
         self.untwisted = np.array(state.rotation, dtype=float)
         self._untwisted = tuple(self.untwisted.ravel().tolist())
         self.wake[:] = 0.0  # still water
+        self.body_wake[:] = 0.0
         self._constants = self._build_constants()
 
     def mass_matrix(self, foot_positions: Sequence[Sequence[float]]) -> np.ndarray:
@@ -368,7 +402,8 @@ class TankModel(FloatingBaseModel):
                 (float(tank.rope_torsion_stiffness), float(tank.rope_torsion_damping)), self._untwisted,
                 tuple(float(x) for x in tank.appendage_damping_linear),
                 tuple(float(x) for x in tank.appendage_damping_quadratic), self._body_m, float(self.paw_added_mass),
-                float(tank.paw_wake_fraction), float(tank.paw_wake_time_constant), float(tank.paw_wake_body_share))
+                float(tank.paw_wake_fraction), float(tank.paw_wake_time_constant), float(tank.paw_wake_body_share),
+                float(tank.body_wake_fraction), float(tank.body_wake_time_constant))
 
     def _mass_solver(self, sr: Sequence[float], S: Sequence[float]) -> Tuple[Tuple[float, ...], ...]:
         """:func:`~.tank_dynamics.mass_solver` of this plant (ValueError if the matrix is singular)."""
@@ -382,8 +417,11 @@ class TankModel(FloatingBaseModel):
     def generalized_forces(self, context: "_TankContext", p: Sequence[float], v: Sequence[float], R: Mat3,
                            w: Sequence[float]) -> Tuple[float, ...]:
         """Right-hand side of eq. (tank) (:func:`~.tank_dynamics.tank_forces`)."""
-        return tank_forces(self._constants, context.feet, self._wake_rows(context), context.lift, context.up_torque,
-                           context.leg_sums, p[0], p[1], p[2], v[0], v[1], v[2], R, w[0], w[1], w[2])
+        W = self.body_wake  # the water's rate in body axes, R^T W
+        water = (R[0] * W[0] + R[3] * W[1] + R[6] * W[2], R[1] * W[0] + R[4] * W[1] + R[7] * W[2],
+                 R[2] * W[0] + R[5] * W[1] + R[8] * W[2])
+        return tank_forces(self._constants, context.feet, self._wake_rows(context), water, context.lift,
+                           context.up_torque, context.leg_sums, p[0], p[1], p[2], v[0], v[1], v[2], R, w[0], w[1], w[2])
 
     def _wake_rows(self, context: "_TankContext") -> Sequence[Sequence[float]]:
         """The rows the paw drag sees with the current wake (the legs' rows without a wake)."""
@@ -435,8 +473,12 @@ class TankModel(FloatingBaseModel):
             drag_feet = self._advance_wake(motion, dt, context)
             if loaded:
                 self._update_joint_loads(motion, drag_feet, q)
-            y = tank_rk4(self._constants, context.feet, drag_feet, context.lift, context.up_torque, context.leg_sums,
-                         context.mass_solver, R0, y0, dt)
+            water = _STILL
+            if self.tank.body_wake_fraction > 0.0:
+                water = body_wake_update(self.body_wake, self.tank.body_wake_fraction,
+                                         self.tank.body_wake_time_constant, R0, y0[9], y0[10], y0[11], dt)
+            y = tank_rk4(self._constants, context.feet, drag_feet, water, context.lift, context.up_torque,
+                         context.leg_sums, context.mass_solver, R0, y0, dt)
         except (ValueError, OverflowError) as exc:  # math.sin(inf) etc. once the state has blown up
             raise diverged(dt, state, str(exc)) from None
         return chart_step_end(R0, y[0:6], y[6:9], y[9:12], dt, state)

@@ -24,7 +24,8 @@ from quadruped_control.model.params import RobotParams
 from quadruped_control.sim.plants.paper_batch import held_step_inputs, leg_geometry, store_step_end
 from quadruped_control.sim.plants.rigid_body import RigidBodyState
 from quadruped_control.sim.plants.tank import TankModel, TankParams
-from quadruped_control.sim.plants.tank_dynamics import leg_sums, mass_solver, paw_joint_loads, paw_wake_update, tank_rk4
+from quadruped_control.sim.plants.tank_dynamics import (body_wake_update, leg_sums, mass_solver, paw_joint_loads,
+                                                        paw_wake_update, tank_rk4)
 
 __all__ = ["TankPlantBatch", "tank_batch_step", "tank_trial_step"]
 
@@ -32,11 +33,11 @@ __all__ = ["TankPlantBatch", "tank_batch_step", "tank_trial_step"]
 @trial_step
 def tank_trial_step(i, frames, five_bar, net_paw_buoyancy, drag_constant, drag, extra_lift, suspension, hook, anchor,
                     rope, torsion, untwisted, linear, quadratic, body_m, paw_added_mass, wake_fraction,
-                    wake_time_constant, wake_body_share, restoring, wake, p, v, R, w, q, q_dot, dt, feet, drag_feet,
-                    stall_torque, loads) -> bool:
-    """One held-input RK4 step of eq. (tank) for trial ``i`` in place (its paws' ``wake[i]`` too, with the
-    body's velocity at the step's start, as :class:`~quadruped_control.sim.plants.tank.TankModel`);
-    False if it failed."""
+                    wake_time_constant, wake_body_share, body_wake_fraction, body_wake_time_constant, restoring, wake,
+                    water, p, v, R, w, q, q_dot, dt, feet, drag_feet, stall_torque, loads) -> bool:
+    """One held-input RK4 step of eq. (tank) for trial ``i`` in place (its paws' ``wake[i]`` and the water
+    turning with its body, ``water[i]``, too, with the body's velocity at the step's start, as
+    :class:`~quadruped_control.sim.plants.tank.TankModel`); False if it failed."""
     ok, lift, up, R0 = held_step_inputs(q, q_dot, i, frames, five_bar, net_paw_buoyancy, restoring, R, feet)
     if not ok:
         return False
@@ -44,7 +45,7 @@ def tank_trial_step(i, frames, five_bar, net_paw_buoyancy, drag_constant, drag, 
     solver = mass_solver(body_m[i], paw_added_mass[i], sums[0], sums[2])
     constants = (drag_constant[i], drag[i], extra_lift[i], suspension[i], hook[i], anchor[i], rope[i],
                  torsion[i], untwisted[i], linear[i], quadratic[i], body_m[i], paw_added_mass[i], wake_fraction[i],
-                 wake_time_constant[i], wake_body_share[i])
+                 wake_time_constant[i], wake_body_share[i], body_wake_fraction[i], body_wake_time_constant[i])
     rows = feet
     if wake_fraction[i] > 0.0 or stall_torque[i] > 0.0:
         vx, vy, vz = v[i, 0], v[i, 1], v[i, 2]  # b = R^T v at the step's start, as TankModel._body_motion
@@ -57,28 +58,33 @@ def tank_trial_step(i, frames, five_bar, net_paw_buoyancy, drag_constant, drag, 
         if stall_torque[i] > 0.0:
             paw_joint_loads(q[i], frames, five_bar, rows, drag_constant[i], bx, by, bz, w[i, 0], w[i, 1], w[i, 2],
                             loads[i])
+    turning = (0.0, 0.0, 0.0)
+    if body_wake_fraction[i] > 0.0:
+        turning = body_wake_update(water[i], body_wake_fraction[i], body_wake_time_constant[i], R0, w[i, 0], w[i, 1],
+                                   w[i, 2], dt)
     y0 = (p[i, 0], p[i, 1], p[i, 2], v[i, 0], v[i, 1], v[i, 2], 0.0, 0.0, 0.0, w[i, 0], w[i, 1], w[i, 2])
-    y = tank_rk4(constants, feet, rows, lift, up, sums, solver, R0, y0, dt)
+    y = tank_rk4(constants, feet, rows, turning, lift, up, sums, solver, R0, y0, dt)
     return store_step_end(y, R0, i, p, v, R, w)
 
 
 @kernel
 def tank_batch_step(frames, five_bar, net_paw_buoyancy, drag_constant, drag, extra_lift, suspension, hook, anchor,
                     rope, torsion, untwisted, linear, quadratic, body_m, paw_added_mass, wake_fraction,
-                    wake_time_constant, wake_body_share, restoring, wake, p, v, R, w, q, q_dot, dt, failed,
-                    stall_torque, loads):
+                    wake_time_constant, wake_body_share, body_wake_fraction, body_wake_time_constant, restoring, wake,
+                    water, p, v, R, w, q, q_dot, dt, failed, stall_torque, loads):
     """One held-input RK4 step of eq. (tank) for every trial not yet ``failed``, in place on p, v, w
-    (N, 3), R (N, 3, 3) and the paws' ``wake`` (N, 4, 3). The constants are the fields of
-    :data:`~.tank_dynamics.TankConstants`, one row (or value) per trial, and ``restoring`` (N, 3, 3) each
-    trial's torso buoyancy moment matrix."""
+    (N, 3), R (N, 3, 3), the paws' ``wake`` (N, 4, 3) and the water turning with each body, ``water``
+    (N, 3). The constants are the fields of :data:`~.tank_dynamics.TankConstants`, one row (or value) per
+    trial, and ``restoring`` (N, 3, 3) each trial's torso buoyancy moment matrix."""
     feet = np.empty((4, 6))
     drag_feet = np.empty((4, 6))
     for i in range(p.shape[0]):
         if not failed[i] and not tank_trial_step(i, frames, five_bar, net_paw_buoyancy, drag_constant, drag,
                                                  extra_lift, suspension, hook, anchor, rope, torsion, untwisted,
                                                  linear, quadratic, body_m, paw_added_mass, wake_fraction,
-                                                 wake_time_constant, wake_body_share, restoring, wake, p, v, R, w,
-                                                 q, q_dot, dt, feet, drag_feet, stall_torque, loads):
+                                                 wake_time_constant, wake_body_share, body_wake_fraction,
+                                                 body_wake_time_constant, restoring, wake, water, p, v, R, w, q,
+                                                 q_dot, dt, feet, drag_feet, stall_torque, loads):
             failed[i] = True
 
 
@@ -97,6 +103,9 @@ class TankPlantBatch:
         self.failed = np.zeros(self.n, dtype=bool)
         #: Each trial's paws' wake velocity (N, 4, 3), body axes: TankModel.wake for N trials.
         self.wake = np.zeros((self.n, 4, 3))
+        #: The rate of the water turning with each trial's body (N, 3), world axes: TankModel.body_wake for N
+        #: trials.
+        self.water = np.zeros((self.n, 3))
         #: Each trial's servos' stall torque (N,; 0: no loaded servos) and joint loads (N, 4, 3): TankModel's
         #: servo_stall_torque and joint_loads for N trials, read by the batch's servo step.
         self.stall_torque = np.array([float(tank.servo_stall_torque) for tank in tanks])
@@ -108,7 +117,7 @@ class TankPlantBatch:
         columns = list(zip(*(m.constants() for m in self.models)))
         names = ("drag_constant", "drag", "extra_lift", "suspension", "hook", "anchor", "rope", "torsion",
                  "untwisted", "linear", "quadratic", "body_m", "paw_added_mass", "wake_fraction", "wake_time_constant",
-                 "wake_body_share")
+                 "wake_body_share", "body_wake_fraction", "body_wake_time_constant")
         self.constants = {name: np.array(column, dtype=bool if name == "suspension" else float)
                           for name, column in zip(names, columns)}
 
@@ -118,6 +127,7 @@ class TankPlantBatch:
             model.attach(RigidBodyState(np.array(position[i], dtype=float), np.zeros(3),
                                         np.array(rotation[i], dtype=float), np.zeros(3)))
         self.wake[:] = 0.0
+        self.water[:] = 0.0
         self.loads[:] = 0.0
         self._load_constants()
 
@@ -129,7 +139,8 @@ class TankPlantBatch:
         tank_batch_step(self.frames, self.five_bar, self.net_paw_buoyancy, c["drag_constant"], c["drag"],
                         c["extra_lift"], c["suspension"], c["hook"], c["anchor"], c["rope"], c["torsion"],
                         c["untwisted"], c["linear"], c["quadratic"], c["body_m"], c["paw_added_mass"],
-                        c["wake_fraction"], c["wake_time_constant"], c["wake_body_share"], self.restoring, self.wake,
-                        p, v, R, w, np.ascontiguousarray(q), np.ascontiguousarray(q_dot), float(dt), self.failed,
-                        self.stall_torque, self.loads)
+                        c["wake_fraction"], c["wake_time_constant"], c["wake_body_share"], c["body_wake_fraction"],
+                        c["body_wake_time_constant"], self.restoring, self.wake, self.water, p, v, R, w,
+                        np.ascontiguousarray(q), np.ascontiguousarray(q_dot), float(dt), self.failed, self.stall_torque,
+                        self.loads)
         return p, v, R, w

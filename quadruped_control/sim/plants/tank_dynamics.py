@@ -4,8 +4,8 @@ per-trial plant (:class:`~quadruped_control.sim.plants.tank.TankModel`, plain Py
 when it is installed, :mod:`quadruped_common.jit`).
 
 - :func:`rope_force`, :func:`rope_twist`, :func:`rope_torsion_torque`, :func:`appendage_damping_torque`,
-  :func:`paw_wake_update`: the tank's own force laws and the paws' wake (physics and sources in
-  :mod:`.tank`'s docstring);
+  :func:`paw_wake_update`, :func:`body_wake_update`: the tank's own force laws, the paws' wake and the
+  water the body's appendages set turning (physics and sources in :mod:`.tank`'s docstring);
 - :func:`leg_sums`, :func:`mass_solver`, :func:`solve_mass`: the mass matrix
   M = M_RB + M_A + sum_i M_paw(r_i) of a held step and its solution by the Schur complement;
 - :func:`tank_forces`: the right-hand side of eq. (tank), the paper's forces
@@ -30,16 +30,17 @@ from quadruped_control.model.kinematics import leg_jacobian_row
 from quadruped_control.sim.plants.paper import body_wrench_f
 from quadruped_control.sim.plants.rigid_body import Mat3, chart_point
 
-__all__ = ["TankConstants", "appendage_damping_torque", "leg_sums", "mass_solver", "paw_joint_loads", "paw_wake_update",
-           "rope_force",
-           "rope_torsion_torque", "rope_twist", "solve_mass", "tank_chart_derivative", "tank_forces", "tank_rk4"]
+__all__ = ["TankConstants", "appendage_damping_torque", "body_wake_update", "leg_sums", "mass_solver",
+           "paw_joint_loads", "paw_wake_update", "rope_force", "rope_torsion_torque", "rope_twist", "solve_mass",
+           "tank_chart_derivative", "tank_forces", "tank_rk4"]
 
 Vec3 = Tuple[float, float, float]
 
 #: (drag_constant, body drag coefficients (8), extra lift (torso buoyancy - weight, N), suspension (bool),
 #: hook (3, m), anchor (3, m, world), rope (length, stiffness, damping), torsion (stiffness, damping),
 #: untwisted R_0 (9), appendage damping linear (3), quadratic (3), M_RB + M_A (36), paw added mass m_a,
-#: paw wake (fraction kappa, time constant tau_w in s, body share s_b))
+#: paw wake (fraction kappa, time constant tau_w in s, body share s_b), body wake (fraction kappa_b, time
+#: constant tau_b in s))
 TankConstants = Tuple[Any, ...]
 
 
@@ -129,6 +130,29 @@ def paw_wake_update(feet: Sequence[Sequence[float]], wake: Any, fraction: float,
         drag_feet[leg, 3] = cx - wake[leg, 0]
         drag_feet[leg, 4] = cy - wake[leg, 1]
         drag_feet[leg, 5] = cz - wake[leg, 2]
+
+
+@jitable
+def body_wake_update(water: Any, fraction: float, time_constant: float, R: Sequence[float], wx: float, wy: float,
+                     wz: float, dt: float) -> Vec3:
+    """Advance the water the body's appendages set turning over a held step; its rate in body axes.
+
+    ``water`` (3, world axes, rad/s, in place): the rate W of the water turning with the body. It relaxes
+    towards the fraction kappa_b of the body's rate, R omega, with the time constant tau_b:
+    dW/dt = (kappa_b R omega - W) / tau_b, solved exactly with R and omega of the step's start held,
+    W <- kappa_b R omega + (W - kappa_b R omega) exp(-dt / tau_b). World axes because the water does not
+    turn with the body. Returns R^T W: the rate the appendage damping measures the body's against
+    (:func:`tank_forces`). ``R`` row-major 3x3 (9 floats), ``omega`` body axes."""
+    decay = math.exp(-dt / time_constant)
+    r0, r1, r2, r3, r4, r5, r6, r7, r8 = R[0], R[1], R[2], R[3], R[4], R[5], R[6], R[7], R[8]
+    tx = fraction * (r0 * wx + r1 * wy + r2 * wz)
+    ty = fraction * (r3 * wx + r4 * wy + r5 * wz)
+    tz = fraction * (r6 * wx + r7 * wy + r8 * wz)
+    water[0] = tx + (water[0] - tx) * decay
+    water[1] = ty + (water[1] - ty) * decay
+    water[2] = tz + (water[2] - tz) * decay
+    return (r0 * water[0] + r3 * water[1] + r6 * water[2], r1 * water[0] + r4 * water[1] + r7 * water[2],
+            r2 * water[0] + r5 * water[1] + r8 * water[2])
 
 
 @jitable
@@ -255,16 +279,19 @@ def solve_mass(solver: Tuple[Any, ...], g0: float, g1: float, g2: float, g3: flo
 # --------------------------------------------------------------------------------------------------
 
 @jitable
-def tank_forces(k: TankConstants, feet: Sequence[Sequence[float]], drag_feet: Sequence[Sequence[float]], lift: float,
-                up_torque: Sequence[float], sums: Tuple[Any, ...], px: float, py: float, pz: float, vx: float,
-                vy: float, vz: float, R: Mat3, wx: float, wy: float, wz: float) -> Tuple[float, ...]:
+def tank_forces(k: TankConstants, feet: Sequence[Sequence[float]], drag_feet: Sequence[Sequence[float]],
+                water: Sequence[float], lift: float, up_torque: Sequence[float], sums: Tuple[Any, ...], px: float,
+                py: float, pz: float, vx: float, vy: float, vz: float, R: Mat3, wx: float, wy: float,
+                wz: float) -> Tuple[float, ...]:
     """Right-hand side of eq. (tank): the 6 body-axes generalised forces minus C(nu) nu and f_paw, for
     the constants ``k`` (:data:`TankConstants`), the step's legs (``feet`` rows, paw buoyancy ``lift`` and
     torque matrix ``up_torque`` with the torso's buoyancy moment, :func:`leg_sums` ``sums``; ``drag_feet``
-    the rows the paw drag sees: ``feet`` itself, or with each paw's wake taken off, :func:`paw_wake_update`)
-    and the state p, v (world), R (row-major), omega (body)."""
+    the rows the paw drag sees: ``feet`` itself, or with each paw's wake taken off, :func:`paw_wake_update`;
+    ``water`` the body-axes rate of the water the appendages set turning, :func:`body_wake_update`, zeros
+    without it) and the state p, v (world), R (row-major), omega (body)."""
     (drag_constant, drag, extra_lift, suspension, hook, anchor, rope, torsion, untwisted, linear, quadratic,
-     body_m, ma, _wake_fraction, _wake_time_constant, _wake_body_share) = k
+     body_m, ma, _wake_fraction, _wake_time_constant, _wake_body_share, _body_wake_fraction,
+     _body_wake_time_constant) = k
     r0, r1, r2, r3, r4, r5, r6, r7, r8 = R
     bx, by, bz = r0 * vx + r3 * vy + r6 * vz, r1 * vx + r4 * vy + r7 * vz, r2 * vx + r5 * vy + r8 * vz
     fx, fy, fz, tx, ty, tz = body_wrench_f(drag_feet, drag_constant, drag, up_torque, bx, by, bz, R, wx, wy, wz)
@@ -286,7 +313,8 @@ def tank_forces(k: TankConstants, feet: Sequence[Sequence[float]], drag_feet: Se
             tx, ty, tz = tx + mx, ty + my, tz + mz
     if linear[0] > 0.0 or linear[1] > 0.0 or linear[2] > 0.0 or quadratic[0] > 0.0 or quadratic[1] > 0.0 \
             or quadratic[2] > 0.0:
-        mx, my, mz = appendage_damping_torque((wx, wy, wz), linear, quadratic)
+        # against the water the appendages set turning (exactly omega without it: x - 0.0 == x)
+        mx, my, mz = appendage_damping_torque((wx - water[0], wy - water[1], wz - water[2]), linear, quadratic)
         tx, ty, tz = tx + mx, ty + my, tz + mz
     # Kirchhoff terms of M_RB + M_A: [omega x p; v x p + omega x h], [p; h] = M nu.
     m = body_m
@@ -329,13 +357,13 @@ def tank_forces(k: TankConstants, feet: Sequence[Sequence[float]], drag_feet: Se
 
 @jitable
 def tank_chart_derivative(k: TankConstants, feet: Sequence[Sequence[float]], drag_feet: Sequence[Sequence[float]],
-                          lift: float, up_torque: Sequence[float], sums: Tuple[Any, ...], solver: Tuple[Any, ...],
-                          R0: Mat3, y: Sequence[float]) -> Tuple[float, ...]:
+                          water: Sequence[float], lift: float, up_torque: Sequence[float], sums: Tuple[Any, ...],
+                          solver: Tuple[Any, ...], R0: Mat3, y: Sequence[float]) -> Tuple[float, ...]:
     """d/dt of the chart state y = (p, v, xi, omega) (12 floats) under eq. (tank), R = R0 exp(hat(xi))."""
     px, py, pz, vx, vy, vz, x, y_, z, wx, wy, wz = y
     R, (rx, ry, rz) = chart_point(R0, x, y_, z, wx, wy, wz)
-    g0, g1, g2, g3, g4, g5 = tank_forces(k, feet, drag_feet, lift, up_torque, sums, px, py, pz, vx, vy, vz, R, wx,
-                                         wy, wz)
+    g0, g1, g2, g3, g4, g5 = tank_forces(k, feet, drag_feet, water, lift, up_torque, sums, px, py, pz, vx, vy, vz,
+                                         R, wx, wy, wz)
     n0, n1, n2, n3, n4, n5 = solve_mass(solver, g0, g1, g2, g3, g4, g5)
     r0, r1, r2, r3, r4, r5, r6, r7, r8 = R
     bx, by, bz = r0 * vx + r3 * vy + r6 * vz, r1 * vx + r4 * vy + r7 * vz, r2 * vx + r5 * vy + r8 * vz
@@ -354,17 +382,18 @@ def _axpy12(y: Sequence[float], a: float, k: Sequence[float]) -> Tuple[float, ..
 
 
 @jitable
-def tank_rk4(k: TankConstants, feet: Sequence[Sequence[float]], drag_feet: Sequence[Sequence[float]], lift: float,
-             up_torque: Sequence[float], sums: Tuple[Any, ...], solver: Tuple[Any, ...], R0: Mat3,
-             y0: Sequence[float], dt: float) -> Tuple[float, ...]:
+def tank_rk4(k: TankConstants, feet: Sequence[Sequence[float]], drag_feet: Sequence[Sequence[float]],
+             water: Sequence[float], lift: float, up_torque: Sequence[float], sums: Tuple[Any, ...],
+             solver: Tuple[Any, ...], R0: Mat3, y0: Sequence[float], dt: float) -> Tuple[float, ...]:
     """One classic RK4 step of :func:`tank_chart_derivative` in the chart around R0 from the chart state
-    y0 = (p, v, 0, omega), the legs (and the paws' wake, ``drag_feet``) held over it: the chart state at
-    its end (12 floats; the caller maps it back with :func:`~.rigid_body.chart_step_end`)."""
+    y0 = (p, v, 0, omega), the legs (the paws' wake, ``drag_feet``, and the water turning with the body,
+    ``water``) held over it: the chart state at its end (12 floats; the caller maps it back with
+    :func:`~.rigid_body.chart_step_end`)."""
     h = 0.5 * dt
-    k1 = tank_chart_derivative(k, feet, drag_feet, lift, up_torque, sums, solver, R0, y0)
-    k2 = tank_chart_derivative(k, feet, drag_feet, lift, up_torque, sums, solver, R0, _axpy12(y0, h, k1))
-    k3 = tank_chart_derivative(k, feet, drag_feet, lift, up_torque, sums, solver, R0, _axpy12(y0, h, k2))
-    k4 = tank_chart_derivative(k, feet, drag_feet, lift, up_torque, sums, solver, R0, _axpy12(y0, dt, k3))
+    k1 = tank_chart_derivative(k, feet, drag_feet, water, lift, up_torque, sums, solver, R0, y0)
+    k2 = tank_chart_derivative(k, feet, drag_feet, water, lift, up_torque, sums, solver, R0, _axpy12(y0, h, k1))
+    k3 = tank_chart_derivative(k, feet, drag_feet, water, lift, up_torque, sums, solver, R0, _axpy12(y0, h, k2))
+    k4 = tank_chart_derivative(k, feet, drag_feet, water, lift, up_torque, sums, solver, R0, _axpy12(y0, dt, k3))
     s = dt / 6.0
     return (y0[0] + s * (k1[0] + 2.0 * (k2[0] + k3[0]) + k4[0]), y0[1] + s * (k1[1] + 2.0 * (k2[1] + k3[1]) + k4[1]),
             y0[2] + s * (k1[2] + 2.0 * (k2[2] + k3[2]) + k4[2]), y0[3] + s * (k1[3] + 2.0 * (k2[3] + k3[3]) + k4[3]),

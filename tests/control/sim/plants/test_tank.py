@@ -355,7 +355,7 @@ def test_candidate_effects_are_off_unless_configured() -> None:
     for params in (TankParams(), TANK):
         assert params.appendage_damping_linear == params.appendage_damping_quadratic == (0.0, 0.0, 0.0)
         assert params.rope_torsion_stiffness == params.rope_torsion_damping == 0.0
-        assert params.paw_wake_fraction == 0.0
+        assert params.paw_wake_fraction == params.body_wake_fraction == 0.0
 
 
 @pytest.mark.parametrize("linear, quadratic", [(0.02, 0.0), (0.0, 0.05), (0.0, 0.0)])
@@ -407,7 +407,9 @@ def test_rope_torsion_turns_the_robot_back_with_its_period_and_keeps_the_energy(
                                                  ("suspension", "torsion_stiffness", -1.0),
                                                  ("paw_wake", "fraction", 1.0),
                                                  ("paw_wake", "time_constant", 0.0),
-                                                 ("paw_wake", "body_share", 1.5)])
+                                                 ("paw_wake", "body_share", 1.5),
+                                                 ("appendage_damping", "wake_fraction", 1.0),
+                                                 ("appendage_damping", "wake_time_constant", 0.01)])
 def test_candidate_effect_keys_are_checked(tmp_path, section, key, value) -> None:
     import yaml
     with open(config_path("tank.yaml")) as stream:
@@ -417,12 +419,12 @@ def test_candidate_effect_keys_are_checked(tmp_path, section, key, value) -> Non
     path.write_text(yaml.safe_dump(tree))
     with pytest.raises(ParameterError, match="%s.%s" % (section, key)):
         load_tank_params(str(path))
-    tree[section][key] = [0.0, 0.1, 0.2] if section == "appendage_damping" else 0.3
+    tree[section][key] = [0.0, 0.1, 0.2] if key == "linear" else 0.3
     path.write_text(yaml.safe_dump(tree))
     params = load_tank_params(str(path))
     assert params.appendage_damping_linear == (0.0, 0.1, 0.2) or 0.3 in (
         params.rope_torsion_stiffness, params.paw_wake_fraction, params.paw_wake_time_constant,
-        params.paw_wake_body_share)
+        params.paw_wake_body_share, params.body_wake_fraction, params.body_wake_time_constant)
 
 
 def _wake_rows(u, wake, fraction, tau, dt):
@@ -562,3 +564,57 @@ def test_the_tank_servos_lag_and_speed_scales_reach_the_servo_model() -> None:
                                                                    ("servo_stall_torque", 2.0)))).servo_params
     assert scaled.time_constant == 4.0 * plain.time_constant and scaled.max_speed == 0.5 * plain.max_speed
     assert scaled.stall_torque == 2.0 and plain.stall_torque == 0.0
+
+
+def test_body_wake_relaxes_exactly_in_world_axes_and_is_seen_in_body_axes() -> None:
+    """One body_wake_update: W <- kappa R omega + (W - kappa R omega) exp(-dt / tau) in world axes; it
+    returns R^T W."""
+    from quadruped_control.sim.plants.tank_dynamics import body_wake_update
+    R = rpy_to_rot(0.3, -0.5, 1.1)
+    omega, start = np.array([0.2, -0.4, 0.7]), np.array([0.05, 0.1, -0.2])
+    kappa, tau, dt = 0.6, 2.0, 0.01
+    water = start.copy()
+    seen = body_wake_update(water, kappa, tau, R.ravel().tolist(), *omega, dt)
+    target = kappa * R @ omega
+    np.testing.assert_allclose(water, target + (start - target) * math.exp(-dt / tau), rtol=1e-14, atol=1e-16)
+    np.testing.assert_allclose(seen, R.T @ water, rtol=1e-14, atol=1e-16)
+
+
+def test_a_spin_against_turning_water_follows_the_coupled_law_and_kappa_zero_is_todays_model() -> None:
+    """A free body spinning about z with linear appendage damping c, nothing else acting:
+    I w' = -c (w - W), W' = (kappa w - W) / tau, whose solution is exp(A t) (w0, 0) with
+    A = [[-c/I, c/I], [kappa/tau, -1/tau]]: the water takes up part of the spin and gives it back, so the
+    body slows less than exp(-c t / I); kappa = 0 (any tau) is today's spin-down bit for bit."""
+    from scipy.linalg import expm
+    c, kappa, tau, w0, seconds = 0.05, 0.6, 1.5, 1.0, 4.0
+    inertia = ROBOT.inertia[2, 2]
+    damped = BARE.with_values(appendage_damping_linear=(0.0, 0.0, c))
+    start = RigidBodyState(omega=np.array([0.0, 0.0, w0]))
+    plain = _spin(TankModel(ROBOT, damped), start, seconds)[-1].omega[2]
+    off = _spin(TankModel(ROBOT, damped.with_values(body_wake_time_constant=0.3)), start, seconds)[-1].omega[2]
+    assert off == plain == pytest.approx(w0 * math.exp(-c * seconds / inertia), rel=1e-6)
+    model = TankModel(ROBOT, damped.with_values(body_wake_fraction=kappa, body_wake_time_constant=tau))
+    end = _spin(model, start, seconds)[-1]
+    A = np.array([[-c / inertia, c / inertia], [kappa / tau, -1.0 / tau]])
+    expected_w, expected_water = expm(A * seconds) @ np.array([w0, 0.0])
+    assert end.omega[2] == pytest.approx(expected_w, rel=2e-3)  # the water is held over each 10 ms step
+    assert model.body_wake[2] == pytest.approx(expected_water, rel=2e-3)
+    assert plain < end.omega[2] < w0
+
+
+def test_turning_water_pushes_a_still_body_on_and_attach_stills_it() -> None:
+    """The water keeps turning after the body stops: a body at rest in water turning about the world
+    vertical is dragged along (the overshoot mechanism); attach() starts from still water."""
+    params = BARE.with_values(appendage_damping_linear=(0.05, 0.05, 0.05), body_wake_fraction=0.5,
+                              body_wake_time_constant=3.0)
+    tilted = RigidBodyState(rotation=rpy_to_rot(0.4, 1.2, -0.3))
+    still, model = TankModel(ROBOT, params), TankModel(ROBOT, params)
+    model.body_wake[:] = (0.0, 0.0, 0.4)
+    # the paws' buoyancy turns the tilted body too: the water's push is the difference
+    dragged, alone = _spin(model, tilted, 0.1)[-1], _spin(still, tilted, 0.1)[-1]
+    # angular momentum gained, world axes: about the water's axis (the torque is; the rate is not, I is not
+    # isotropic), about c * 0.4 rad/s * 0.1 s
+    push = dragged.rotation @ ROBOT.inertia @ dragged.omega - alone.rotation @ ROBOT.inertia @ alone.omega
+    assert push[2] == pytest.approx(0.05 * 0.4 * 0.1, rel=0.1) and abs(push[0]) + abs(push[1]) < 0.1 * push[2]
+    model.attach(tilted)
+    assert not model.body_wake.any()
