@@ -172,8 +172,13 @@ def nominal_values(tank: TankParams) -> Dict[str, float]:
     return out
 
 
+def _signed_log_ratio(a: float, b: float) -> float:
+    """ln(a / b) with both times floored at 0.5 s."""
+    return math.log(max(a, 0.5) / max(b, 0.5))
+
+
 def _log_ratio(a: float, b: float) -> float:
-    return abs(math.log(max(a, 0.5) / max(b, 0.5)))
+    return abs(_signed_log_ratio(a, b))
 
 
 def case_cost(row: Dict[str, Any], weights: Optional[Dict[str, float]] = None) -> float:
@@ -219,6 +224,51 @@ def targets(rows: Sequence[Dict[str, Any]]) -> Dict[str, int]:
             "t_r_within_2x": sum(_within_2x(r["sim"]["t_r"], r["paper"]["t_r"]) for r in rows),
             "yaw_t_s_within_2x": sum(_within_2x(r["sim"]["yaw"]["t_s"], r["paper"]["yaw"]["t_s"]) for r in rows),
             "yaw_t_s_reported": sum(r["paper"]["yaw"]["t_s"] is not None for r in rows)}
+
+
+#: The timing metrics of :func:`timing_bias`: (label, paper or simulation side -> value).
+_TIMINGS: Tuple[Tuple[str, Callable[[Dict[str, Any]], Optional[float]]], ...] = (
+    ("t_r", lambda side: side["t_r"]), ("t_s", lambda side: side["t_s"]),
+    ("yaw t_r", lambda side: side["yaw"]["t_r"]), ("yaw t_s", lambda side: side["yaw"]["t_s"]))
+
+
+def timing_bias(rows: Sequence[Dict[str, Any]]) -> Dict[str, Dict[str, Any]]:
+    """How much slower the robot is than the model, per group of experiments: for each timing metric the
+    geometric mean of paper / simulation (the 0.5 s floor of the objective) over the experiments where
+    both report one (> 1: the robot is slower), with their number, and the median overshoot M_p of each
+    side (%). A bias shared by every metric of a group, in sample as well as held out, is what no
+    parameter of a model that treats the groups alike can remove."""
+    out: Dict[str, Dict[str, Any]] = {}
+    for group in GROUPS:
+        members = [r for r in rows if r["set"] == group]
+        if not members:
+            continue
+        entry: Dict[str, Any] = {}
+        for label, get in _TIMINGS:
+            logs = [_signed_log_ratio(get(r["paper"]), get(r["sim"])) for r in members
+                    if get(r["paper"]) is not None and get(r["sim"]) is not None]
+            entry[label] = (math.exp(sum(logs) / len(logs)) if logs else None, len(logs))
+        for side in ("paper", "sim"):
+            overshoots = [r[side]["M_p"] for r in members if r[side]["M_p"] is not None]
+            entry["M_p " + side] = float(np.median(overshoots)) if overshoots else None
+        out[group] = entry
+    return out
+
+
+def format_timing_bias(report: Dict[str, Any]) -> str:
+    """Markdown: :func:`timing_bias` of the full fit's best set (in sample) and of the cross-validation's
+    predictions (held out)."""
+    lines = ["How much slower the robot is than the model: geometric mean of paper / simulation per group "
+             "(> 1: the robot is slower; in brackets the number of experiments), and the median overshoot.", "",
+             "| fit | group | t_r | t_s | yaw t_r | yaw t_s | M_p paper / sim [%] |", "|---|---|---|---|---|---|---|"]
+    held = [r for fold in report["cross_validation"] for r in fold["prediction"]["rows"]]
+    for title, rows in (("full fit, in sample", report["fit"]["best"]["rows"]), ("held out", held)):
+        for group, entry in timing_bias(rows).items():
+            cells = ["--" if entry[label][0] is None else "%.2f (%d)" % entry[label] for label, _ in _TIMINGS]
+            overshoot = " / ".join("--" if entry["M_p " + side] is None else "%.0f" % entry["M_p " + side]
+                                   for side in ("paper", "sim"))
+            lines.append("| %s | %s | %s | %s |" % (title, group, " | ".join(cells), overshoot))
+    return "\n".join(lines) + "\n"
 
 
 #: Every value is written with 17 significant digits, so that a written set reproduces the fit's trials bit
@@ -543,13 +593,16 @@ def _report_text(report: Dict[str, Any], best: Dict[str, Any]) -> str:
             tp["t_s_within_2x"], tb["t_s_within_2x"], tp["t_r_within_2x"], tb["t_r_within_2x"],
             tp["yaw_t_s_within_2x"], tb["yaw_t_s_within_2x"], tp["yaw_t_s_reported"])
             + (" %d / %s |" % (tp["slow_recovery_unsettled"], unsettled(tb)) if checks else ""))
-    lines += ["", pe.format_table(best["rows"], "Best parameter set of the full fit: tank plant, experiment gains, "
-                                  "%s servos" % report["servo_model"])]
+    lines += ["", format_timing_bias(report),
+              pe.format_table(best["rows"], "Best parameter set of the full fit: tank plant, experiment gains, "
+                              "%s servos" % report["servo_model"])]
     return "\n".join(lines) + "\n"
 
 
-if __name__ == "__main__":  # the figure again from a study's identify.json: python -m ... REPORT.json OUT.png
-    import sys
+if __name__ == "__main__":  # the figure again from a study's identify.json, and its timing bias: python -m ...
+    import sys                # REPORT.json OUT.png
 
     with open(sys.argv[1]) as stream:
-        plot_report(json.load(stream), sys.argv[2])
+        loaded = json.load(stream)
+    plot_report(loaded, sys.argv[2])
+    print(format_timing_bias(loaded), end="")

@@ -45,6 +45,30 @@ def test_targets_count_the_issue_figures() -> None:
                       "yaw_t_s_within_2x": 3, "yaw_t_s_reported": 4}
 
 
+def test_timing_bias_is_the_geometric_mean_of_paper_over_simulation_per_group() -> None:
+    """Per group: exp(mean ln(paper / sim)) over the experiments where both report the metric (0.5 s
+    floor), their number, and each side's median overshoot; groups without rows are left out."""
+    rows = [dict(_row(paper_ts=60.0, sim_ts=20.0), set="roll"),
+            dict(_row(paper_ts=40.0, sim_ts=40.0 / 3.0), set="roll"),
+            dict(_row(paper_ts=50.0, sim_ts=None), set="roll"), dict(_row(sim_ts=100.0), set="pitch")]
+    rows[1]["sim"]["t_r"], rows[1]["sim"]["M_p"] = 80.0, 40.0  # the model 4x slower to rise here
+    rows[3]["sim"]["yaw"]["t_s"], rows[3]["sim"]["yaw"]["t_r"] = None, 0.1  # yaw never settles; rises below the floor
+    bias = idf.timing_bias(rows)
+    assert list(bias) == ["roll", "pitch"]
+    roll, pitch = bias["roll"], bias["pitch"]
+    assert roll["t_s"][0] == pytest.approx(3.0) and roll["t_s"][1] == 2
+    assert roll["t_r"][0] == pytest.approx(0.25 ** (1.0 / 3.0)) and roll["t_r"][1] == 3
+    assert roll["yaw t_s"] == (pytest.approx(1.0), 3)
+    assert roll["M_p paper"] == 10.0 and roll["M_p sim"] == 10.0
+    assert pitch["t_s"][0] == pytest.approx(0.5) and pitch["yaw t_s"] == (None, 0)
+    assert pitch["yaw t_r"][0] == pytest.approx(10.0 / 0.5)
+    report = {"fit": {"best": {"rows": rows}}, "cross_validation": [{"prediction": {"rows": rows[:2]}}]}
+    text = idf.format_timing_bias(report)
+    assert "| full fit, in sample | roll | 0.63 (3) | 3.00 (2) | 1.00 (3) | 1.00 (3) | 10 / 10 |" in text
+    assert "| full fit, in sample | pitch | 1.00 (1) | 0.50 (1) | 20.00 (1) | -- | 10 / 10 |" in text
+    assert "| held out | roll | 0.63 (2) |" not in text and "| held out | roll | 0.50 (2) | 3.00 (2) |" in text
+
+
 def test_a_folds_start_is_the_best_screening_set_on_its_training_groups_only() -> None:
     """best_on judges each set on the chosen experiments: the held-out group must not pick the start."""
     good, bad = _row(), _row(sim_ts=200.0)
