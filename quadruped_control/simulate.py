@@ -108,6 +108,9 @@ def build_parser() -> argparse.ArgumentParser:
     parser.add_argument("--slow-recovery-check", action="store_true",
                         help="identify: the paper's t_rec observation as three more experiments: pitch 75, 90 and "
                              "roll+pitch 60 with t_rec = 1.5 s must not settle (the paper needed 1.0 s there)")
+    parser.add_argument("--band", type=float, default=1.0, metavar="FACTOR",
+                        help="identify: count each timing term only beyond this factor of the paper's, "
+                             "max(0, |ln ratio| - ln FACTOR) (default 1: the whole log-ratio; 2 is the issue's band)")
     parser.add_argument("--study", choices=tuple(STUDIES),
                         default=None,
                         help="run a study (paper-experiments: Table 1's 15 experiments, default on the tank plant "
@@ -174,6 +177,8 @@ def main(argv: Optional[Sequence[str]] = None) -> int:
                                          or args.popsize < 2 or args.ensemble < 1):
             parser.error("identify needs --screen, --evaluations, --cv-evaluations and --popsize >= 2 and "
                          "--ensemble >= 1")
+        if args.study == "identify" and not (math.isfinite(args.band) and args.band >= 1.0):
+            parser.error("--band must be a factor >= 1 (1: the whole log-ratio), got %r" % (args.band,))
         if args.study == "identify":
             from quadruped_control.studies.identify import PARAMETERS
             for option in ("include", "parameters"):

@@ -37,6 +37,16 @@ def test_case_cost_weighs_every_metric_yaw_included() -> None:
     assert idf.objective([row, _row()]) == pytest.approx(idf.case_cost(row))
 
 
+def test_a_band_counts_only_the_timing_beyond_its_factor_and_one_is_the_plain_log_ratio() -> None:
+    row = _row(sim_ts=150.0)  # t_s 3x the paper's
+    row["sim"].update(t_r=30.0, e_ss=6.0)  # t_r 1.5x: inside a band of 2; e_ss (5 deg off: 1) is no timing
+    row["sim"]["yaw"] = {"t_s": 120.0, "t_r": None, "e_ss": 0.0, "M_p": 5.0}  # yaw 4x slower, never rose
+    assert idf.case_cost(row, band=1.0) == idf.case_cost(row)  # bit for bit
+    assert idf.case_cost(row) == pytest.approx(math.log(3.0) + math.log(1.5) + 1.0 + 0.5 * math.log(4.0) + 0.5)
+    assert idf.case_cost(row, band=2.0) == pytest.approx(math.log(1.5) + 0.0 + 1.0 + 0.5 * math.log(2.0) + 0.5)
+    assert idf.case_cost(_row(sim_ts=99.0), band=2.0) == 0.0
+
+
 def test_targets_count_the_issue_figures() -> None:
     rows = [_row(), _row(sim_ts=120.0), _row(paper_ts=None, sim_ts=None), _row(sim_ts=None)]
     rows[1]["sim"]["yaw"]["t_s"] = None
@@ -188,6 +198,10 @@ def test_identify_cli_tiny_run(tmp_path) -> None:
         simulate.main(["--study", "identify", "--parameters", "cob_z", "--out", out])
     with pytest.raises(SystemExit):  # adding to the screening's choice and replacing it: one or the other
         simulate.main(["--study", "identify", "--parameters", "cob_z", "--include", "hook_z", "--out", out])
+    assert report["band"] == 1.0
+    for band in ("0.5", "nan"):  # a band is a factor >= 1
+        with pytest.raises(SystemExit):
+            simulate.main(["--study", "identify", "--band", band, "--out", out])
 
 
 def test_the_slow_recovery_check_adds_the_papers_t_rec_cases_to_their_groups(tmp_path) -> None:
