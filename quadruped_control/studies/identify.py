@@ -5,8 +5,9 @@ docs/identification.md): the tank's uncertain estimates (centre of buoyancy, hoo
 length, torso added mass, servo speed, paw drag) and the candidate effects of
 :mod:`quadruped_control.sim.plants.tank` (appendage damping, linear and quadratic, roll/pitch and yaw;
 rope torsion; the paws' wake, fraction, time constant and the body's share; loaded servos; the servos'
-lag). Every set is run on the batched simulator (:mod:`quadruped_control.sim.batch`), the 15 experiments
-of Table 1 with the experiment gains and rate-limited servos, 160 s each.
+lag; the body wake, fraction and time constant). Every set is run on the batched simulator
+(:mod:`quadruped_control.sim.batch`), the 15 experiments of Table 1 with the experiment gains and
+rate-limited servos, 160 s each.
 
 Objective (lower is better), summed over the experiments with the weights of :data:`WEIGHTS`
 (:func:`case_cost`): on the commanded axis (coupled cases: the worse of roll and pitch, as the paper
@@ -243,8 +244,8 @@ def timing_bias(rows: Sequence[Dict[str, Any]]) -> Dict[str, Dict[str, Any]]:
     """How much slower the robot is than the model, per group of experiments: for each timing metric the
     geometric mean of paper / simulation (the 0.5 s floor of the objective) over the experiments where
     both report one (> 1: the robot is slower), with their number, and the median overshoot M_p of each
-    side (%). A bias shared by every metric of a group, in sample as well as held out, is what no
-    parameter of a model that treats the groups alike can remove."""
+    side (%). A bias that stays in every fit, in sample as well as held out, is what the fitted parameters
+    cannot remove."""
     out: Dict[str, Dict[str, Any]] = {}
     for group in GROUPS:
         members = [r for r in rows if r["set"] == group]
@@ -586,6 +587,8 @@ def _report_text(report: Dict[str, Any], best: Dict[str, Any]) -> str:
     def unsettled(counts: Dict[str, int]) -> str:
         return "%d of %d" % (counts["slow_recovery_unsettled"], counts["slow_recovery_checks"])
 
+    band = report.get("band", 1.0)  # reports before --band have none: the plain log-ratios
+    lines += ["", "Timing terms counted beyond a factor %g of the paper's (--band)." % band] if band != 1.0 else []
     lines += ["", "Full fit (CMA-ES, %d sets): objective %.2f; same outcome %d of 15, t_s within 2x %d, t_r "
               "within 2x %d, yaw t_s within 2x %d of %d%s." % (
                   report["fit"]["evaluations"], best["objective"], t["same_outcome"], t["t_s_within_2x"],
@@ -609,8 +612,8 @@ def _report_text(report: Dict[str, Any], best: Dict[str, Any]) -> str:
     return "\n".join(lines) + "\n"
 
 
-if __name__ == "__main__":  # the figure again from a study's identify.json, and its timing bias: python -m ...
-    import sys                # REPORT.json OUT.png
+if __name__ == "__main__":  # python -m ... REPORT.json OUT.png: an identify.json's figure again, and its timing bias
+    import sys
 
     with open(sys.argv[1]) as stream:
         loaded = json.load(stream)

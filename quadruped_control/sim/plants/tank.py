@@ -97,8 +97,8 @@ from quadruped_control.sim.plants.rigid_body import (Mat3, RigidBodyState, StepC
                                                      check_dt, diverged, joint_array)
 from quadruped_control.sim.plants.tank_dynamics import (TankConstants, appendage_damping_torque, leg_sums, mass_solver,
                                                         body_wake_update, paw_joint_loads, paw_wake_update,
-                                                        rope_force,
-                                                        rope_torsion_torque, rope_twist, tank_forces, tank_rk4)
+                                                        rope_force, rope_torsion_torque, rope_twist, tank_forces,
+                                                        tank_rk4)
 
 __all__ = ["TankModel", "TankParams", "appendage_damping_torque", "hydrostatic_wrench", "load_tank_params",
            "rope_force", "rope_torsion_torque", "rope_twist", "torso_ellipsoid"]

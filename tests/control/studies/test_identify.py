@@ -204,7 +204,7 @@ def test_identify_cli_tiny_run(tmp_path) -> None:
             simulate.main(["--study", "identify", "--band", band, "--out", out])
 
 
-def test_the_slow_recovery_check_adds_the_papers_t_rec_cases_to_their_groups(tmp_path) -> None:
+def test_the_slow_recovery_check_adds_the_papers_t_rec_cases_to_their_groups(tmp_path, monkeypatch) -> None:
     report = _tiny_identify(str(tmp_path / "slow"), 2, 1, "--parameters", "cob_z", "net_weight",
                             "--slow-recovery-check")
     assert report["slow_recovery_check"] is True
@@ -221,9 +221,20 @@ def test_the_slow_recovery_check_adds_the_papers_t_rec_cases_to_their_groups(tmp
         assert fold["prediction"]["targets"]["cases"] == (6, 6, 3)[idf.GROUPS.index(fold["held_out"])]
     with open(os.path.join(str(tmp_path / "slow"), "identify.md")) as stream:
         assert "t_rec 1.5 s not settled" in stream.read()
-    plain = _tiny_identify(str(tmp_path / "plain"), 2, 1, "--parameters", "cob_z", "net_weight")
+    bands = []  # the band every cost of the run is computed with
+    case_cost = idf.case_cost
+    monkeypatch.setattr(idf, "case_cost", lambda row, weights=None, band=1.0: bands.append(band) or case_cost(
+        row, weights, band))
+    plain = _tiny_identify(str(tmp_path / "plain"), 2, 1, "--parameters", "cob_z", "net_weight", "--band", "2")
+    assert bands and set(bands) == {2.0}
     assert plain["slow_recovery_check"] is False and plain["fit"]["best"]["cases"] == list(range(15))
     assert plain["fit"]["best"]["targets"]["slow_recovery_checks"] == 0
+    # the band reaches every cost the fit sees, and the report says so
+    assert plain["band"] == 2.0
+    assert plain["fit"]["best"]["objective"] == pytest.approx(
+        sum(idf.case_cost(row, band=2.0) for row in plain["fit"]["best"]["rows"]))
+    with open(os.path.join(str(tmp_path / "plain"), "identify.md")) as stream:
+        assert "beyond a factor 2 of the paper's (--band)" in stream.read()
 
 
 def test_a_screening_that_chooses_one_parameter_is_refused_by_name(tmp_path, monkeypatch) -> None:
