@@ -86,6 +86,9 @@ PARAMETERS: Tuple[Tuple[str, float, float], ...] = (
     ("servo_load_slope", 0.0, 1.0),        # 1/N m: 1 / stall torque of loaded servos, off to 1 N m (rated 3.9)
     ("body_wake_fraction", 0.0, 0.8),      # share of the body's rate the water its appendages stir reaches
     ("body_wake_time_constant", 0.5, 20.0),  # s: from a stroke cycle to the swirl a 0.6 m body leaves
+    ("block_mobility", 0.0, 5.0),          # 1/kg: 1 / the floating block's mass, fixed (0) to 0.2 kg
+    ("block_drag", 0.2, 20.0),             # N s^2/m^2: 1/2 rho C_D A of the block's draft, plus its lines
+    ("block_tie_stiffness", 0.0, 20.0),    # N/m: a slack tie (0) to ten times the rope's pendulum T / L
 )
 
 #: Weights of the objective's terms (module docstring).
@@ -135,6 +138,9 @@ _PLACES: Dict[str, _Place] = {
     "servo_load_slope": _Place("servo_stall_torque", (), "servos", "stall_torque", reciprocal=True),
     "body_wake_fraction": _Place("body_wake_fraction", (), "appendage_damping", "wake_fraction"),
     "body_wake_time_constant": _Place("body_wake_time_constant", (), "appendage_damping", "wake_time_constant"),
+    "block_mobility": _Place("block_mass", (), "suspension", "block_mass", reciprocal=True),
+    "block_drag": _Place("block_drag", (), "suspension", "block_drag"),
+    "block_tie_stiffness": _Place("block_tie_stiffness", (), "suspension", "block_tie_stiffness"),
 }
 
 
@@ -161,7 +167,8 @@ def tank_overrides(values: Dict[str, float]) -> Tuple[Tuple[str, Any], ...]:
 
 def stall_torque_of(slope: float) -> float:
     """The loaded servos' stall torque (N m) of the parameter ``servo_load_slope`` = 1 / tau_stall (1/N m),
-    0 (off) for a zero slope: fitted as the slope so that "off" is inside its bounds. Its own inverse."""
+    0 (off) for a zero slope: fitted as the slope so that "off" is inside its bounds. Its own inverse. The
+    same for the floating block's mass and ``block_mobility`` = 1 / m_b (0: a fixed anchor)."""
     return 1.0 / float(slope) if slope > 0.0 else 0.0
 
 

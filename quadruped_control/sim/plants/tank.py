@@ -14,9 +14,10 @@ Equations of motion (body axes, about the centre of mass, nu = (v^B, omega) with
 - C(nu) nu = Kirchhoff terms of M_RB + M_A (rigid-body gyroscopic and added-mass Coriolis/centripetal,
   Fossen eq. 6.43); f_paw = sum_i m_a (omega x v + omega x (omega x r_i) + 2 omega x c_i) with its
   moments r_i x f_i (paw added mass, :mod:`.added_mass`).
-- ``tau_rope`` (:func:`rope_force`): tension-only, stiff and damped rope from the hook h^B to a fixed
-  anchor a^W: with d = a - (p + R h), L = |d|, T = max(0, k (L - L_0) + c dL/dt) when L > L_0 (slack
-  otherwise); force T d / L at the hook, moment h x R^T (T d / L).
+- ``tau_rope`` (:func:`rope_force`): tension-only, stiff and damped rope from the hook h^B to an
+  anchor a^W (fixed, unless the floating block below moves it): with d = a - (p + R h), L = |d|,
+  T = max(0, k (L - L_0) + c dL/dt) when L > L_0 (slack otherwise); force T d / L at the hook, moment
+  h x R^T (T d / L).
 - ``tau_hydrostatic`` (:func:`hydrostatic_wrench`): torso weight W (paws excluded: their net weight is
   the paper's paw buoyancy) down at the centre of mass and torso buoyancy B = W - net_weight up at the
   centre of buoyancy r_cb: force (B - W) z_hat, moment r_cb x (B R^T z_hat).
@@ -65,6 +66,18 @@ Candidate effects of the identification against Table 1, each zero (today's mode
   convolution (retardation) terms of Cummins' equation, Fossen (2011), section 5.4, whose simplest
   state-space form is this one pole). kappa_b = 0 is today's damping. Held over a step like the paws'
   wake: tau_b >= 0.05 s against the 10 ms step.
+- ``floating block`` (:func:`~.tank_dynamics.floating_block_update`, ``block_mass``, ``block_drag``,
+  ``block_tie_stiffness``): the rope hangs from a foam block that floats on the surface, tied to a gantry
+  (the paper, section "Experimental Setup"), not from a fixed point. The block moves horizontally under
+  the rope's pull, its drag and its tie: m_b a'' = -T u_h - c_b |a'| a' - k_g (a - a_0), with m_b its mass
+  with added mass, c_b = 1/2 rho C_D A of its draft (a bluff block: C_D about 1, Hoerner, "Fluid-Dynamic
+  Drag" (1965), ch. 3), k_g the tie's horizontal stiffness around the block's rest a_0. The rope's
+  pendulum stiffness on the block, T / L, is of the order of 1 N/m, so a light, free block drifts over the
+  hook within seconds and the rope's direction, and the hook's moment on the body, lag the swing: a
+  restoring torque with a memory. block_mass = 0 (the default) is today's fixed anchor; a tie far stiffer
+  than T / L tends to it (tested). Advanced once per step with the body state of the step's start, like
+  the wakes, the rope's dashpot and the block's drag implicit (the dashpot is far stiffer than a light
+  block); the hook's rope velocity is taken relative to the block's.
 - ``loaded servos`` (``servo_stall_torque``, :func:`paw_joint_loads`,
   :func:`~quadruped_control.sim.servo_model.loaded_speed`): a servo's DC motor slows along its
   torque-speed line, w = w_max (1 - tau_opp / tau_stall), against the part tau_opp of its joint's load
@@ -95,15 +108,18 @@ from quadruped_control.sim.plants.added_mass import ellipsoid_added_mass, point_
 from quadruped_control.sim.plants.paper import FloatingBaseModel
 from quadruped_control.sim.plants.rigid_body import (Mat3, RigidBodyState, StepContext, as_mat3, chart_step_end,
                                                      check_dt, diverged, joint_array)
-from quadruped_control.sim.plants.tank_dynamics import (TankConstants, appendage_damping_torque, leg_sums, mass_solver,
-                                                        body_wake_update, paw_joint_loads, paw_wake_update,
-                                                        rope_force, rope_torsion_torque, rope_twist, tank_forces,
-                                                        tank_rk4)
+from quadruped_control.sim.plants.tank_dynamics import (TankConstants, appendage_damping_torque, body_wake_update,
+                                                        floating_block_update, leg_sums, mass_solver, paw_joint_loads,
+                                                        paw_wake_update, rope_force, rope_torsion_torque, rope_twist,
+                                                        tank_forces, tank_rk4)
 
 __all__ = ["TankModel", "TankParams", "appendage_damping_torque", "hydrostatic_wrench", "load_tank_params",
            "rope_force", "rope_torsion_torque", "rope_twist", "torso_ellipsoid"]
 
 Vec3 = Tuple[float, float, float]
+
+#: The plant step the floating block's stability check allows for (s): the 100 Hz control period.
+_MAX_STEP = 0.01
 
 #: The water's rate without the body wake: the appendage damping sees omega itself.
 _STILL: Vec3 = (0.0, 0.0, 0.0)
@@ -152,6 +168,11 @@ class TankParams:
     #: constant tau_b (s)
     body_wake_fraction: float = 0.0
     body_wake_time_constant: float = 5.0
+    #: floating block the rope hangs from: its mass with added mass m_b (kg; 0: the anchor is fixed), its
+    #: quadratic horizontal drag c_b (N s^2/m^2) and the horizontal stiffness k_g of its tie to the gantry (N/m)
+    block_mass: float = 0.0
+    block_drag: float = 2.0
+    block_tie_stiffness: float = 0.0
 
     def __post_init__(self) -> None:
         for name in ("rope_length", "rope_stiffness"):
@@ -182,6 +203,18 @@ class TankParams:
         if not (math.isfinite(self.body_wake_time_constant) and self.body_wake_time_constant >= 0.05):
             raise ParameterError("tank body_wake_time_constant must be >= 0.05 s (five steps), got %r"
                                  % (self.body_wake_time_constant,))
+        if not (math.isfinite(self.block_mass) and (self.block_mass == 0.0 or self.block_mass >= 0.01)):
+            raise ParameterError("tank block_mass must be 0 (fixed anchor) or >= 0.01 kg, got %r" % (self.block_mass,))
+        if not (math.isfinite(self.block_drag) and self.block_drag >= 0.0):
+            raise ParameterError("tank block_drag must be finite and >= 0, got %r" % (self.block_drag,))
+        if not (math.isfinite(self.block_tie_stiffness) and 0.0 <= self.block_tie_stiffness <= 1000.0):
+            raise ParameterError("tank block_tie_stiffness must be in [0, 1000] N/m, got %r"
+                                 % (self.block_tie_stiffness,))
+        if self.block_mass > 0.0 and (self.rope_stiffness + self.block_tie_stiffness) * _MAX_STEP ** 2 \
+                >= 4.0 * self.block_mass:
+            # floating_block_update keeps the rope's elastic pull explicit: stable while dt^2 (k + k_g) / m_b < 4
+            raise ParameterError("tank block_mass must exceed (rope stiffness + block_tie_stiffness) * %g s^2 / 4 "
+                                 "(stable with a %g s step), got %r" % (_MAX_STEP ** 2, _MAX_STEP, self.block_mass))
         if not math.isfinite(self.net_weight):
             raise ParameterError("tank net_weight must be finite, got %r" % (self.net_weight,))
         for name in ("hook", "center_of_buoyancy"):
@@ -215,7 +248,8 @@ def tank_params_from_dict(data: Mapping[str, Any]) -> TankParams:
     effects = check_keys(_optional_section(data, "effects"), "effects",
                          ("suspension", "hydrostatics", "torso_added_mass", "paw_added_mass", "drag"))
     rope = check_keys(data["suspension"], "suspension",
-                      ("hook", "length", "stiffness", "damping", "torsion_stiffness", "torsion_damping"),
+                      ("hook", "length", "stiffness", "damping", "torsion_stiffness", "torsion_damping",
+                       "block_mass", "block_drag", "block_tie_stiffness"),
                       required=("hook", "length", "stiffness", "damping"))
     hydro = check_keys(data["hydrostatics"], "hydrostatics", ("net_weight", "center_of_buoyancy"),
                        required=("net_weight", "center_of_buoyancy"))
@@ -254,6 +288,10 @@ def tank_params_from_dict(data: Mapping[str, Any]) -> TankParams:
         appendage_damping_quadratic=axes(appendage, "quadratic", 100.0),
         rope_torsion_stiffness=number(rope.get("torsion_stiffness", 0.0), "suspension.torsion_stiffness", 0.0, 1e4),
         rope_torsion_damping=number(rope.get("torsion_damping", 0.0), "suspension.torsion_damping", 0.0, 1e4),
+        block_mass=number(rope.get("block_mass", 0.0), "suspension.block_mass", 0.0, 100.0),
+        block_drag=number(rope.get("block_drag", 2.0), "suspension.block_drag", 0.0, 1e4),
+        block_tie_stiffness=number(rope.get("block_tie_stiffness", 0.0), "suspension.block_tie_stiffness", 0.0,
+                                   1000.0),
         paw_wake_fraction=number(wake.get("fraction", 0.0), "paw_wake.fraction", 0.0, 0.95),
         paw_wake_time_constant=number(wake.get("time_constant", 0.3), "paw_wake.time_constant", 0.02, 100.0),
         paw_wake_body_share=number(wake.get("body_share", 1.0), "paw_wake.body_share", 0.0, 1.0),
@@ -335,7 +373,11 @@ class TankModel(FloatingBaseModel):
         self.paw_added_mass = (tank.paw_added_mass_scale * sphere_added_mass(outer_volume, params.rho)
                                if tank.paw_added_mass else 0.0)
         self.anchor = np.zeros(3)
-        self._anchor: Vec3 = (0.0, 0.0, 0.0)
+        #: the rope's upper end, position and velocity (world; :func:`~.tank_dynamics.floating_block_update`),
+        #: and where the block rests on its tie: plant state, set by :meth:`attach`
+        self.block = np.zeros(6)
+        self.block_rest = np.zeros(3)
+        self._anchor: Tuple[float, ...] = (0.0,) * 6
         self.untwisted = np.eye(3)
         self._untwisted = tuple(self.untwisted.ravel().tolist())
         self._body_m = tuple(self.body_mass_matrix.ravel().tolist())
@@ -372,7 +414,9 @@ class TankModel(FloatingBaseModel):
         hook = state.position + state.rotation @ self.hook
         stretch = self.static_rope_tension() / self.tank.rope_stiffness
         self.anchor = hook + np.array([0.0, 0.0, self.tank.rope_length + stretch])
-        self._anchor = tuple(self.anchor.tolist())  # type: ignore[assignment]
+        self.block_rest = self.anchor.copy()
+        self.block = np.concatenate((self.anchor, np.zeros(3)))  # the block at rest
+        self._anchor = tuple(self.block.tolist())
         # The rope hangs untwisted in this attitude (rope torsion measures the twist from it).
         self.untwisted = np.array(state.rotation, dtype=float)
         self._untwisted = tuple(self.untwisted.ravel().tolist())
@@ -473,6 +517,8 @@ class TankModel(FloatingBaseModel):
             drag_feet = self._advance_wake(motion, dt, context)
             if loaded:
                 self._update_joint_loads(motion, drag_feet, q)
+            if self.tank.block_mass > 0.0 and self.tank.suspension:
+                self._advance_block(state, R0, dt)
             water = _STILL
             if self.tank.body_wake_fraction > 0.0:
                 water = body_wake_update(self.body_wake, self.tank.body_wake_fraction,
@@ -482,6 +528,17 @@ class TankModel(FloatingBaseModel):
         except (ValueError, OverflowError) as exc:  # math.sin(inf) etc. once the state has blown up
             raise diverged(dt, state, str(exc)) from None
         return chart_step_end(R0, y[0:6], y[6:9], y[9:12], dt, state)
+
+    def _advance_block(self, state: RigidBodyState, R0: Tuple[float, ...], dt: float) -> None:
+        """:func:`~.tank_dynamics.floating_block_update` over this step (the body state of its start):
+        the block moves, and the constants carry its new position and velocity."""
+        tank = self.tank
+        floating_block_update(self.block, self.block_rest, state.position, state.velocity, R0, state.omega,
+                              self.hook, (tank.rope_length, tank.rope_stiffness, tank.rope_damping), tank.block_mass,
+                              tank.block_drag, tank.block_tie_stiffness, dt)
+        self.anchor = self.block[:3].copy()
+        self._anchor = tuple(self.block.tolist())
+        self._constants = self._build_constants()
 
     def step(self, state: RigidBodyState, q: Any, q_dot: Any, dt: float) -> RigidBodyState:
         dt = check_dt(dt)

@@ -24,8 +24,8 @@ from quadruped_control.model.params import RobotParams
 from quadruped_control.sim.plants.paper_batch import held_step_inputs, leg_geometry, store_step_end
 from quadruped_control.sim.plants.rigid_body import RigidBodyState
 from quadruped_control.sim.plants.tank import TankModel, TankParams
-from quadruped_control.sim.plants.tank_dynamics import (body_wake_update, leg_sums, mass_solver, paw_joint_loads,
-                                                        paw_wake_update, tank_rk4)
+from quadruped_control.sim.plants.tank_dynamics import (body_wake_update, floating_block_update, leg_sums, mass_solver,
+                                                        paw_joint_loads, paw_wake_update, tank_rk4)
 
 __all__ = ["TankPlantBatch", "tank_batch_step", "tank_trial_step"]
 
@@ -34,10 +34,10 @@ __all__ = ["TankPlantBatch", "tank_batch_step", "tank_trial_step"]
 def tank_trial_step(i, frames, five_bar, net_paw_buoyancy, drag_constant, drag, extra_lift, suspension, hook, anchor,
                     rope, torsion, untwisted, linear, quadratic, body_m, paw_added_mass, wake_fraction,
                     wake_time_constant, wake_body_share, body_wake_fraction, body_wake_time_constant, restoring, wake,
-                    water, p, v, R, w, q, q_dot, dt, feet, drag_feet, stall_torque, loads) -> bool:
-    """One held-input RK4 step of eq. (tank) for trial ``i`` in place (its paws' ``wake[i]`` and the water
-    turning with its body, ``water[i]``, too, with the body's velocity at the step's start, as
-    :class:`~quadruped_control.sim.plants.tank.TankModel`); False if it failed."""
+                    water, p, v, R, w, q, q_dot, dt, feet, drag_feet, stall_torque, loads, block, block_rest) -> bool:
+    """One held-input RK4 step of eq. (tank) for trial ``i`` in place (its paws' ``wake[i]``, the water
+    turning with its body, ``water[i]``, and its floating block, ``anchor[i]``, too, with the body's state
+    at the step's start, as :class:`~quadruped_control.sim.plants.tank.TankModel`); False if it failed."""
     ok, lift, up, R0 = held_step_inputs(q, q_dot, i, frames, five_bar, net_paw_buoyancy, restoring, R, feet)
     if not ok:
         return False
@@ -58,6 +58,9 @@ def tank_trial_step(i, frames, five_bar, net_paw_buoyancy, drag_constant, drag, 
         if stall_torque[i] > 0.0:
             paw_joint_loads(q[i], frames, five_bar, rows, drag_constant[i], bx, by, bz, w[i, 0], w[i, 1], w[i, 2],
                             loads[i])
+    if block[i, 0] > 0.0 and suspension[i]:
+        floating_block_update(anchor[i], block_rest[i], p[i], v[i], R0, w[i], hook[i], rope[i], block[i, 0],
+                              block[i, 1], block[i, 2], dt)
     turning = (0.0, 0.0, 0.0)
     if body_wake_fraction[i] > 0.0:
         turning = body_wake_update(water[i], body_wake_fraction[i], body_wake_time_constant[i], R0, w[i, 0], w[i, 1],
@@ -71,11 +74,13 @@ def tank_trial_step(i, frames, five_bar, net_paw_buoyancy, drag_constant, drag, 
 def tank_batch_step(frames, five_bar, net_paw_buoyancy, drag_constant, drag, extra_lift, suspension, hook, anchor,
                     rope, torsion, untwisted, linear, quadratic, body_m, paw_added_mass, wake_fraction,
                     wake_time_constant, wake_body_share, body_wake_fraction, body_wake_time_constant, restoring, wake,
-                    water, p, v, R, w, q, q_dot, dt, failed, stall_torque, loads):
+                    water, p, v, R, w, q, q_dot, dt, failed, stall_torque, loads, block, block_rest):
     """One held-input RK4 step of eq. (tank) for every trial not yet ``failed``, in place on p, v, w
-    (N, 3), R (N, 3, 3), the paws' ``wake`` (N, 4, 3) and the water turning with each body, ``water``
-    (N, 3). The constants are the fields of :data:`~.tank_dynamics.TankConstants`, one row (or value) per
-    trial, and ``restoring`` (N, 3, 3) each trial's torso buoyancy moment matrix."""
+    (N, 3), R (N, 3, 3), the paws' ``wake`` (N, 4, 3), the water turning with each body, ``water``
+    (N, 3), and each rope's upper end, ``anchor`` (N, 6). The constants are the fields of
+    :data:`~.tank_dynamics.TankConstants`, one row (or value) per trial, ``restoring`` (N, 3, 3) each
+    trial's torso buoyancy moment matrix, ``block`` (N, 3) each floating block's mass, drag and tie
+    stiffness (mass 0: a fixed anchor) and ``block_rest`` (N, 3) where it rests."""
     feet = np.empty((4, 6))
     drag_feet = np.empty((4, 6))
     for i in range(p.shape[0]):
@@ -84,7 +89,8 @@ def tank_batch_step(frames, five_bar, net_paw_buoyancy, drag_constant, drag, ext
                                                  linear, quadratic, body_m, paw_added_mass, wake_fraction,
                                                  wake_time_constant, wake_body_share, body_wake_fraction,
                                                  body_wake_time_constant, restoring, wake, water, p, v, R, w, q,
-                                                 q_dot, dt, feet, drag_feet, stall_torque, loads):
+                                                 q_dot, dt, feet, drag_feet, stall_torque, loads, block,
+                                                 block_rest):
             failed[i] = True
 
 
@@ -110,6 +116,12 @@ class TankPlantBatch:
         #: servo_stall_torque and joint_loads for N trials, read by the batch's servo step.
         self.stall_torque = np.array([float(tank.servo_stall_torque) for tank in tanks])
         self.loads = np.zeros((self.n, 4, 3))
+        #: Each trial's floating block (N, 3): mass, drag and tie stiffness (TankParams' block_*; mass 0: the
+        #: anchor is fixed); where it rests (N, 3, world), set by attach. Its position and velocity are the
+        #: constants' "anchor" rows (N, 6), advanced in place.
+        self.block = np.array([[tank.block_mass, tank.block_drag, tank.block_tie_stiffness] for tank in tanks],
+                              dtype=float).reshape(self.n, 3)
+        self.block_rest = np.zeros((self.n, 3))
         self._load_constants()
 
     def _load_constants(self) -> None:
@@ -130,6 +142,7 @@ class TankPlantBatch:
         self.water[:] = 0.0
         self.loads[:] = 0.0
         self._load_constants()
+        self.block_rest = np.array([m.block_rest for m in self.models], dtype=float).reshape(self.n, 3)
 
     def step(self, p: np.ndarray, v: np.ndarray, R: np.ndarray, w: np.ndarray, q: np.ndarray, q_dot: np.ndarray,
              dt: float):
@@ -142,5 +155,5 @@ class TankPlantBatch:
                         c["wake_fraction"], c["wake_time_constant"], c["wake_body_share"], c["body_wake_fraction"],
                         c["body_wake_time_constant"], self.restoring, self.wake, self.water, p, v, R, w,
                         np.ascontiguousarray(q), np.ascontiguousarray(q_dot), float(dt), self.failed, self.stall_torque,
-                        self.loads)
+                        self.loads, self.block, self.block_rest)
         return p, v, R, w

@@ -4,8 +4,9 @@ per-trial plant (:class:`~quadruped_control.sim.plants.tank.TankModel`, plain Py
 when it is installed, :mod:`quadruped_common.jit`).
 
 - :func:`rope_force`, :func:`rope_twist`, :func:`rope_torsion_torque`, :func:`appendage_damping_torque`,
-  :func:`paw_wake_update`, :func:`body_wake_update`: the tank's own force laws, the paws' wake and the
-  water the body's appendages set turning (physics and sources in :mod:`.tank`'s docstring);
+  :func:`paw_wake_update`, :func:`body_wake_update`, :func:`floating_block_update`: the tank's own force
+  laws, the paws' wake, the water the body's appendages set turning and the floating block the rope hangs
+  from (physics and sources in :mod:`.tank`'s docstring);
 - :func:`leg_sums`, :func:`mass_solver`, :func:`solve_mass`: the mass matrix
   M = M_RB + M_A + sum_i M_paw(r_i) of a held step and its solution by the Schur complement;
 - :func:`tank_forces`: the right-hand side of eq. (tank), the paper's forces
@@ -30,14 +31,15 @@ from quadruped_control.model.kinematics import leg_jacobian_row
 from quadruped_control.sim.plants.paper import body_wrench_f
 from quadruped_control.sim.plants.rigid_body import Mat3, chart_point
 
-__all__ = ["TankConstants", "appendage_damping_torque", "body_wake_update", "leg_sums", "mass_solver",
+__all__ = ["TankConstants", "appendage_damping_torque", "body_wake_update", "floating_block_update", "leg_sums",
+           "mass_solver",
            "paw_joint_loads", "paw_wake_update", "rope_force", "rope_torsion_torque", "rope_twist", "solve_mass",
            "tank_chart_derivative", "tank_forces", "tank_rk4"]
 
 Vec3 = Tuple[float, float, float]
 
 #: (drag_constant, body drag coefficients (8), extra lift (torso buoyancy - weight, N), suspension (bool),
-#: hook (3, m), anchor (3, m, world), rope (length, stiffness, damping), torsion (stiffness, damping),
+#: hook (3, m), anchor (6: position (m) and velocity (m/s) of the rope's upper end, world), rope (length, stiffness, damping), torsion (stiffness, damping),
 #: untwisted R_0 (9), appendage damping linear (3), quadratic (3), M_RB + M_A (36), paw added mass m_a,
 #: paw wake (fraction kappa, time constant tau_w in s, body share s_b), body wake (fraction kappa_b, time
 #: constant tau_b in s))
@@ -53,7 +55,9 @@ def _cross(ax: float, ay: float, az: float, bx: float, by: float, bz: float) -> 
 def rope_force(hook_world: Sequence[float], hook_velocity: Sequence[float], anchor: Sequence[float],
                length: float, stiffness: float, damping: float) -> Vec3:
     """Rope force on the hook, world frame (N): T d / |d| with d = anchor - hook and
-    T = max(0, k (|d| - L_0) + c d|d|/dt) while |d| > L_0, zero when slack (a rope only pulls)."""
+    T = max(0, k (|d| - L_0) + c d|d|/dt) while |d| > L_0, zero when slack (a rope only pulls).
+    ``hook_velocity``: the hook's velocity relative to the anchor (the anchor's own, a moving block's,
+    subtracted: :func:`floating_block_update`)."""
     dx, dy, dz = anchor[0] - hook_world[0], anchor[1] - hook_world[1], anchor[2] - hook_world[2]
     distance = math.sqrt(dx * dx + dy * dy + dz * dz)
     if distance <= length:
@@ -153,6 +157,54 @@ def body_wake_update(water: Any, fraction: float, time_constant: float, R: Seque
     water[2] = tz + (water[2] - tz) * decay
     return (r0 * water[0] + r3 * water[1] + r6 * water[2], r1 * water[0] + r4 * water[1] + r7 * water[2],
             r2 * water[0] + r5 * water[1] + r8 * water[2])
+
+
+@jitable
+def floating_block_update(anchor: Any, rest: Sequence[float], p: Sequence[float], v: Sequence[float],
+                          R: Sequence[float], w: Sequence[float], hook: Sequence[float], rope: Sequence[float],
+                          mass: float, drag: float, tie: float, dt: float) -> None:
+    """Advance the floating block the rope hangs from over a held step, in place on ``anchor`` (6 floats,
+    world: the block's position a, i.e. the rope's upper end, and its velocity a_dot).
+
+    The block floats at the surface, so only its horizontal motion is free (its waterplane holds its
+    height to millimetres): m_b a_dd = -T u_h - c_b |a_dot| a_dot - k_g (a - a_0), horizontal components,
+    with T u the rope's pull on the hook (:func:`rope_force`: u the unit vector from the hook to the block,
+    T = k (|d| - L_0) + c u . (a_dot - v_hook) while taut and positive, else 0), c_b the block's quadratic
+    drag (1/2 rho C_D A of its draft), k_g the horizontal stiffness of its tie to the gantry around its rest
+    position ``rest`` (a_0, where :meth:`TankModel.attach <quadruped_control.sim.plants.tank.TankModel.attach>`
+    put it) and m_b its mass with its added mass. The body's state is the step's start (p, v world, R
+    row-major, omega body axes; ``hook`` h^B, ``rope`` (L_0, k, c)). Semi-implicit Euler with the rope's
+    dashpot and the block's drag implicit in the new velocity (the dashpot, there to kill the rope's own
+    bounce, is far stiffer than a light block: explicit, it would need dt < 2 m_b / c), solved by
+    Sherman-Morrison: ((m_b / dt + c_b |a_dot|) I + c u_h u_h^T) a_dot' = m_b a_dot / dt - T_0 u_h
+    - k_g (a - a_0), T_0 the tension with the block still; then a <- a + dt a_dot'. The rope's elastic pull
+    stays explicit: stable while dt^2 (k + k_g) / m_b < 4 (:class:`~quadruped_control.sim.plants.tank.TankParams`
+    checks it)."""
+    r0, r1, r2, r3, r4, r5, r6, r7, r8 = R[0], R[1], R[2], R[3], R[4], R[5], R[6], R[7], R[8]
+    hx, hy, hz = hook[0], hook[1], hook[2]
+    cx, cy, cz = _cross(w[0], w[1], w[2], hx, hy, hz)
+    dx = anchor[0] - (p[0] + r0 * hx + r1 * hy + r2 * hz)
+    dy = anchor[1] - (p[1] + r3 * hx + r4 * hy + r5 * hz)
+    dz = anchor[2] - (p[2] + r6 * hx + r7 * hy + r8 * hz)
+    inertia = mass / dt
+    alpha = inertia + drag * math.sqrt(anchor[3] * anchor[3] + anchor[4] * anchor[4])
+    bx = inertia * anchor[3] - tie * (anchor[0] - rest[0])
+    by = inertia * anchor[4] - tie * (anchor[1] - rest[1])
+    vx, vy = bx / alpha, by / alpha  # the block's new velocity with the rope slack
+    distance = math.sqrt(dx * dx + dy * dy + dz * dz)
+    if distance > rope[0]:
+        ux, uy, uz = dx / distance, dy / distance, dz / distance
+        hook_rate = ux * (v[0] + r0 * cx + r1 * cy + r2 * cz) + uy * (v[1] + r3 * cx + r4 * cy + r5 * cz) \
+            + uz * (v[2] + r6 * cx + r7 * cy + r8 * cz)
+        still = rope[1] * (distance - rope[0]) - rope[2] * hook_rate  # T_0
+        ex, ey = bx - still * ux, by - still * uy
+        k = rope[2] * (ux * ex + uy * ey) / (alpha + rope[2] * (ux * ux + uy * uy))
+        tx, ty = (ex - k * ux) / alpha, (ey - k * uy) / alpha
+        if still + rope[2] * (ux * tx + uy * ty) > 0.0:  # taut: the rope pulls the block towards the hook
+            vx, vy = tx, ty
+    anchor[3], anchor[4] = vx, vy
+    anchor[0] += dt * vx
+    anchor[1] += dt * vy
 
 
 @jitable
@@ -303,7 +355,9 @@ def tank_forces(k: TankConstants, feet: Sequence[Sequence[float]], drag_feet: Se
         Rhx, Rhy, Rhz = r0 * hx + r1 * hy + r2 * hz, r3 * hx + r4 * hy + r5 * hz, r6 * hx + r7 * hy + r8 * hz
         ax, ay, az = _cross(wx, wy, wz, hx, hy, hz)
         Rax, Ray, Raz = r0 * ax + r1 * ay + r2 * az, r3 * ax + r4 * ay + r5 * az, r6 * ax + r7 * ay + r8 * az
-        Fx, Fy, Fz = rope_force((px + Rhx, py + Rhy, pz + Rhz), (vx + Rax, vy + Ray, vz + Raz), anchor,
+        # the hook's velocity relative to the rope's upper end (exactly the hook's with a fixed anchor: x - 0.0 == x)
+        Fx, Fy, Fz = rope_force((px + Rhx, py + Rhy, pz + Rhz),
+                                (vx + Rax - anchor[3], vy + Ray - anchor[4], vz + Raz - anchor[5]), anchor,
                                 rope[0], rope[1], rope[2])
         Fbx, Fby, Fbz = r0 * Fx + r3 * Fy + r6 * Fz, r1 * Fx + r4 * Fy + r7 * Fz, r2 * Fx + r5 * Fy + r8 * Fz
         mx, my, mz = _cross(hx, hy, hz, Fbx, Fby, Fbz)

@@ -356,6 +356,7 @@ def test_candidate_effects_are_off_unless_configured() -> None:
         assert params.appendage_damping_linear == params.appendage_damping_quadratic == (0.0, 0.0, 0.0)
         assert params.rope_torsion_stiffness == params.rope_torsion_damping == 0.0
         assert params.paw_wake_fraction == params.body_wake_fraction == 0.0
+        assert params.block_mass == 0.0  # the anchor is fixed
 
 
 @pytest.mark.parametrize("linear, quadratic", [(0.02, 0.0), (0.0, 0.05), (0.0, 0.0)])
@@ -409,7 +410,10 @@ def test_rope_torsion_turns_the_robot_back_with_its_period_and_keeps_the_energy(
                                                  ("paw_wake", "time_constant", 0.0),
                                                  ("paw_wake", "body_share", 1.5),
                                                  ("appendage_damping", "wake_fraction", 1.0),
-                                                 ("appendage_damping", "wake_time_constant", 0.01)])
+                                                 ("appendage_damping", "wake_time_constant", 0.01),
+                                                 ("suspension", "block_mass", -1.0),
+                                                 ("suspension", "block_drag", -1.0),
+                                                 ("suspension", "block_tie_stiffness", 1.0e4)])
 def test_candidate_effect_keys_are_checked(tmp_path, section, key, value) -> None:
     import yaml
     with open(config_path("tank.yaml")) as stream:
@@ -424,7 +428,8 @@ def test_candidate_effect_keys_are_checked(tmp_path, section, key, value) -> Non
     params = load_tank_params(str(path))
     assert params.appendage_damping_linear == (0.0, 0.1, 0.2) or 0.3 in (
         params.rope_torsion_stiffness, params.paw_wake_fraction, params.paw_wake_time_constant,
-        params.paw_wake_body_share, params.body_wake_fraction, params.body_wake_time_constant)
+        params.paw_wake_body_share, params.body_wake_fraction, params.body_wake_time_constant, params.block_mass,
+        params.block_drag, params.block_tie_stiffness)
 
 
 def _wake_rows(u, wake, fraction, tau, dt):
@@ -618,3 +623,87 @@ def test_turning_water_pushes_a_still_body_on_and_attach_stills_it() -> None:
     assert push[2] == pytest.approx(0.05 * 0.4 * 0.1, rel=0.1) and abs(push[0]) + abs(push[1]) < 0.1 * push[2]
     model.attach(tilted)
     assert not model.body_wake.any()
+
+
+# ---- the floating block the rope hangs from -----------------------------------------------------------
+
+def _block_at(offset_x: float, tension: float, rope=(0.5, 2000.0, 0.0)) -> np.ndarray:
+    """A block straight above a still hook at h = (0, 0, 0.077), the rope stretched by ``tension``, moved
+    ``offset_x`` along x: (a, a_dot)."""
+    return np.array([offset_x, 0.0, 0.077 + rope[0] + tension / rope[1], 0.0, 0.0, 0.0])
+
+
+def _block_steps(block, rest, rope, mass, drag, tie, seconds):
+    from quadruped_control.sim.plants.tank_dynamics import floating_block_update
+    still, identity = (0.0, 0.0, 0.0), tuple(np.eye(3).ravel().tolist())
+    xs = [block[0]]
+    for _ in range(int(round(seconds / DT))):
+        floating_block_update(block, rest, still, still, identity, still, (0.0, 0.0, 0.077), rope, mass, drag, tie, DT)
+        xs.append(block[0])
+    return np.array(xs)
+
+
+def test_a_block_swings_on_its_rope_and_tie_with_the_pendulum_period() -> None:
+    """No drag: m_b x'' = -(k_g + T / l) x for small x (the rope's pull, T x / l, and the tie): the block
+    keeps its amplitude and swings with 2 pi sqrt(m_b / (k_g + T / l)); the vertical stays put."""
+    mass, tie, tension, rope = 0.5, 3.0, 1.0, (0.5, 2000.0, 0.0)
+    # 1 mm: the stretch that a swing adds, k x^2 / (2 l), stays small against T (1 cm would add 0.2 N)
+    block = _block_at(0.001, tension, rope)
+    rest = block[:3] - np.array([0.001, 0.0, 0.0])
+    height = block[2] - 0.077
+    xs = _block_steps(block, rest, rope, mass, 0.0, tie, 8.0)
+    period = 2.0 * math.pi * math.sqrt(mass / (tie + tension / height))
+    t = np.arange(xs.size) * DT
+    crossings = [t[k] - xs[k] * DT / (xs[k + 1] - xs[k]) for k in range(xs.size - 1) if xs[k] > 0.0 >= xs[k + 1]]
+    assert len(crossings) >= 3
+    assert np.mean(np.diff(crossings)) == pytest.approx(period, rel=5e-3)
+    assert np.max(np.abs(xs[-int(period / DT):])) == pytest.approx(0.001, rel=0.02)
+    assert block[2] == _block_at(0.0, tension, rope)[2] and block[5] == 0.0
+
+
+def test_a_slack_rope_leaves_the_block_to_its_quadratic_drag() -> None:
+    """Slack rope, no tie: m_b v' = -c_b |v| v, so v(t) = v_0 / (1 + c_b v_0 t / m_b)."""
+    mass, drag, v0 = 0.4, 2.0, 0.3
+    block = np.array([0.0, 0.0, 0.3, v0, 0.0, 0.0])  # 0.22 m above the hook: the 0.5 m rope is slack
+    _block_steps(block, block[:3].copy(), (0.5, 2000.0, 150.0), mass, drag, 0.0, 2.0)
+    assert block[3] == pytest.approx(v0 / (1.0 + drag * v0 * 2.0 / mass), rel=2e-3)
+    assert block[4] == 0.0
+
+
+def test_a_light_block_on_a_steep_damped_rope_stays_stable_and_settles_above_the_hook() -> None:
+    """The rope's dashpot (150 N s/m) against a 0.1 kg block: explicit Euler would need dt < 1.3 ms; the
+    implicit dashpot settles the block above the hook from a 30 degree tilt."""
+    rope = (0.5, 2000.0, 150.0)
+    block = _block_at(0.25, 1.0, rope)
+    xs = _block_steps(block, block[:3].copy(), rope, 0.1, 2.0, 0.0, 60.0)
+    assert np.all(np.isfinite(xs)) and np.max(np.abs(xs)) <= 0.25 + 1e-12
+    assert abs(xs[-1]) < 0.01
+
+
+def test_a_free_block_follows_the_swinging_robot_and_a_stiff_tie_is_the_fixed_anchor() -> None:
+    """The robot released at 30 degrees of roll: with a free block (no tie) the block drifts over the hook
+    and the rope ends vertical; with a tie far stiffer than the rope's pendulum (T / l ~ 2 N/m) the swing is
+    the fixed anchor's; block_mass 0 is the fixed anchor bit for bit, whatever the other block values."""
+    fixed = _roll(_hang(TankModel(ROBOT, TANK), 30.0, 6.0)[1])
+    ignored = _roll(_hang(TankModel(ROBOT, TANK.with_values(block_drag=5.0, block_tie_stiffness=7.0)), 30.0, 6.0)[1])
+    assert np.array_equal(fixed, ignored)
+    stiff = _roll(_hang(TankModel(ROBOT, TANK.with_values(block_mass=1.0, block_tie_stiffness=1000.0)), 30.0, 6.0)[1])
+    assert np.max(np.abs(stiff - fixed)) < 0.02 * math.radians(30.0)
+    model = TankModel(ROBOT, TANK.with_values(block_mass=0.3, block_drag=2.0))
+    plant, states = _hang(model, 30.0, 40.0)
+    start_anchor = model.block_rest
+    hook = states[-1].position + states[-1].rotation @ model.hook
+    assert np.linalg.norm(model.anchor[:2] - start_anchor[:2]) > 0.01  # the block moved
+    assert np.linalg.norm(model.anchor[:2] - hook[:2]) < 0.002  # and hangs above the hook
+    free = _roll(states[:601])
+    assert np.max(np.abs(free - fixed)) > 0.02 * math.radians(30.0)  # a free block changes the swing
+    model.attach(states[-1])
+    assert np.array_equal(model.block[:3], model.block_rest) and not model.block[3:].any()
+
+
+def test_block_parameters_are_validated() -> None:
+    for values in ({"block_mass": -1.0}, {"block_mass": 0.001}, {"block_drag": -0.1}, {"block_drag": float("nan")},
+                   {"block_tie_stiffness": 2000.0}, {"block_mass": 0.04}):  # 0.04 kg: unstable on a 2 kN/m rope
+        with pytest.raises(ParameterError, match="block"):
+            TANK.with_values(**values)
+    assert TANK.with_values(block_mass=0.06).block_mass == 0.06
