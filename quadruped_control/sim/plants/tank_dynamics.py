@@ -32,17 +32,16 @@ from quadruped_control.sim.plants.paper import body_wrench_f
 from quadruped_control.sim.plants.rigid_body import Mat3, chart_point
 
 __all__ = ["TankConstants", "appendage_damping_torque", "body_wake_update", "floating_block_update", "leg_sums",
-           "mass_solver",
-           "paw_joint_loads", "paw_wake_update", "rope_force", "rope_torsion_torque", "rope_twist", "solve_mass",
-           "tank_chart_derivative", "tank_forces", "tank_rk4"]
+           "mass_solver", "paw_joint_loads", "paw_wake_update", "rope_force", "rope_torsion_torque", "rope_twist",
+           "solve_mass", "tank_chart_derivative", "tank_forces", "tank_rk4"]
 
 Vec3 = Tuple[float, float, float]
 
 #: (drag_constant, body drag coefficients (8), extra lift (torso buoyancy - weight, N), suspension (bool),
-#: hook (3, m), anchor (6: position (m) and velocity (m/s) of the rope's upper end, world), rope (length, stiffness, damping), torsion (stiffness, damping),
-#: untwisted R_0 (9), appendage damping linear (3), quadratic (3), M_RB + M_A (36), paw added mass m_a,
-#: paw wake (fraction kappa, time constant tau_w in s, body share s_b), body wake (fraction kappa_b, time
-#: constant tau_b in s))
+#: hook (3, m), anchor (6: position (m) and velocity (m/s) of the rope's upper end, world), rope (length,
+#: stiffness, damping), torsion (stiffness, damping), untwisted R_0 (9), appendage damping linear (3),
+#: quadratic (3), M_RB + M_A (36), paw added mass m_a, paw wake (fraction kappa, time constant tau_w in s,
+#: body share s_b), body wake (fraction kappa_b, time constant tau_b in s))
 TankConstants = Tuple[Any, ...]
 
 

@@ -74,9 +74,35 @@ def test_timing_bias_is_the_geometric_mean_of_paper_over_simulation_per_group() 
     assert pitch["yaw t_r"][0] == pytest.approx(10.0 / 0.5)
     report = {"fit": {"best": {"rows": rows}}, "cross_validation": [{"prediction": {"rows": rows[:2]}}]}
     text = idf.format_timing_bias(report)
-    assert "| full fit, in sample | roll | 0.63 (3) | 3.00 (2) | 1.00 (3) | 1.00 (3) | 10 / 10 |" in text
-    assert "| full fit, in sample | pitch | 1.00 (1) | 0.50 (1) | 20.00 (1) | -- | 10 / 10 |" in text
+    assert "| full fit, in sample | roll | 0.63 (3) | 3.00 (2) | 1.00 (3) | 1.00 (3) | 10 / 10 | -- |" in text
+    assert "| full fit, in sample | pitch | 1.00 (1) | 0.50 (1) | 20.00 (1) | -- | 10 / 10 | -- |" in text
     assert "| held out | roll | 0.63 (2) |" not in text and "| held out | roll | 0.50 (2) | 3.00 (2) |" in text
+
+
+def test_yaw_first_compares_how_much_sooner_yaw_rises_than_the_tilt_on_both_sides() -> None:
+    """exp(mean ln(yaw t_r / t_r)) per side (0.5 s floor), over the experiments with a heading error of
+    at least 10 deg where both sides report both rise times; the paper's Table 1 gives 0.38."""
+    rows = [_row() for _ in range(4)]
+    for row, psi in zip(rows, (-78.0, 61.0, 1.5, 40.0)):
+        row["paper"]["psi_init"] = psi
+    rows[0]["paper"].update(t_r=40.0)  # paper: yaw 10 s, tilt 40 s
+    rows[1]["sim"]["yaw"] = dict(rows[1]["sim"]["yaw"], t_r=40.0)  # sim: yaw 40 s, tilt 20 s
+    rows[2]["paper"].update(t_r=80.0)  # heading error 1.5 deg: left out
+    rows[3]["sim"]["yaw"] = dict(rows[3]["sim"]["yaw"], t_r=None)  # the simulation's yaw never rose: left out
+    paper, sim, count = idf.yaw_first_ratio(rows)
+    assert count == 2
+    assert paper == pytest.approx(math.sqrt(0.25 * 0.5)) and sim == pytest.approx(math.sqrt(0.5 * 2.0))
+    in_sample = "10 / 10 | %.2f / %.2f (2) |" % (paper, sim)
+    assert idf.yaw_first_ratio(rows[2:]) == (None, None, 0)
+    from quadruped_control.studies.paper_experiments import PAPER_TABLE
+    table = [{"t_r": case["t_r"], "psi_init": case["psi_init"], "yaw": {"t_r": case["yaw_t_r"]}} for case in PAPER_TABLE]
+    robot, same, count = idf.yaw_first_ratio([{"paper": side, "sim": side} for side in table])
+    assert count == 13 and robot == same == pytest.approx(0.38, abs=0.005)  # all but pitch 15 and roll+pitch 30
+    for row in rows:
+        row["set"] = "roll"
+    report = {"fit": {"best": {"rows": rows}}, "cross_validation": [{"prediction": {"rows": rows[:1]}}]}
+    text = idf.format_timing_bias(report)
+    assert in_sample in text and "| held out | roll |" in text and "10 / 10 | 0.25 / 0.50 (1) |" in text
 
 
 def test_a_folds_start_is_the_best_screening_set_on_its_training_groups_only() -> None:
