@@ -39,6 +39,10 @@ Design (:func:`main_study`):
    with one factor that slows everything, the paw drag scale (the stroke's thrust), fitted by a grid on
    the same training groups.
 4. Ensemble: the best distinct sets of the full fit (``--ensemble``), written as tank.yaml files.
+
+The report adds, per group, what the misses have in common (:func:`timing_bias`): how much slower the
+robot is than the model in each timing metric, the median overshoots, and how much sooner yaw rises than
+the tilt on either side (:func:`yaw_first_ratio`).
 """
 from __future__ import annotations
 
@@ -60,7 +64,7 @@ from quadruped_control.studies.paper_experiments import experiment_specs
 from quadruped_control.studies.trial import TrialSpec, run_batch, run_many
 
 __all__ = ["GROUPS", "PARAMETERS", "WEIGHTS", "best_on", "case_cost", "morris_sets", "nominal_values", "objective",
-           "plot_report", "targets", "tank_overrides", "update_tank_yaml"]
+           "plot_report", "targets", "tank_overrides", "timing_bias", "update_tank_yaml", "yaw_first_ratio"]
 
 #: (name, low, high): bounds with their physical reason in docs/identification.md
 PARAMETERS: Tuple[Tuple[str, float, float], ...] = (
