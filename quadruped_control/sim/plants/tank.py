@@ -372,7 +372,6 @@ class TankModel(FloatingBaseModel):
         outer_volume = math.pi * params.paw_diameter ** 3 / 6.0
         self.paw_added_mass = (tank.paw_added_mass_scale * sphere_added_mass(outer_volume, params.rho)
                                if tank.paw_added_mass else 0.0)
-        self.anchor = np.zeros(3)
         #: the rope's upper end, position and velocity (world; :func:`~.tank_dynamics.floating_block_update`),
         #: and where the block rests on its tie: plant state, set by :meth:`attach`
         self.block = np.zeros(6)
@@ -413,9 +412,8 @@ class TankModel(FloatingBaseModel):
         self.joint_loads = None
         hook = state.position + state.rotation @ self.hook
         stretch = self.static_rope_tension() / self.tank.rope_stiffness
-        self.anchor = hook + np.array([0.0, 0.0, self.tank.rope_length + stretch])
-        self.block_rest = self.anchor.copy()
-        self.block = np.concatenate((self.anchor, np.zeros(3)))  # the block at rest
+        self.block_rest = hook + np.array([0.0, 0.0, self.tank.rope_length + stretch])
+        self.block = np.concatenate((self.block_rest, np.zeros(3)))  # the block at rest
         self._anchor = tuple(self.block.tolist())
         # The rope hangs untwisted in this attitude (rope torsion measures the twist from it).
         self.untwisted = np.array(state.rotation, dtype=float)
@@ -423,6 +421,12 @@ class TankModel(FloatingBaseModel):
         self.wake[:] = 0.0  # still water
         self.body_wake[:] = 0.0
         self._constants = self._build_constants()
+
+    @property
+    def anchor(self) -> np.ndarray:
+        """The rope's upper end (world, m): fixed above the hook of the last :meth:`attach`, unless the
+        floating block moves it (a view of :attr:`block`)."""
+        return self.block[:3]
 
     def mass_matrix(self, foot_positions: Sequence[Sequence[float]]) -> np.ndarray:
         """M = M_RB + M_A + sum_i M_paw(r_i) (6x6, body axes about the centre of mass)."""
@@ -536,7 +540,6 @@ class TankModel(FloatingBaseModel):
         floating_block_update(self.block, self.block_rest, state.position, state.velocity, R0, state.omega,
                               self.hook, (tank.rope_length, tank.rope_stiffness, tank.rope_damping), tank.block_mass,
                               tank.block_drag, tank.block_tie_stiffness, dt)
-        self.anchor = self.block[:3].copy()
         self._anchor = tuple(self.block.tolist())
         self._constants = self._build_constants()
 

@@ -51,6 +51,20 @@ def _cross(ax: float, ay: float, az: float, bx: float, by: float, bz: float) -> 
 
 
 @jitable
+def _hook_motion(px: float, py: float, pz: float, vx: float, vy: float, vz: float, R: Sequence[float], wx: float,
+                 wy: float, wz: float, hook: Sequence[float]) -> Tuple[float, ...]:
+    """The hook's position p + R h and velocity v + R (omega x h), world (6 floats), for the body's p, v
+    (world), R (row-major) and omega (body axes): what the rope sees (:func:`tank_forces`,
+    :func:`floating_block_update`)."""
+    hx, hy, hz = hook[0], hook[1], hook[2]
+    r0, r1, r2, r3, r4, r5, r6, r7, r8 = R[0], R[1], R[2], R[3], R[4], R[5], R[6], R[7], R[8]
+    ax, ay, az = _cross(wx, wy, wz, hx, hy, hz)
+    return (px + (r0 * hx + r1 * hy + r2 * hz), py + (r3 * hx + r4 * hy + r5 * hz),
+            pz + (r6 * hx + r7 * hy + r8 * hz), vx + (r0 * ax + r1 * ay + r2 * az),
+            vy + (r3 * ax + r4 * ay + r5 * az), vz + (r6 * ax + r7 * ay + r8 * az))
+
+
+@jitable
 def rope_force(hook_world: Sequence[float], hook_velocity: Sequence[float], anchor: Sequence[float],
                length: float, stiffness: float, damping: float) -> Vec3:
     """Rope force on the hook, world frame (N): T d / |d| with d = anchor - hook and
@@ -179,12 +193,8 @@ def floating_block_update(anchor: Any, rest: Sequence[float], p: Sequence[float]
     - k_g (a - a_0), T_0 the tension with the block still; then a <- a + dt a_dot'. The rope's elastic pull
     stays explicit: stable while dt^2 (k + k_g) / m_b < 4 (:class:`~quadruped_control.sim.plants.tank.TankParams`
     checks it)."""
-    r0, r1, r2, r3, r4, r5, r6, r7, r8 = R[0], R[1], R[2], R[3], R[4], R[5], R[6], R[7], R[8]
-    hx, hy, hz = hook[0], hook[1], hook[2]
-    cx, cy, cz = _cross(w[0], w[1], w[2], hx, hy, hz)
-    dx = anchor[0] - (p[0] + r0 * hx + r1 * hy + r2 * hz)
-    dy = anchor[1] - (p[1] + r3 * hx + r4 * hy + r5 * hz)
-    dz = anchor[2] - (p[2] + r6 * hx + r7 * hy + r8 * hz)
+    qx, qy, qz, qvx, qvy, qvz = _hook_motion(p[0], p[1], p[2], v[0], v[1], v[2], R, w[0], w[1], w[2], hook)
+    dx, dy, dz = anchor[0] - qx, anchor[1] - qy, anchor[2] - qz
     inertia = mass / dt
     alpha = inertia + drag * math.sqrt(anchor[3] * anchor[3] + anchor[4] * anchor[4])
     bx = inertia * anchor[3] - tie * (anchor[0] - rest[0])
@@ -193,8 +203,7 @@ def floating_block_update(anchor: Any, rest: Sequence[float], p: Sequence[float]
     distance = math.sqrt(dx * dx + dy * dy + dz * dz)
     if distance > rope[0]:
         ux, uy, uz = dx / distance, dy / distance, dz / distance
-        hook_rate = ux * (v[0] + r0 * cx + r1 * cy + r2 * cz) + uy * (v[1] + r3 * cx + r4 * cy + r5 * cz) \
-            + uz * (v[2] + r6 * cx + r7 * cy + r8 * cz)
+        hook_rate = ux * qvx + uy * qvy + uz * qvz
         still = rope[1] * (distance - rope[0]) - rope[2] * hook_rate  # T_0
         ex, ey = bx - still * ux, by - still * uy
         k = rope[2] * (ux * ex + uy * ey) / (alpha + rope[2] * (ux * ux + uy * uy))
@@ -350,16 +359,12 @@ def tank_forces(k: TankConstants, feet: Sequence[Sequence[float]], drag_feet: Se
     up_force = lift + extra_lift
     fx, fy, fz = fx + up_force * r6, fy + up_force * r7, fz + up_force * r8
     if suspension:
-        hx, hy, hz = hook[0], hook[1], hook[2]
-        Rhx, Rhy, Rhz = r0 * hx + r1 * hy + r2 * hz, r3 * hx + r4 * hy + r5 * hz, r6 * hx + r7 * hy + r8 * hz
-        ax, ay, az = _cross(wx, wy, wz, hx, hy, hz)
-        Rax, Ray, Raz = r0 * ax + r1 * ay + r2 * az, r3 * ax + r4 * ay + r5 * az, r6 * ax + r7 * ay + r8 * az
+        qx, qy, qz, qvx, qvy, qvz = _hook_motion(px, py, pz, vx, vy, vz, R, wx, wy, wz, hook)
         # the hook's velocity relative to the rope's upper end (exactly the hook's with a fixed anchor: x - 0.0 == x)
-        Fx, Fy, Fz = rope_force((px + Rhx, py + Rhy, pz + Rhz),
-                                (vx + Rax - anchor[3], vy + Ray - anchor[4], vz + Raz - anchor[5]), anchor,
+        Fx, Fy, Fz = rope_force((qx, qy, qz), (qvx - anchor[3], qvy - anchor[4], qvz - anchor[5]), anchor,
                                 rope[0], rope[1], rope[2])
         Fbx, Fby, Fbz = r0 * Fx + r3 * Fy + r6 * Fz, r1 * Fx + r4 * Fy + r7 * Fz, r2 * Fx + r5 * Fy + r8 * Fz
-        mx, my, mz = _cross(hx, hy, hz, Fbx, Fby, Fbz)
+        mx, my, mz = _cross(hook[0], hook[1], hook[2], Fbx, Fby, Fbz)
         fx, fy, fz, tx, ty, tz = fx + Fbx, fy + Fby, fz + Fbz, tx + mx, ty + my, tz + mz
         if torsion[0] > 0.0 or torsion[1] > 0.0:
             mx, my, mz = rope_torsion_torque(R, untwisted, (wx, wy, wz), torsion[0], torsion[1])
