@@ -563,10 +563,19 @@ class TankModel(FloatingBaseModel):
         state = RigidBodyState(rotation=np.asarray(rotation, dtype=float)).validate()
         q = joint_array(q, "q")
         self.attach(state)
-        context = self._step_context(q, np.zeros_like(q))
+        return self.held_wrench(state, q, np.zeros_like(q))[3:6]
+
+    def held_wrench(self, state: RigidBodyState, q: Any, q_dot: Any) -> np.ndarray:
+        """eq. (tank)'s right-hand side (force in N, then torque in N m; body axes, about the centre of mass)
+        on the body held at rest at ``state``'s position and attitude, its legs at ``q`` moving at
+        ``q_dot`` (12 or 4 x 3; the joints as held over a step), the paws' wake and the rope's anchor as
+        they stand: what a clamp that holds the body still takes up, less the reaction to the legs'
+        accelerations through the mass matrix (zero on average over a periodic stroke). The torque the
+        strokes deliver on a bench (:mod:`quadruped_control.sim.plants.clamped`)."""
+        context = self._step_context(joint_array(q, "q"), joint_array(q_dot, "q_dot"))
         forces = self.generalized_forces(context, tuple(state.position.tolist()), (0.0, 0.0, 0.0),
                                          as_mat3(state.rotation), (0.0, 0.0, 0.0))
-        return np.array(forces[3:6], dtype=float)
+        return np.array(forces, dtype=float)
 
     # ---- energy ------------------------------------------------------------------------------
 
