@@ -93,6 +93,7 @@ PARAMETERS: Tuple[Tuple[str, float, float], ...] = (
     ("block_mobility", 0.0, 5.0),          # 1/kg: 1 / the floating block's mass, fixed (0) to 0.2 kg
     ("block_drag", 0.2, 20.0),             # N s^2/m^2: 1/2 rho C_D A of the block's draft, plus its lines
     ("block_tie_stiffness", 0.0, 20.0),    # N/m: a slack tie (0) to ten times the rope's pendulum T / L
+    ("paw_buoyancy_offset", -0.05, 0.13),  # N per paw beyond robot.yaml's -0.029: a 40 g paw to a floating one
 )
 
 #: Weights of the objective's terms (module docstring).
@@ -145,6 +146,7 @@ _PLACES: Dict[str, _Place] = {
     "block_mobility": _Place("block_mass", (), "suspension", "block_mass", reciprocal=True),
     "block_drag": _Place("block_drag", (), "suspension", "block_drag"),
     "block_tie_stiffness": _Place("block_tie_stiffness", (), "suspension", "block_tie_stiffness"),
+    "paw_buoyancy_offset": _Place("paw_buoyancy_offset", (), "hydrostatics", "paw_buoyancy_offset"),
 }
 
 

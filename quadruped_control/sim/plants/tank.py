@@ -141,6 +141,9 @@ class TankParams:
     rope_damping: float = 150.0
     net_weight: float = 1.0
     center_of_buoyancy: Vec3 = (0.0, 0.0, 0.001)
+    #: how much more buoyant each paw is than robot.yaml's estimate (N; 0: as estimated): the plant's paw
+    #: buoyancy only, the controller's feedforward keeps robot.yaml's, as the robot's own controller does
+    paw_buoyancy_offset: float = 0.0
     added_mass_scale: float = 1.0
     paw_added_mass_scale: float = 1.0
     #: paw drag coefficient relative to robot.yaml's C_D (the paper's CFD value)
@@ -217,6 +220,9 @@ class TankParams:
                                  "(stable with a %g s step), got %r" % (_MAX_STEP ** 2, _MAX_STEP, self.block_mass))
         if not math.isfinite(self.net_weight):
             raise ParameterError("tank net_weight must be finite, got %r" % (self.net_weight,))
+        if not (math.isfinite(self.paw_buoyancy_offset) and abs(self.paw_buoyancy_offset) <= 1.0):
+            raise ParameterError("tank paw_buoyancy_offset must be within +-1 N (a paw is 7.5 cm), got %r"
+                                 % (self.paw_buoyancy_offset,))
         for name in ("hook", "center_of_buoyancy"):
             value = getattr(self, name)
             if len(value) != 3 or not all(math.isfinite(float(v)) for v in value):
@@ -251,7 +257,8 @@ def tank_params_from_dict(data: Mapping[str, Any]) -> TankParams:
                       ("hook", "length", "stiffness", "damping", "torsion_stiffness", "torsion_damping",
                        "block_mass", "block_drag", "block_tie_stiffness"),
                       required=("hook", "length", "stiffness", "damping"))
-    hydro = check_keys(data["hydrostatics"], "hydrostatics", ("net_weight", "center_of_buoyancy"),
+    hydro = check_keys(data["hydrostatics"], "hydrostatics",
+                       ("net_weight", "center_of_buoyancy", "paw_buoyancy_offset"),
                        required=("net_weight", "center_of_buoyancy"))
     added = check_keys(data["added_mass"], "added_mass", ("scale", "paw_scale"), required=("scale", "paw_scale"))
     paw_drag = check_keys(_optional_section(data, "paw_drag"), "paw_drag", ("scale",))
@@ -278,6 +285,8 @@ def tank_params_from_dict(data: Mapping[str, Any]) -> TankParams:
         net_weight=number(hydro["net_weight"], "hydrostatics.net_weight", -100.0, 100.0),
         center_of_buoyancy=tuple(vector(hydro["center_of_buoyancy"], "hydrostatics.center_of_buoyancy",
                                         3, -0.5, 0.5)),  # type: ignore[arg-type]
+        paw_buoyancy_offset=number(hydro.get("paw_buoyancy_offset", 0.0), "hydrostatics.paw_buoyancy_offset",
+                                   -1.0, 1.0),
         added_mass_scale=number(added["scale"], "added_mass.scale", 0.0, 10.0),
         paw_added_mass_scale=number(added["paw_scale"], "added_mass.paw_scale", 0.0, 10.0),
         paw_drag_scale=number(paw_drag.get("scale", 1.0), "paw_drag.scale", 0.0, 10.0),
@@ -351,6 +360,9 @@ class TankModel(FloatingBaseModel):
             self._drag = (0.0,) * 8
         self.hook = np.array(tank.hook, dtype=float)
         self.center_of_buoyancy = np.array(tank.center_of_buoyancy, dtype=float)
+        # The paws' buoyancy in the water (robot.yaml's estimate plus the tank's offset): the plant's alone,
+        # the controller's buoyancy feedforward keeps robot.yaml's value.
+        self.net_paw_buoyancy = float(params.paw_net_buoyancy) + tank.paw_buoyancy_offset
         self.torso_weight = (params.mass - 4.0 * params.paw_mass) * params.gravity
         self.torso_buoyancy = self.torso_weight - tank.net_weight
         if tank.hydrostatics:

@@ -38,7 +38,7 @@ def tank_trial_step(i, frames, five_bar, net_paw_buoyancy, drag_constant, drag, 
     """One held-input RK4 step of eq. (tank) for trial ``i`` in place (its paws' ``wake[i]``, the water
     turning with its body, ``water[i]``, and its floating block, ``anchor[i]``, too, with the body's state
     at the step's start, as :class:`~quadruped_control.sim.plants.tank.TankModel`); False if it failed."""
-    ok, lift, up, R0 = held_step_inputs(q, q_dot, i, frames, five_bar, net_paw_buoyancy, restoring, R, feet)
+    ok, lift, up, R0 = held_step_inputs(q, q_dot, i, frames, five_bar, net_paw_buoyancy[i], restoring, R, feet)
     if not ok:
         return False
     sums = leg_sums(feet)
@@ -79,7 +79,7 @@ def tank_batch_step(frames, five_bar, net_paw_buoyancy, drag_constant, drag, ext
     (N, 3), R (N, 3, 3), the paws' ``wake`` (N, 4, 3), the water turning with each body, ``water``
     (N, 3), and each rope's upper end, ``anchor`` (N, 6). The constants are the fields of
     :data:`~.tank_dynamics.TankConstants`, one row (or value) per trial, ``restoring`` (N, 3, 3) each
-    trial's torso buoyancy moment matrix, ``block`` (N, 3) each floating block's mass, drag and tie
+    trial's torso buoyancy moment matrix, ``net_paw_buoyancy`` (N,) each trial's paws' buoyancy, ``block`` (N, 3) each floating block's mass, drag and tie
     stiffness (mass 0: a fixed anchor) and ``block_rest`` (N, 3) where it rests."""
     feet = np.empty((4, 6))
     drag_feet = np.empty((4, 6))
@@ -104,7 +104,8 @@ class TankPlantBatch:
         self.n = len(self.models)
         self.robot = robot
         self.frames, self.five_bar = leg_geometry(robot)
-        self.net_paw_buoyancy = float(robot.paw_net_buoyancy)
+        #: Each trial's paws' net buoyancy (N,): TankModel.net_paw_buoyancy (robot.yaml's plus the tank's offset).
+        self.net_paw_buoyancy = np.array([m.net_paw_buoyancy for m in self.models], dtype=float)
         self.restoring = np.array([m._restoring_matrix for m in self.models], dtype=float)  # noqa: SLF001
         self.failed = np.zeros(self.n, dtype=bool)
         #: Each trial's paws' wake velocity (N, 4, 3), body axes: TankModel.wake for N trials.

@@ -166,7 +166,7 @@ def test_tank_batch_agrees_with_the_per_trial_tank_plant_bit_for_bit_over_10_s(r
                               body_wake_fraction=0.6, body_wake_time_constant=2.0, block_mass=0.3, block_drag=2.0),
              base.with_values(rope_torsion_stiffness=0.05, rope_torsion_damping=0.02, paw_drag_scale=0.6,
                               paw_wake_fraction=0.5, paw_wake_time_constant=0.2, paw_wake_body_share=0.3,
-                              servo_stall_torque=3.9),
+                              servo_stall_torque=3.9, paw_buoyancy_offset=0.06),
              base.with_values(added_mass_scale=3.0, paw_added_mass_scale=2.0, net_weight=2.0, servo_stall_torque=1.5,
                               block_mass=1.0, block_drag=10.0, block_tie_stiffness=5.0),
              base.with_values(suspension=False, hydrostatics=False)]

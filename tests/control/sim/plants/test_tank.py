@@ -413,7 +413,8 @@ def test_rope_torsion_turns_the_robot_back_with_its_period_and_keeps_the_energy(
                                                  ("appendage_damping", "wake_time_constant", 0.01),
                                                  ("suspension", "block_mass", -1.0),
                                                  ("suspension", "block_drag", -1.0),
-                                                 ("suspension", "block_tie_stiffness", 1.0e4)])
+                                                 ("suspension", "block_tie_stiffness", 1.0e4),
+                                                 ("hydrostatics", "paw_buoyancy_offset", 1.5)])
 def test_candidate_effect_keys_are_checked(tmp_path, section, key, value) -> None:
     import yaml
     with open(config_path("tank.yaml")) as stream:
@@ -429,7 +430,28 @@ def test_candidate_effect_keys_are_checked(tmp_path, section, key, value) -> Non
     assert params.appendage_damping_linear == (0.0, 0.1, 0.2) or 0.3 in (
         params.rope_torsion_stiffness, params.paw_wake_fraction, params.paw_wake_time_constant,
         params.paw_wake_body_share, params.body_wake_fraction, params.body_wake_time_constant, params.block_mass,
-        params.block_drag, params.block_tie_stiffness)
+        params.block_drag, params.block_tie_stiffness, params.paw_buoyancy_offset)
+
+
+def test_the_paws_buoyancy_offset_moves_the_plants_paws_alone() -> None:
+    """Buoyant paws: the plant's paw buoyancy is robot.yaml's plus the offset (0: today's model, exactly);
+    the difference of the restoring torque is the paws' buoyancy moment plus the rope's lighter load at the
+    hook, in closed form; the controller's feedforward keeps robot.yaml's value."""
+    delta = 0.05
+    base = TankParams(center_of_buoyancy=(0.0, 0.0, 0.002))
+    assert TankModel(ROBOT, base).net_paw_buoyancy == ROBOT.paw_net_buoyancy
+    buoyant = TankModel(ROBOT, base.with_values(paw_buoyancy_offset=delta))
+    assert buoyant.net_paw_buoyancy == ROBOT.paw_net_buoyancy + delta
+    assert buoyant.static_rope_tension() == pytest.approx(TankModel(ROBOT, base).static_rope_tension() - 4 * delta)
+    q = nominal_joint_angles(ROBOT)
+    R = rpy_to_rot(0.4, -0.3, 0.2)
+    up = R.T @ np.array([0.0, 0.0, 1.0])  # the world's up in body axes
+    feet = sum(ROBOT.nominal_foot_body(leg) for leg in (1, 2, 3, 4))
+    expected = np.cross(feet, delta * up) + np.cross(np.array(base.hook), -4 * delta * up)
+    difference = buoyant.restoring_torque(R, q) - TankModel(ROBOT, base).restoring_torque(R, q)
+    np.testing.assert_allclose(difference, expected, atol=1e-12)
+    with pytest.raises(ParameterError, match="paw_buoyancy_offset"):
+        TankParams(paw_buoyancy_offset=float("nan"))
 
 
 def _wake_rows(u, wake, fraction, tau, dt):
