@@ -5,7 +5,8 @@ docs/identification.md): the tank's uncertain estimates (centre of buoyancy, hoo
 length, torso added mass, servo speed, paw drag) and the candidate effects of
 :mod:`quadruped_control.sim.plants.tank` (appendage damping, linear and quadratic, roll/pitch and yaw;
 rope torsion; the paws' wake, fraction, time constant and the body's share; loaded servos; the servos'
-lag; the body wake, fraction and time constant; the floating block, its mobility 1 / m_b, drag and tie).
+lag; the body wake, fraction and time constant; the floating block, its mobility 1 / m_b, drag and tie;
+the paws' buoyancy beyond robot.yaml's estimate).
 Every set is run on the batched simulator (:mod:`quadruped_control.sim.batch`), the 15 experiments of
 Table 1 with the experiment gains and rate-limited servos, 160 s each.
 

@@ -86,6 +86,14 @@ Candidate effects of the identification against Table 1, each zero (today's mode
   stroke, which pushes the water, is slowed more than the recovery, which the drag opposes less. The
   rated stall torque is 3.9 N m (the paper, section "Robot Design"); 0 (the default) leaves the rate
   limit alone. Motor torque-speed line: e.g. Hughes and Drury, "Electric Motors and Drives" (2019), ch. 3.
+- ``buoyant paws`` (``paw_buoyancy_offset``): the paws' net buoyancy B_net of eq. (buoy_force),
+  (buoy_torque), robot.yaml's estimate g (rho V_s - m_s) = -0.029 N of a flooded PLA shell, plus an offset
+  (N per paw). An FDM-printed shell with sparse infill holds air in its cells, the printed lower links near
+  the foot float, a bubble caught in the sphere adds 0.01 N per cm^3. The paws' buoyancy moment scales with
+  their displacement, not their speed, and acts on roll and pitch only (gravity has no moment about the
+  vertical): a floating paw opposes the tilt strokes, a sinking one helps them. The plant's paws only;
+  the robot's controller feeds forward robot.yaml's estimate, as the real controller does. The rope's
+  static load follows (net weight minus 4 B_net). 0 (the default) is today's model exactly.
 
 Each effect has a switch (:class:`TankParams`); with all of them off the equations reduce to the paper's
 eq. (trans), (rot) (tested). Parameters: ``config/tank.yaml``.

@@ -79,8 +79,9 @@ def tank_batch_step(frames, five_bar, net_paw_buoyancy, drag_constant, drag, ext
     (N, 3), R (N, 3, 3), the paws' ``wake`` (N, 4, 3), the water turning with each body, ``water``
     (N, 3), and each rope's upper end, ``anchor`` (N, 6). The constants are the fields of
     :data:`~.tank_dynamics.TankConstants`, one row (or value) per trial, ``restoring`` (N, 3, 3) each
-    trial's torso buoyancy moment matrix, ``net_paw_buoyancy`` (N,) each trial's paws' buoyancy, ``block`` (N, 3) each floating block's mass, drag and tie
-    stiffness (mass 0: a fixed anchor) and ``block_rest`` (N, 3) where it rests."""
+    trial's torso buoyancy moment matrix, ``net_paw_buoyancy`` (N,) each trial's paws' buoyancy, ``block``
+    (N, 3) each floating block's mass, drag and tie stiffness (mass 0: a fixed anchor) and ``block_rest``
+    (N, 3) where it rests."""
     feet = np.empty((4, 6))
     drag_feet = np.empty((4, 6))
     for i in range(p.shape[0]):
@@ -104,7 +105,7 @@ class TankPlantBatch:
         self.n = len(self.models)
         self.robot = robot
         self.frames, self.five_bar = leg_geometry(robot)
-        #: Each trial's paws' net buoyancy (N,): TankModel.net_paw_buoyancy (robot.yaml's plus the tank's offset).
+        #: Each trial's paws' net buoyancy (N,): TankModel.net_paw_buoyancy (robot.yaml's plus the offset).
         self.net_paw_buoyancy = np.array([m.net_paw_buoyancy for m in self.models], dtype=float)
         self.restoring = np.array([m._restoring_matrix for m in self.models], dtype=float)  # noqa: SLF001
         self.failed = np.zeros(self.n, dtype=bool)
