@@ -6,7 +6,7 @@
 
 Why (docs/identification.md, "The loop's shape"): on the identified tank model the strokes' net torque
 reaches half its largest value at 1-2 degrees of attitude error, where the experiment gains ask for a
-tenth of the 2 N m they saturate at. Beyond a few degrees the controller acts as a relay: the model
+tenth to a sixth of the 2 N m they saturate at. Beyond a few degrees the controller acts as a relay: the model
 approaches at a steady rate and stops. The real robot overshoots and settles slowly, as a loop that stays
 proportional over a wider range would. Which one the robot has is measured on a bench, and this tool
 prints what the model predicts for that measurement.
