@@ -64,8 +64,9 @@ from quadruped_control.studies import paper_experiments as pe
 from quadruped_control.studies.paper_experiments import experiment_specs
 from quadruped_control.studies.trial import TrialSpec, run_batch, run_many
 
-__all__ = ["GROUPS", "PARAMETERS", "WEIGHTS", "best_on", "case_cost", "morris_sets", "nominal_values", "objective",
-           "plot_report", "targets", "tank_overrides", "timing_bias", "update_tank_yaml", "yaw_first_ratio"]
+__all__ = ["Evaluator", "GROUPS", "PARAMETERS", "WEIGHTS", "best_on", "case_cost", "fit", "morris_sets",
+           "nominal_values", "objective", "plot_report", "targets", "tank_overrides", "timing_bias",
+           "update_tank_yaml", "yaw_first_ratio"]
 
 #: (name, low, high): bounds with their physical reason in docs/identification.md
 PARAMETERS: Tuple[Tuple[str, float, float], ...] = (
@@ -375,7 +376,7 @@ def slow_recovery_cost(settled: bool, weights: Optional[Dict[str, float]] = None
     return (WEIGHTS if weights is None else weights)["slow_recovery"] if settled else 0.0
 
 
-class _Evaluator:
+class Evaluator:
     """Runs parameter sets on chosen experiments and keeps every result.
 
     The experiments are numbered as the rows of Table 1 (0-14); with ``slow_recovery`` the paper's t_rec
@@ -480,14 +481,14 @@ def best_on(results: Sequence[Dict[str, Any]], subset: Sequence[int]) -> Dict[st
 
 
 def fit(evaluate: Callable, names: Sequence[str], fixed: Dict[str, float], start: Dict[str, float], budget: int,
-        popsize: int, seed: int, cases: Sequence[int], tag: str) -> List[Dict[str, Any]]:
-    """CMA-ES over ``names`` (scaled to [0, 1]) from ``start``, the others at ``fixed``: every evaluated
-    set, best first."""
+        popsize: int, seed: int, cases: Sequence[int], tag: str, sigma: float = 0.25) -> List[Dict[str, Any]]:
+    """CMA-ES over ``names`` (scaled to [0, 1]) from ``start`` with step ``sigma`` (of the scaled range), the
+    others at ``fixed``: every evaluated set, best first."""
     import cma
 
     bounds = {name: (low, high) for name, low, high in PARAMETERS}
     x0 = [(start[n] - bounds[n][0]) / (bounds[n][1] - bounds[n][0]) for n in names]
-    es = cma.CMAEvolutionStrategy(x0, 0.25, {"bounds": [0.0, 1.0], "popsize": popsize, "seed": seed,
+    es = cma.CMAEvolutionStrategy(x0, sigma, {"bounds": [0.0, 1.0], "popsize": popsize, "seed": seed,
                                              "maxfevals": budget, "verbose": -9})
     evaluated: List[Dict[str, Any]] = []
     while not es.stop() and len(evaluated) < budget:
@@ -516,7 +517,7 @@ def main_study(args: argparse.Namespace) -> int:
     duration = args.duration if args.duration_given else 160.0  # longest paper t_s 128.6 s + 30 s hold
     servo = args.servo_model_given or "rate-limited"
     start_time = time.perf_counter()
-    evaluate = _Evaluator(args, duration, servo, bool(getattr(args, "slow_recovery_check", False)))
+    evaluate = Evaluator(args, duration, servo, bool(getattr(args, "slow_recovery_check", False)))
     tank = load_tank_params(args.tank_yaml)
     nominal = nominal_values(tank)
     everything = evaluate.cases(GROUPS)

@@ -278,7 +278,7 @@ def test_a_screening_that_chooses_one_parameter_is_refused_by_name(tmp_path, mon
             return [0]
 
     names = [name for name, _, _ in idf.PARAMETERS]
-    monkeypatch.setattr(idf, "_Evaluator", NoTrials)
+    monkeypatch.setattr(idf, "Evaluator", NoTrials)
     monkeypatch.setattr(idf, "screen", lambda *args: {"names": names, "best": {"values": {}}, "results": [],
                                                       "mu_star": [1.0] + [0.0] * (len(names) - 1)})
     args = simulate.build_parser().parse_args(["--study", "identify", "--out", str(tmp_path)])
