@@ -483,12 +483,17 @@ def best_on(results: Sequence[Dict[str, Any]], subset: Sequence[int]) -> Dict[st
 def fit(evaluate: Callable, names: Sequence[str], fixed: Dict[str, float], start: Dict[str, float], budget: int,
         popsize: int, seed: int, cases: Sequence[int], tag: str, sigma: float = 0.25) -> List[Dict[str, Any]]:
     """CMA-ES over ``names`` (scaled to [0, 1]) from ``start`` with step ``sigma`` (of the scaled range), the
-    others at ``fixed``: every evaluated set, best first."""
+    others at ``fixed``: every evaluated set, best first. The same ``seed`` (>= 0) gives the same fit."""
     import cma
 
     bounds = {name: (low, high) for name, low, high in PARAMETERS}
     x0 = [(start[n] - bounds[n][0]) / (bounds[n][1] - bounds[n][0]) for n in names]
-    es = cma.CMAEvolutionStrategy(x0, sigma, {"bounds": [0.0, 1.0], "popsize": popsize, "seed": seed,
+    if seed < 0:
+        raise StudyError("identify: the fit's seed must be >= 0, got %d" % seed)
+    # pycma reads a seed of 0 (or None) as "seed from the clock" (cma.CMAOptions("seed")), and the study's
+    # default seed is 0: before this mapping every full fit at --seed 0 drew a new search. pycma gets
+    # seed + 1, never 0.
+    es = cma.CMAEvolutionStrategy(x0, sigma, {"bounds": [0.0, 1.0], "popsize": popsize, "seed": seed + 1,
                                              "maxfevals": budget, "verbose": -9})
     evaluated: List[Dict[str, Any]] = []
     while not es.stop() and len(evaluated) < budget:

@@ -187,6 +187,29 @@ def test_the_screening_design_is_the_same_for_the_same_seed_zero_included() -> N
     assert not np.array_equal(idf.morris_sets(problem, 4, 0), idf.morris_sets(problem, 4, 1))
 
 
+def test_the_fit_is_the_same_for_the_same_seed_zero_included() -> None:
+    """pycma reads seed 0 as "from the clock"; fit gives it seed + 1, so the study's default seed repeats."""
+    pytest.importorskip("cma")
+    names = ["cob_z", "net_weight"]
+    start = idf.nominal_values(TankParams())
+
+    def searched(seed):
+        asked = []
+
+        def evaluate(sets, cases, tag):  # a bowl around the nominal set: the fit's own arithmetic only
+            asked.extend(tuple(v[n] for n in names) for v in sets)
+            return [{"values": v, "objective": sum((v[n] - start[n]) ** 2 for n in names)} for v in sets]
+
+        idf.fit(evaluate, names, start, start, 8, 4, seed, [0], "t")
+        return asked
+
+    for seed in (0, 5):
+        assert searched(seed) == searched(seed)
+    assert searched(0) != searched(1)
+    with pytest.raises(StudyError, match="seed must be >= 0"):
+        idf.fit(lambda *a: [], names, start, start, 8, 4, -1, [0], "t")
+
+
 def test_nominal_values_lie_within_the_bounds() -> None:
     nominal = idf.nominal_values(TankParams(net_weight=50.0))
     for name, low, high in idf.PARAMETERS:
