@@ -124,7 +124,7 @@ def plot_profile(result: Dict[str, Any], path: str) -> None:
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    points = result["points"]
+    points = sorted(result["points"], key=lambda p: p["value"])
     values = [p["value"] for p in points]
     figure, (left, right) = plt.subplots(1, 2, figsize=(11, 4.2))
     left.plot(values, [p["fit"]["best"]["objective"] for p in points], "o-", label="full fit, in sample")
@@ -158,7 +158,7 @@ def _text(result: Dict[str, Any]) -> str:
              "| %s | objective in sample | outcome / t_s / t_r / yaw t_s in sample | objective held out | "
              "held out: outcome | t_s within 2x | t_r within 2x | yaw t_s within 2x |" % result["parameter"],
              "|---|---|---|---|---|---|---|---|"]
-    for point in result["points"]:
+    for point in sorted(result["points"], key=lambda p: p["value"]):
         best, held = point["fit"]["best"], point["held_out"]
         t = best["targets"]
         lines.append("| %.4g | %.2f | %d / %d / %d / %d | %.2f | %d of %d | %d | %d | %d of %d |" % (
