@@ -22,6 +22,10 @@ Raue et al., "Structural and practical identifiability analysis of partially obs
 by exploiting the profile likelihood", Bioinformatics 25 (2009), with the objective in place of the
 likelihood.
 
+First the report's own best set and fold fits run again on this code: the profile's reference, and a
+check that the trials reproduce the report's. ``--tank-yaml`` must be the identification's own (its
+parameters' values there are checked against the report's ``nominal``).
+
 Output in ``--out``: ``profile.md`` (the table), ``profile.json`` (everything, each fit's per-case rows
 included, the command, the report's sha256 and the code's fingerprint) and ``profile.png`` (the
 objective and the held-out counts against v). The trials are kept under ``--out`` as a study's are, so an
@@ -38,11 +42,13 @@ import sys
 import time
 from typing import Any, Dict, List, Optional, Sequence
 
+from quadruped_common.config import ParameterError
+from quadruped_control.sim.plants.tank import load_tank_params
 from quadruped_control.studies import StudyError
-from quadruped_control.studies.identify import GROUPS, PARAMETERS, Evaluator, fit
+from quadruped_control.studies.identify import GROUPS, PARAMETERS, Evaluator, fit, nominal_values
 from quadruped_control.studies.runner import code_fingerprint
 
-__all__ = ["COUNTS", "check_values", "load_report", "main", "plot_profile", "profile", "profile_point",
+__all__ = ["COUNTS", "check_base", "check_values", "load_report", "main", "plot_profile", "profile", "profile_point",
            "summed_targets"]
 
 #: The held-out counts of the issue's targets, summed over the folds.
@@ -75,6 +81,22 @@ def check_values(name: str, values: Sequence[float]) -> None:
     for value in values:
         if not (math.isfinite(value) and low <= value <= high):
             raise StudyError("profile: %s = %r lies outside its bounds %g .. %g" % (name, value, low, high))
+
+
+def check_base(report: Dict[str, Any], tank_yaml: Optional[str]) -> None:
+    """:class:`StudyError` unless ``tank_yaml`` (None: config/tank.yaml) holds the values the report's
+    identification started from (its ``nominal``): the profile's trials read that file for everything the
+    fit does not set, so another file would profile another model."""
+    try:
+        nominal = nominal_values(load_tank_params(tank_yaml))
+    except (ParameterError, OSError) as exc:
+        raise StudyError("profile: cannot load the tank parameters %s: %s" % (tank_yaml, exc)) from exc
+    differ = [name for name, value in report.get("nominal", {}).items()
+              if name in nominal and not math.isclose(nominal[name], float(value), rel_tol=1e-9, abs_tol=1e-12)]
+    if differ:
+        raise StudyError("profile: %s is not the tank yaml the identification started from (%s differ from the "
+                         "report's nominal values): pass its own --tank-yaml"
+                         % (tank_yaml or "config/tank.yaml", ", ".join(sorted(differ))))
 
 
 def summed_targets(folds: Sequence[Dict[str, Any]]) -> Dict[str, int]:
@@ -193,6 +215,7 @@ def main(argv: Optional[Sequence[str]] = None) -> int:
     try:
         report = load_report(args.report)
         check_values(args.parameter, args.values)  # before any trial runs
+        check_base(report, args.tank_yaml)
         os.makedirs(args.out, exist_ok=True)
         start_time = time.perf_counter()
         study = argparse.Namespace(seed=int(report["seed"]), tank_yaml=args.tank_yaml, robot_yaml=None,

@@ -142,3 +142,22 @@ def test_bad_command_lines_and_reports_fail_before_any_trial(tmp_path, capsys, t
                                    "seed": 0, "duration": 1.0}))
     assert pro.main([str(partial), "--parameter", "cob_z", "--values", "0"]) == 1
     assert "has no 'servo_model'" in capsys.readouterr().err
+
+
+def test_a_tank_yaml_other_than_the_identifications_is_refused_by_the_keys_that_differ(tiny_report, tmp_path,
+                                                                                      capsys) -> None:
+    from quadruped_common.config import config_path
+
+    with open(config_path("tank.yaml")) as stream:
+        text = idf.update_tank_yaml(stream.read(), {"cob_z": 0.003, "net_weight": 2.5}, "another trim")
+    other = tmp_path / "other_tank.yaml"
+    other.write_text(text)
+    assert pro.main([tiny_report, "--parameter", "servo_lag_scale", "--values", "2", "--tank-yaml", str(other),
+                     "--out", str(tmp_path / "z")]) == 1
+    err = capsys.readouterr().err
+    assert "is not the tank yaml the identification started from (cob_z, net_weight differ" in err
+    assert not os.path.exists(str(tmp_path / "z"))
+    broken = tmp_path / "broken.yaml"
+    broken.write_text("tank: [1, 2\n")
+    with pytest.raises(StudyError, match="cannot load the tank parameters"):
+        pro.check_base({"nominal": {}}, str(broken))
