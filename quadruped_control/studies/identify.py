@@ -64,8 +64,8 @@ from quadruped_control.studies import paper_experiments as pe
 from quadruped_control.studies.paper_experiments import experiment_specs
 from quadruped_control.studies.trial import TrialSpec, run_batch, run_many
 
-__all__ = ["Evaluator", "GROUPS", "PARAMETERS", "WEIGHTS", "best_on", "case_cost", "fit", "morris_sets",
-           "nominal_values", "objective", "plot_report", "targets", "tank_overrides", "timing_bias",
+__all__ = ["BOUNDS", "Evaluator", "GROUPS", "PARAMETERS", "WEIGHTS", "best_on", "case_cost", "fit",
+           "morris_sets", "nominal_values", "objective", "plot_report", "targets", "tank_overrides", "timing_bias",
            "update_tank_yaml", "yaw_first_ratio"]
 
 #: (name, low, high): bounds with their physical reason in docs/identification.md
@@ -97,6 +97,9 @@ PARAMETERS: Tuple[Tuple[str, float, float], ...] = (
     ("block_tie_stiffness", 0.0, 20.0),    # N/m: a slack tie (0) to ten times the rope's pendulum T / L
     ("paw_buoyancy_offset", -0.05, 0.13),  # N per paw beyond robot.yaml's -0.029: a 40 g paw to a floating one
 )
+
+#: Each parameter's (low, high): :data:`PARAMETERS` by name.
+BOUNDS: Dict[str, Tuple[float, float]] = {name: (low, high) for name, low, high in PARAMETERS}
 
 #: Weights of the objective's terms (module docstring).
 WEIGHTS: Dict[str, float] = {"outcome": 1.0, "t_s": 1.0, "t_r": 1.0, "e_ss": 1.0, "M_p": 1.0,
@@ -437,9 +440,8 @@ class Evaluator:
 
 def _to_values(x: Sequence[float], names: Sequence[str], fixed: Dict[str, float]) -> Dict[str, float]:
     values = dict(fixed)
-    bounds = {name: (low, high) for name, low, high in PARAMETERS}
     for name, u in zip(names, x):
-        low, high = bounds[name]
+        low, high = BOUNDS[name]
         values[name] = low + min(1.0, max(0.0, float(u))) * (high - low)
     return values
 
@@ -486,8 +488,7 @@ def fit(evaluate: Callable, names: Sequence[str], fixed: Dict[str, float], start
     others at ``fixed``: every evaluated set, best first. The same ``seed`` (>= 0) gives the same fit."""
     import cma
 
-    bounds = {name: (low, high) for name, low, high in PARAMETERS}
-    x0 = [(start[n] - bounds[n][0]) / (bounds[n][1] - bounds[n][0]) for n in names]
+    x0 = [(start[n] - BOUNDS[n][0]) / (BOUNDS[n][1] - BOUNDS[n][0]) for n in names]
     if seed < 0:
         raise StudyError("identify: the fit's seed must be >= 0, got %d" % seed)
     # pycma reads a seed of 0 (or None) as "seed from the clock" (cma.CMAOptions("seed")), and the study's
@@ -622,14 +623,13 @@ def plot_report(report: Dict[str, Any], path: str) -> None:
 
 
 def _report_text(report: Dict[str, Any], best: Dict[str, Any]) -> str:
-    bounds = {name: (low, high) for name, low, high in PARAMETERS}
     screening = report["screening"]
     lines = ["## Identification: %d trials, %.0f s wall" % (report["trials"], report["wall_time"]), "",
              "Screening (Morris, %d sets): mu* (sigma) of each parameter; identified: %s." % (
                  screening["sets"], ", ".join(report["identified"])), "",
              "| parameter | low | high | mu* | sigma | best (full fit) |", "|---|---|---|---|---|---|"]
     for name, mu, sigma in zip(screening["names"], screening["mu_star"], screening["sigma"]):
-        low, high = bounds[name]
+        low, high = BOUNDS[name]
         lines.append("| %s | %g | %g | %.2f | %s | %.4g |" % (name, low, high, mu, "--" if sigma is None else
                                                                 "%.2f" % sigma, best["values"][name]))
     t = best["targets"]

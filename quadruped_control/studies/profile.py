@@ -45,7 +45,7 @@ from typing import Any, Dict, List, Optional, Sequence
 from quadruped_common.config import ParameterError
 from quadruped_control.sim.plants.tank import load_tank_params
 from quadruped_control.studies import StudyError
-from quadruped_control.studies.identify import GROUPS, PARAMETERS, Evaluator, fit, nominal_values
+from quadruped_control.studies.identify import BOUNDS, GROUPS, Evaluator, fit, nominal_values
 from quadruped_control.studies.runner import code_fingerprint
 
 __all__ = ["COUNTS", "check_base", "check_values", "load_report", "main", "plot_profile", "profile", "profile_point",
@@ -53,7 +53,6 @@ __all__ = ["COUNTS", "check_base", "check_values", "load_report", "main", "plot_
 
 #: The held-out counts of the issue's targets, summed over the folds.
 COUNTS = ("same_outcome", "t_s_within_2x", "t_r_within_2x", "yaw_t_s_within_2x", "yaw_t_s_reported", "cases")
-_BOUNDS = {name: (low, high) for name, low, high in PARAMETERS}
 
 
 def load_report(path: str) -> Dict[str, Any]:
@@ -77,7 +76,7 @@ def load_report(path: str) -> Dict[str, Any]:
 
 def check_values(name: str, values: Sequence[float]) -> None:
     """:class:`StudyError` unless every value is finite and inside ``name``'s bounds (identify.PARAMETERS)."""
-    low, high = _BOUNDS[name]
+    low, high = BOUNDS[name]
     for value in values:
         if not (math.isfinite(value) and low <= value <= high):
             raise StudyError("profile: %s = %r lies outside its bounds %g .. %g" % (name, value, low, high))
@@ -193,7 +192,7 @@ def _text(result: Dict[str, Any]) -> str:
 def main(argv: Optional[Sequence[str]] = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     parser.add_argument("report", help="an identification's identify.json")
-    parser.add_argument("--parameter", required=True, choices=sorted(_BOUNDS), metavar="NAME",
+    parser.add_argument("--parameter", required=True, choices=sorted(BOUNDS), metavar="NAME",
                         help="the parameter to hold (one of identify.PARAMETERS)")
     parser.add_argument("--values", required=True, nargs="+", type=float, metavar="V", help="values to hold it at")
     parser.add_argument("--evaluations", type=int, default=200, help="sets per full fit (default %(default)s)")
