@@ -103,6 +103,8 @@ def reindexed_copy(path: str, folder: str) -> str:
 class BagData:
     imu_t: List[float] = field(default_factory=list)
     imu_q: List[Sequence[float]] = field(default_factory=list)
+    #: the IMU's body rate (x, y, z), rad/s, one row per /imu/data sample
+    imu_w: List[Sequence[float]] = field(default_factory=list)
     state_t: List[float] = field(default_factory=list)
     state_setpoint: List[Sequence[float]] = field(default_factory=list)
     state_geodesic: List[float] = field(default_factory=list)
@@ -178,6 +180,8 @@ def _read_into(data: BagData, reader) -> None:
             o = msg.orientation
             data.imu_t.append(_stamp(msg))
             data.imu_q.append((o.x, o.y, o.z, o.w))
+            w = msg.angular_velocity
+            data.imu_w.append((w.x, w.y, w.z))
         elif connection.topic == "/controller_state":
             s = msg.setpoint
             data.state_t.append(_stamp(msg))

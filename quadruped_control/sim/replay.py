@@ -1,0 +1,166 @@
+"""Open-loop replay of a recorded run through the tank plant: the measured joint angles drive N plants.
+
+Why: Table 1 of the paper (section "Experiments") gives fifteen rows of summary metrics, and fitting the
+tank plant to them cannot tell its physics apart (docs/identification.md). A recorded run holds far more:
+the attitude at the IMU's rate and every joint angle (the ADS1115 feedback). Driven by the measured
+joints, the plant runs without the controller and the servo model, so what is left to explain the
+recorded attitude is the plant alone: its hydrostatics, drag, added mass, rope and the candidate effects
+of :mod:`quadruped_control.sim.plants.tank`.
+
+:class:`Record` is a run on the plant's time grid (t_k = t_0 + k dt): attitude R_B^W, body rate, joint
+angles and which samples are measured (a gap in either stream, or a corrupt joint sample, makes its
+samples invalid). :func:`replay` runs the recorded joints through one
+:class:`~quadruped_control.sim.plants.tank_batch.TankPlantBatch` trial per (parameter set, window), the
+joints held over each step as the closed-loop engines hold them (midpoint and finite-difference rate,
+:func:`~quadruped_control.sim.servo_model.servo_batch_step`), so a record of a simulated run replays to
+the same bits from the same state.
+
+Multiple shooting: a window starts from the recorded attitude and body rate. What no sensor on the
+robot measures starts as at rest: the body on a vertical rope under its anchor
+(:meth:`~quadruped_control.sim.plants.tank.TankModel.attach`), still water in the paws' and the body's
+wakes, the floating block at rest. The body's swing on the rope (a slow pendulum) is the largest of
+these; windows short against it keep the error small, and the tests measure it on simulated records.
+"""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from typing import Sequence
+
+import numpy as np
+
+from quadruped_common.so3 import geodesic_angles
+from quadruped_control.model.params import RobotParams
+from quadruped_control.sim.plants.tank import TankParams
+from quadruped_control.sim.plants.tank_batch import TankPlantBatch
+
+__all__ = ["Record", "ReplayResult", "attitude_errors", "replay", "still_errors", "window_starts"]
+
+
+@dataclass(frozen=True)
+class Record:
+    """A run on a uniform time grid: ``t`` (K,) s with step ``dt``; ``rotation`` (K, 3, 3) the attitude
+    R_B^W; ``omega`` (K, 3) the body rate in body axes, rad/s; ``joints`` (K, 4, 3) the joint angles
+    (theta1, theta2, theta3 of legs 1..4), rad; ``valid`` (K,) whether the sample was measured (the
+    invalid samples' values are not used). ``source`` says where it came from."""
+
+    t: np.ndarray
+    rotation: np.ndarray
+    omega: np.ndarray
+    joints: np.ndarray
+    valid: np.ndarray
+    dt: float
+    source: str = ""
+
+    def __post_init__(self) -> None:
+        k = self.t.shape[0] if self.t.ndim == 1 else -1
+        shapes = {"rotation": (k, 3, 3), "omega": (k, 3), "joints": (k, 4, 3), "valid": (k,)}
+        for name, shape in shapes.items():
+            if getattr(self, name).shape != shape:
+                raise ValueError("record %s must have shape %s, got %s" % (name, shape, getattr(self, name).shape))
+        if k < 2:
+            raise ValueError("a record needs at least two samples, got %d" % max(k, 0))
+        if not (math.isfinite(self.dt) and self.dt > 0.0):
+            raise ValueError("record dt must be a positive time step, got %r" % (self.dt,))
+        if not np.allclose(np.diff(self.t), self.dt, rtol=0.0, atol=1e-9 * max(1.0, abs(float(self.t[-1])))):
+            raise ValueError("record times must be a uniform grid with step dt = %g s" % self.dt)
+        good = self.valid.astype(bool)
+        for name in ("rotation", "omega", "joints"):
+            if not np.all(np.isfinite(getattr(self, name)[good])):
+                raise ValueError("record %s is not finite at a sample marked valid" % name)
+
+    @property
+    def duration(self) -> float:
+        return float(self.t[-1] - self.t[0])
+
+
+def window_starts(record: Record, steps: int, stride: int) -> np.ndarray:
+    """The first sample of each window of ``steps`` steps (``steps`` + 1 samples, all valid), one every
+    ``stride`` samples from the record's start (a window over an invalid sample is left out)."""
+    if steps < 1 or stride < 1:
+        raise ValueError("window steps and stride must be >= 1, got %d and %d" % (steps, stride))
+    valid = record.valid.astype(bool)
+    # bad[k] = number of invalid samples before k: a window k..k+steps is clean when the count does not grow
+    bad = np.concatenate(([0], np.cumsum(~valid)))
+    last = valid.size - steps - 1
+    starts = np.arange(0, last + 1, stride) if last >= 0 else np.zeros(0, dtype=int)
+    return starts[bad[starts + steps + 1] == bad[starts]].astype(int)
+
+
+@dataclass
+class ReplayResult:
+    """What :func:`replay` returns: the replayed attitude every ``every`` steps of each window,
+    ``rotation`` (S, W, M, 3, 3) for S parameter sets, W windows and M = steps // every samples (the
+    first after ``every`` steps); ``failed`` (S, W) whose plant step failed (its rotations from then on
+    are those of the failure, not to be used)."""
+
+    rotation: np.ndarray
+    failed: np.ndarray
+    starts: np.ndarray
+    every: int
+
+
+def replay(robot: RobotParams, tanks: Sequence[TankParams], record: Record, starts: Sequence[int], steps: int,
+           every: int = 10) -> ReplayResult:
+    """Replay ``record``'s joints from each window start (:func:`window_starts`) for ``steps`` steps on the
+    tank plant of each of ``tanks`` (module docstring): one batch of len(tanks) x len(starts) trials."""
+    starts = np.asarray(starts, dtype=int)
+    n_sets, n_windows = len(tanks), starts.size
+    if n_sets < 1 or n_windows < 1:
+        raise ValueError("replay needs at least one parameter set and one window")
+    if every < 1 or steps < every:
+        raise ValueError("replay needs steps >= every >= 1, got %d and %d" % (steps, every))
+    if starts.min() < 0 or starts.max() + steps >= record.t.size:
+        raise ValueError("a window runs past the record (%d samples)" % record.t.size)
+    plant = TankPlantBatch(robot, [tank for tank in tanks for _ in range(n_windows)])
+    n = plant.n
+    windows = np.tile(np.arange(n_windows), n_sets)
+    p, v = np.zeros((n, 3)), np.zeros((n, 3))
+    R = np.ascontiguousarray(record.rotation[starts[windows]], dtype=float)
+    w = np.ascontiguousarray(record.omega[starts[windows]], dtype=float)
+    plant.attach(p, R)
+    joints = record.joints
+    samples = steps // every
+    out = np.empty((n, samples, 3, 3))
+    dt = record.dt
+    mid, rate = np.empty((n, 4, 3)), np.empty((n, 4, 3))
+    held_mid, held_rate = mid.reshape(n_sets, n_windows, 4, 3), rate.reshape(n_sets, n_windows, 4, 3)  # views
+    for k in range(steps):
+        q0, q1 = joints[starts + k], joints[starts + k + 1]
+        # the closed-loop engines' joint hold (servo_batch_step): midpoint and finite-difference rate
+        held_mid[:] = 0.5 * (q0 + q1)
+        held_rate[:] = (q1 - q0) / dt
+        p, v, R, w = plant.step(p, v, R, w, mid, rate, dt)
+        if (k + 1) % every == 0:
+            out[:, (k + 1) // every - 1] = R
+    return ReplayResult(rotation=out.reshape(n_sets, n_windows, samples, 3, 3),
+                        failed=plant.failed.reshape(n_sets, n_windows).copy(), starts=starts, every=every)
+
+
+def _angles(recorded: np.ndarray, replayed: np.ndarray) -> np.ndarray:
+    """Geodesic angle (rad) between rotations (..., 3, 3) that broadcast (:func:`geodesic_angles`)."""
+    recorded, replayed = np.broadcast_arrays(recorded, replayed)
+    shape = recorded.shape[:-2]
+    return geodesic_angles(recorded.reshape(-1, 3, 3), replayed.reshape(-1, 3, 3)).reshape(shape)
+
+
+def _recorded_samples(record: Record, starts: np.ndarray, samples: int, every: int) -> np.ndarray:
+    index = starts[:, None] + every * np.arange(1, samples + 1)[None, :]
+    return record.rotation[index]  # (W, M, 3, 3)
+
+
+def attitude_errors(result: ReplayResult, record: Record) -> np.ndarray:
+    """(S, W, M) geodesic angle (rad) between the replayed and the recorded attitude at each sample of
+    :func:`replay`'s result; pi (the largest) for a failed trial's samples."""
+    samples = result.rotation.shape[2]
+    errors = _angles(_recorded_samples(record, result.starts, samples, result.every)[None], result.rotation)
+    errors[result.failed] = math.pi
+    return errors
+
+
+def still_errors(record: Record, starts: Sequence[int], steps: int, every: int = 10) -> np.ndarray:
+    """(W, M) geodesic angle (rad) of a model that predicts no motion at all (the attitude held at each
+    window's start) at :func:`replay`'s samples: the baseline a plant must beat to predict anything."""
+    starts = np.asarray(starts, dtype=int)
+    recorded = _recorded_samples(record, starts, steps // every, every)
+    return _angles(record.rotation[starts][:, None], recorded)
