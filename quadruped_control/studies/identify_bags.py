@@ -1,0 +1,505 @@
+"""Identify the tank plant from recorded runs: the measured joint angles replayed open loop through the
+plant, its parameters fitted to the recorded attitude, and checked on runs held out of the fit.
+
+    python -m quadruped_control.studies.identify_bags RUN [RUN ...] [--hold-out RUN ...] --out DIR
+        [--tank-yaml Y] [--parameters P ...] [--window 10] [--stride 5] [--every 10]
+        [--evaluations 600] [--popsize 16] [--sigma 0.25] [--seed 0]
+
+A RUN is a recorded bag, or the parts of one split recording joined by commas (``a_0.bag,a_1.bag``).
+Each is read with :func:`quadruped_control.analysis.bag_report.read_bags` (``/imu/data`` attitude and
+body rate, ``/joint_states`` the ADS1115 feedback) and put on the plant's 10 ms grid
+(:func:`record_from_bag`), and its joint angles are low-passed without delay at ``--joint-filter-hz``
+(:func:`smoothed`: the replay differentiates them). Joint samples that are not finite, outside the servo ranges or that the
+five-bar cannot close are skipped (:func:`quadruped_control.analysis.strokes.foot_paths`); a gap of
+more than ``--max-gap`` s in either stream makes its samples invalid, and no window crosses them.
+
+Why (docs/identification.md, "Identification from recorded runs"): Table 1 gives fifteen rows of summary
+metrics, and fits to it leave the plant's physics undecided. A recorded run gives the attitude and every
+joint angle at 100-200 Hz. Replayed with the measured joints (:mod:`quadruped_control.sim.replay`), the
+plant runs without the controller and the servo model, so the servos' parameters (speed, lag, load) do
+not enter and are refused here: what the fit explains is the body's response to its legs' motion.
+
+Objective: the root mean square, over every window of ``--window`` s (one every ``--stride`` s) and every
+``--every``-th step in it, of the geodesic angle between the replayed and the recorded attitude, in
+degrees. Each window starts from the recorded attitude and body rate, with the unmeasured states at rest
+(:mod:`quadruped_control.sim.replay`). Fit: CMA-ES over the named parameters scaled into their bounds
+(:data:`quadruped_control.studies.identify.PARAMETERS`, with their physical reasons), from the base
+tank.yaml's values, seeded (:func:`quadruped_control.studies.identify.fit`). Reported on the training
+runs and the held-out runs alike, beside two references: the base tank.yaml, and "still", a model that
+predicts no motion (the attitude held at each window's start). A plant that does not beat "still" on
+held-out runs predicts nothing.
+
+``--simulated TRUTH_YAML`` replaces the bags with runs of the simulated robot on the tank plant of
+TRUTH_YAML (the robot's controller, the ``--gains`` set and rate-limited servos, from ``--initial-rpy`` to
+``--rpy``, one run per ``--rpy``, for ``--duration`` s) with the IMU's attitude noise and the feedback's
+joint noise added (``--attitude-noise-deg``, ``--joint-noise-deg``, seeded): what a recorded run would
+tell about a plant whose parameters are known. The report then adds the truth's values and objective.
+
+Output in ``--out``: ``identify_bags.json`` (everything: the command, the code's fingerprint, each run's
+source and windows, the values and objectives), ``identify_bags.md``, ``identify_bags.png`` (the first
+held-out run, else the first run: recorded attitude and the replayed windows of the fit and the base)
+and ``tank_fitted.yaml``, the base tank.yaml with the fitted values.
+"""
+from __future__ import annotations
+
+import argparse
+import json
+import math
+import os
+import sys
+import time
+from typing import Any, Dict, List, Optional, Sequence, Tuple
+
+import numpy as np
+
+from quadruped_common.config import ParameterError, config_path
+from quadruped_common.so3 import exp_so3, rpy_to_rot
+from quadruped_control.analysis.bag_report import BagData, BagReportError, read_bags
+from quadruped_control.analysis.strokes import foot_paths
+from quadruped_control.model.params import RobotParams, load_robot_params
+from quadruped_control.sim.plants.tank import TankParams, load_tank_params
+from quadruped_control.sim.replay import Record, attitude_errors, replay, still_errors, window_starts
+from quadruped_control.studies import StudyError
+from quadruped_control.studies.identify import (BOUNDS, PARAMETERS, fit, nominal_values, tank_overrides,
+                                                update_tank_yaml)
+from quadruped_control.studies.runner import code_fingerprint
+
+__all__ = ["PLANT_PARAMETERS", "SERVO_PARAMETERS", "ReplayObjective", "main", "read_run", "record_from_bag",
+           "simulated_record", "smoothed"]
+
+#: The identification's parameters of the servo model: the replay drives the plant with the measured
+#: joints, so these do not enter it.
+SERVO_PARAMETERS = ("servo_speed_scale", "servo_lag_scale", "servo_load_slope")
+#: Every parameter of :data:`~quadruped_control.studies.identify.PARAMETERS` that the replay can fit.
+PLANT_PARAMETERS = tuple(name for name, _, _ in PARAMETERS if name not in SERVO_PARAMETERS)
+
+#: The plant's step (s): the controller's period, on which the closed-loop engines hold the joints.
+GRID_DT = 0.01
+
+
+# --------------------------------------------------------------------------------------------------
+# Records
+# --------------------------------------------------------------------------------------------------
+
+def _sorted_rows(t: Sequence[float], rows: Sequence[Sequence[float]], name: str) -> Tuple[np.ndarray, np.ndarray]:
+    """Samples in stamp order, repeated stamps dropped (split bags, several publishers)."""
+    times = np.asarray(t, dtype=float)
+    values = np.asarray(rows, dtype=float).reshape(times.size, -1)
+    order = np.argsort(times, kind="stable")
+    times, values = times[order], values[order]
+    keep = np.concatenate(([True], np.diff(times) > 0.0)) if times.size else np.zeros(0, dtype=bool)
+    if np.count_nonzero(keep) < 2:
+        raise StudyError("identify_bags: the record has fewer than two %s samples" % name)
+    return times[keep], values[keep]
+
+
+def _covered(times: np.ndarray, grid: np.ndarray, max_gap: float) -> np.ndarray:
+    """Whether each grid time lies within a span of ``times`` without a gap longer than ``max_gap``."""
+    after = np.clip(np.searchsorted(times, grid, side="left"), 1, times.size - 1)
+    inside = (grid >= times[0]) & (grid <= times[-1])
+    return inside & ((times[after] - times[after - 1] <= max_gap) | (times[after] == grid)
+                     | (times[after - 1] == grid))
+
+
+def record_from_bag(data: BagData, robot: RobotParams, dt: float = GRID_DT, max_gap: float = 0.1,
+                    source: str = "") -> Tuple[Record, int]:
+    """A :class:`~quadruped_control.sim.replay.Record` of a read bag on a ``dt`` grid over the span both
+    streams cover (module docstring): attitude by spherical interpolation of the IMU's quaternions, body
+    rate and joints linearly; and the number of joint samples skipped as corrupt. StudyError if the bag
+    lacks a stream or the streams do not overlap."""
+    from scipy.spatial.transform import Rotation, Slerp
+
+    if not data.imu_t or not data.joint_t:
+        raise StudyError("identify_bags: %s has no %s" % (source or "the record", "/imu/data" if not data.imu_t
+                                                          else "/joint_states"))
+    imu_t, imu = _sorted_rows(data.imu_t, [tuple(q) + tuple(w) for q, w in zip(data.imu_q, data.imu_w)], "/imu/data")
+    joint_t, joints = _sorted_rows(data.joint_t, data.joint_q, "/joint_states")
+    quaternions, rates = imu[:, :4], imu[:, 4:]
+    good_imu = np.all(np.isfinite(imu), axis=1) & (np.linalg.norm(np.nan_to_num(quaternions), axis=1) > 0.5)
+    imu_t, quaternions, rates = imu_t[good_imu], quaternions[good_imu], rates[good_imu]
+    _, good = foot_paths(joints, robot)
+    skipped = int(np.count_nonzero(~good))
+    joint_t, joints = joint_t[good], joints[good]
+    if imu_t.size < 2 or joint_t.size < 2:
+        raise StudyError("identify_bags: %s has fewer than two usable %s samples"
+                         % (source or "the record", "/imu/data" if imu_t.size < 2 else "/joint_states"))
+    start, end = max(imu_t[0], joint_t[0]), min(imu_t[-1], joint_t[-1])
+    if end - start < 2.0 * dt:
+        raise StudyError("identify_bags: the /imu/data and /joint_states of %s do not overlap"
+                         % (source or "the record"))
+    # times from the grid's start: stamps since 1970 would round the grid's steps
+    imu_t, joint_t = imu_t - start, joint_t - start
+    grid = dt * np.arange(int(math.floor((end - start) / dt + 1e-9)) + 1)
+    rotation = Slerp(imu_t, Rotation.from_quat(quaternions))(np.clip(grid, imu_t[0], imu_t[-1])).as_matrix()
+    omega = np.column_stack([np.interp(grid, imu_t, rates[:, axis]) for axis in range(3)])
+    angles = np.column_stack([np.interp(grid, joint_t, joints[:, j]) for j in range(12)]).reshape(-1, 4, 3)
+    valid = _covered(imu_t, grid, max_gap) & _covered(joint_t, grid, max_gap)
+    return Record(t=grid, rotation=rotation, omega=omega, joints=angles, valid=valid, dt=dt, source=source), skipped
+
+
+def smoothed(record: Record, cutoff_hz: float) -> Record:
+    """``record`` with its joint angles low-passed at ``cutoff_hz`` (0: unchanged) without delay: a
+    second-order Butterworth run forwards and backwards (scipy's ``sosfiltfilt``) over each stretch of
+    valid samples. Why: the replay holds the joints with their finite-difference rate over each 10 ms step,
+    which turns a feedback noise of 0.3 deg into 40 deg/s of paw motion, and the paws' quadratic drag
+    rectifies it into torque; the servos' own motion stays below about 10 Hz (a power stroke lasts
+    0.1-0.3 s). A stretch too short to filter is marked invalid."""
+    from scipy.signal import butter, sosfiltfilt
+
+    if cutoff_hz == 0.0:
+        return record
+    nyquist = 0.5 / record.dt
+    if not (math.isfinite(cutoff_hz) and 0.0 < cutoff_hz < nyquist):
+        raise StudyError("identify_bags: the joint filter's cutoff must lie in (0, %g) Hz, got %r"
+                         % (nyquist, cutoff_hz))
+    sos = butter(2, cutoff_hz, fs=1.0 / record.dt, output="sos")
+    joints, valid = record.joints.copy(), record.valid.astype(bool).copy()
+    edges = np.flatnonzero(np.diff(np.concatenate(([0], valid.astype(int), [0]))))
+    for first, end in zip(edges[::2], edges[1::2]):
+        try:
+            joints[first:end] = sosfiltfilt(sos, joints[first:end], axis=0)
+        except ValueError:  # shorter than the filter's padding
+            valid[first:end] = False
+    return Record(t=record.t, rotation=record.rotation, omega=record.omega, joints=joints, valid=valid,
+                  dt=record.dt, source=record.source)
+
+
+def read_run(run: str, robot: RobotParams, max_gap: float) -> Tuple[Record, int]:
+    """The record of RUN (a bag, or the parts of one recording joined by commas)."""
+    paths = [part for part in run.split(",") if part]
+    for path in paths:
+        if not os.path.isfile(path):
+            raise StudyError("identify_bags: no such bag: %s" % path)
+    try:
+        data = read_bags(paths)
+    except BagReportError as exc:
+        raise StudyError("identify_bags: %s" % exc) from None
+    return record_from_bag(data, robot, max_gap=max_gap, source=run)
+
+
+def simulated_record(truth_yaml: str, setpoint_rpy_deg: Sequence[float], initial_rpy_deg: Sequence[float],
+                     duration: float, gains: str = "experiment", attitude_noise_deg: float = 0.0,
+                     joint_noise_deg: float = 0.0, seed: int = 0) -> Record:
+    """A run of the simulated robot on the tank plant of ``truth_yaml`` (module docstring) as a bag would
+    record it: the true attitude turned by an isotropic rotation-vector noise of ``attitude_noise_deg``
+    (std), the true body rate, and the servos' angles plus a noise of ``joint_noise_deg`` (std)."""
+    from quadruped_control.sim.batch import BatchSimulation, BatchTrial
+    from quadruped_control.studies.trial import TrialSpec, trial_setup
+
+    spec = TrialSpec(label="simulated", setpoint_rpy_deg=tuple(setpoint_rpy_deg),
+                     initial_rpy_deg=tuple(initial_rpy_deg), duration=duration, gains=gains,
+                     servo_model="rate-limited", plant="tank", tank_yaml=truth_yaml)
+    setup = trial_setup(spec)
+    trial = BatchTrial(config=setup.config, setpoint=rpy_to_rot(*np.radians(spec.setpoint_rpy_deg)),
+                       initial=rpy_to_rot(*np.radians(spec.initial_rpy_deg)), servo_model="rate-limited",
+                       servo_params=setup.servo_params, tank=setup.model.tank)
+    simulation = BatchSimulation(setup.robot, [trial])
+    samples = int(round(duration / simulation.dt)) + 1
+    result = simulation.run(duration, record_states=samples)
+    if not result.trusted(0):
+        raise StudyError("identify_bags: the simulated run on %s failed" % truth_yaml)
+    states = result.states
+    rotation, omega, joints = states["rotation"][0].copy(), states["omega"][0].copy(), states["joints"][0].copy()
+    rng = np.random.default_rng(seed)
+    if attitude_noise_deg > 0.0:
+        noise = rng.normal(0.0, math.radians(attitude_noise_deg), size=(samples, 3))
+        rotation = np.array([R @ exp_so3(n) for R, n in zip(rotation, noise)])
+    if joint_noise_deg > 0.0:
+        joints += rng.normal(0.0, math.radians(joint_noise_deg), size=joints.shape)
+    return Record(t=result.t - result.t[0], rotation=rotation, omega=omega, joints=joints,
+                  valid=np.ones(samples, dtype=bool), dt=simulation.dt,
+                  source="simulated: %s, rpy %s from %s, %g s" % (truth_yaml, list(setpoint_rpy_deg),
+                                                                 list(initial_rpy_deg), duration))
+
+
+# --------------------------------------------------------------------------------------------------
+# The objective
+# --------------------------------------------------------------------------------------------------
+
+class ReplayObjective:
+    """The replay's objective (module docstring) over ``records``' windows of ``steps`` steps, one every
+    ``stride`` samples, sampled every ``every`` steps; parameter sets are partial: the rest is
+    ``nominal`` (the base tank.yaml's values), applied to ``base``. Callable as
+    :func:`~quadruped_control.studies.identify.fit` evaluates: ``objective(sets, cases, tag)`` -> one
+    ``{"values", "objective"}`` per set (``cases`` and ``tag`` unused: every window counts)."""
+
+    def __init__(self, robot: RobotParams, base: TankParams, nominal: Dict[str, float], records: Sequence[Record],
+                 steps: int, stride: int, every: int) -> None:
+        self.robot, self.base, self.nominal = robot, base, dict(nominal)
+        self.steps, self.every = steps, every
+        self.windows = [(record, window_starts(record, steps, stride)) for record in records]
+        self.evaluations = 0
+
+    @property
+    def window_count(self) -> int:
+        return int(sum(starts.size for _, starts in self.windows))
+
+    def tank(self, values: Dict[str, float]) -> TankParams:
+        return self.base.with_values(**dict(tank_overrides(dict(self.nominal, **values))))
+
+    def errors(self, sets: Sequence[Dict[str, float]]) -> List[np.ndarray]:
+        """Per record, the (S, W, M) geodesic errors (rad) of each set."""
+        return self.errors_of([self.tank(values) for values in sets])
+
+    def errors_of(self, tanks: Sequence[TankParams]) -> List[np.ndarray]:
+        """Per record, the (S, W, M) geodesic errors (rad) of each whole tank plant."""
+        self.evaluations += len(tanks)
+        out = []
+        for record, starts in self.windows:
+            if starts.size:
+                out.append(attitude_errors(replay(self.robot, tanks, record, starts, self.steps, self.every), record))
+        return out
+
+    @staticmethod
+    def rms_deg(errors: Sequence[np.ndarray]) -> np.ndarray:
+        """(S,) root mean square over every record, window and sample, in degrees."""
+        squares = np.concatenate([e.reshape(e.shape[0], -1) ** 2 for e in errors], axis=1)
+        return np.degrees(np.sqrt(squares.mean(axis=1)))
+
+    def __call__(self, sets: Sequence[Dict[str, float]], cases: Any = None, tag: str = "") -> List[Dict[str, Any]]:
+        if self.window_count == 0:
+            raise StudyError("identify_bags: no window of %.2f s fits in the valid samples of the records"
+                             % (self.steps * GRID_DT))
+        objective = self.rms_deg(self.errors(sets))
+        return [{"values": dict(values), "objective": float(value)} for values, value in zip(sets, objective)]
+
+    def still_deg(self) -> float:
+        """The objective of a model that predicts no motion (:func:`~quadruped_control.sim.replay.still_errors`)."""
+        errors = [still_errors(record, starts, self.steps, self.every)[None]
+                  for record, starts in self.windows if starts.size]
+        return float(self.rms_deg(errors)[0])
+
+    def per_window_deg(self, values: Dict[str, float]) -> List[List[float]]:
+        """Per record, each window's root mean square error (deg) of one set."""
+        errors = iter(self.errors([values]))
+        return [[float(np.degrees(np.sqrt(np.mean(row ** 2)))) for row in next(errors)[0]] if starts.size else []
+                for _, starts in self.windows]
+
+
+# --------------------------------------------------------------------------------------------------
+# The study
+# --------------------------------------------------------------------------------------------------
+
+def _check_parameters(names: Sequence[str]) -> List[str]:
+    unknown = [n for n in names if n not in BOUNDS]
+    if unknown:
+        raise StudyError("identify_bags: unknown parameter %s (one of identify.PARAMETERS)" % ", ".join(unknown))
+    servo = [n for n in names if n in SERVO_PARAMETERS]
+    if servo:
+        raise StudyError("identify_bags: %s belong to the servo model, which the replay does not run: the "
+                         "measured joint angles drive the plant" % ", ".join(servo))
+    if len(set(names)) != len(names):
+        raise StudyError("identify_bags: a parameter is named twice")
+    if len(names) < 2:  # pycma does not fit one dimension (pycma issue 86)
+        raise StudyError("identify_bags: CMA-ES fits two or more parameters, got %d" % len(names))
+    return list(names)
+
+
+def _records(args: argparse.Namespace, robot: RobotParams) -> Tuple[List[Record], List[Record], List[int]]:
+    """The training and held-out records, and the corrupt joint samples skipped in each bag."""
+    if args.simulated:
+        if not args.rpy:
+            raise StudyError("identify_bags: --simulated needs at least one --rpy")
+        records = [smoothed(simulated_record(args.simulated, rpy, args.initial_rpy, args.duration, args.gains,
+                                             args.attitude_noise_deg, args.joint_noise_deg, args.seed + i),
+                            args.joint_filter_hz) for i, rpy in enumerate(args.rpy)]
+        held = [smoothed(simulated_record(args.simulated, rpy, args.initial_rpy, args.duration, args.gains,
+                                          args.attitude_noise_deg, args.joint_noise_deg, args.seed + len(args.rpy) + i),
+                         args.joint_filter_hz) for i, rpy in enumerate(args.hold_out_rpy or [])]
+        return records, held, []
+    if not args.runs:
+        raise StudyError("identify_bags: name at least one recorded run (or --simulated)")
+    training = [read_run(run, robot, args.max_gap) for run in args.runs]
+    held_out = [read_run(run, robot, args.max_gap) for run in args.hold_out or []]
+    return ([smoothed(r, args.joint_filter_hz) for r, _ in training],
+            [smoothed(r, args.joint_filter_hz) for r, _ in held_out], [s for _, s in training + held_out])
+
+
+def _plot(path: str, record: Record, objective: ReplayObjective, best: Dict[str, float], title: str) -> None:
+    import matplotlib
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    from quadruped_common.so3 import rotations_to_rpy
+
+    starts = window_starts(record, objective.steps, objective.steps)  # windows that do not overlap
+    fig, axes = plt.subplots(3, 1, figsize=(10, 7), sharex=True)
+    rpy = np.degrees(rotations_to_rpy(record.rotation))
+    for axis, name in enumerate(("roll", "pitch", "yaw")):
+        axes[axis].plot(record.t, rpy[:, axis], color="black", lw=1.0, label="recorded")
+        axes[axis].set_ylabel(name + " [deg]")
+    if starts.size:
+        for label, values, style in (("fitted", best, "tab:blue"), ("base tank.yaml", {}, "tab:red")):
+            result = replay(objective.robot, [objective.tank(values)], record, starts, objective.steps, objective.every)
+            for w, start in enumerate(starts):
+                t = record.t[start + objective.every * np.arange(1, result.rotation.shape[2] + 1)]
+                replayed = np.degrees(rotations_to_rpy(result.rotation[0, w]))
+                for axis in range(3):
+                    axes[axis].plot(t, replayed[:, axis], color=style, lw=1.0, label=label if w == 0 else None)
+    axes[0].legend(loc="best", fontsize=8)
+    axes[0].set_title(title, fontsize=9)
+    axes[2].set_xlabel("time [s]")
+    fig.tight_layout()
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+
+
+def _text(report: Dict[str, Any]) -> str:
+    lines = ["# The tank plant identified from recorded runs", "",
+             "    " + " ".join(report["command"]), "",
+             "Code %s; %d parameter sets evaluated, %.0f s wall." % (report["code"], report["evaluations"],
+                                                                 report["wall_time"]), ""]
+    lines += ["| runs | windows | still [deg] | base tank.yaml [deg] | fitted [deg] |%s" %
+              (" truth [deg] |" if "truth" in report else ""), "|---|---|---|---|---|%s" %
+              ("---|" if "truth" in report else "")]
+    for part in ("training", "held_out"):
+        side = report[part]
+        if not side["windows"]:
+            continue
+        row = "| %s (%d) | %d | %.2f | %.2f | %.2f |" % (part.replace("_", " "), len(side["runs"]), side["windows"],
+                                                       side["still"], side["base"], side["fitted"])
+        if "truth" in report:
+            row += " %.2f |" % side["truth"]
+        lines.append(row)
+    lines += ["", "Root mean square geodesic error between the replayed and the recorded attitude over windows "
+              "of %g s, one every %g s." % (report["window"], report["stride"]), ""]
+    lines += ["| parameter | bounds | base | fitted |%s" % (" truth |" if "truth" in report else ""),
+              "|---|---|---|---|%s" % ("---|" if "truth" in report else "")]
+    for name in report["parameters"]:
+        low, high = BOUNDS[name]
+        row = "| %s | %.4g .. %.4g | %.4g | %.4g |" % (name, low, high, report["base"][name], report["fitted"][name])
+        if "truth" in report:
+            row += " %.4g |" % report["truth"]["values"][name]
+        lines.append(row)
+    for part in ("training", "held_out"):
+        for run in report[part]["runs"]:
+            lines.append("")
+            lines.append("- %s (%s): %.1f s, %d windows; per window, fitted [deg]: %s" % (
+                run["source"], part.replace("_", " "), run["duration"], len(run["fitted_per_window"]),
+                ", ".join("%.2f" % e for e in run["fitted_per_window"]) or "-"))
+    return "\n".join(lines) + "\n"
+
+
+def main(argv: Optional[Sequence[str]] = None) -> int:
+    parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    parser.add_argument("runs", nargs="*", metavar="RUN", help="recorded runs to fit: a bag, or a split "
+                        "recording's parts joined by commas")
+    parser.add_argument("--hold-out", nargs="+", default=[], metavar="RUN", help="runs to predict, not fitted")
+    parser.add_argument("--tank-yaml", default=None, help="base tank parameters (default: config/tank.yaml)")
+    parser.add_argument("--robot-yaml", default=None, help="robot parameters (default: config/robot.yaml)")
+    parser.add_argument("--parameters", nargs="+", default=list(PLANT_PARAMETERS), metavar="NAME",
+                        help="parameters to fit (default: every plant parameter of identify.PARAMETERS)")
+    parser.add_argument("--window", type=float, default=10.0, help="window length, s (default %(default)s)")
+    parser.add_argument("--stride", type=float, default=5.0, help="one window every so many s (default %(default)s)")
+    parser.add_argument("--every", type=int, default=10, help="compare every n-th step (default %(default)s)")
+    parser.add_argument("--max-gap", type=float, default=0.1,
+                        help="a longer gap (s) in a stream makes its samples invalid (default %(default)s)")
+    parser.add_argument("--joint-filter-hz", type=float, default=10.0,
+                        help="low-pass the joint angles without delay at this cutoff, 0: off (default %(default)s)")
+    parser.add_argument("--evaluations", type=int, default=600, help="parameter sets (default %(default)s)")
+    parser.add_argument("--popsize", type=int, default=16, help="CMA-ES population (default %(default)s)")
+    parser.add_argument("--sigma", type=float, default=0.25, help="CMA-ES step, of each range (default %(default)s)")
+    parser.add_argument("--seed", type=int, default=0, help="the fit's and the simulated noise's seed")
+    parser.add_argument("--simulated", metavar="TRUTH_YAML", help="fit simulated runs on this tank.yaml instead")
+    parser.add_argument("--rpy", nargs=3, type=float, action="append", metavar=("R", "P", "Y"),
+                        help="--simulated: a run's setpoint, deg (repeat for more runs)")
+    parser.add_argument("--hold-out-rpy", nargs=3, type=float, action="append", metavar=("R", "P", "Y"),
+                        help="--simulated: a held-out run's setpoint, deg")
+    parser.add_argument("--initial-rpy", nargs=3, type=float, default=[0.0, 0.0, 60.0], metavar=("R", "P", "Y"),
+                        help="--simulated: initial attitude, deg (default %(default)s)")
+    parser.add_argument("--duration", type=float, default=120.0, help="--simulated: run length, s")
+    parser.add_argument("--gains", default="experiment", help="--simulated: gain set (default %(default)s)")
+    parser.add_argument("--attitude-noise-deg", type=float, default=0.2, help="--simulated: IMU attitude noise")
+    parser.add_argument("--joint-noise-deg", type=float, default=0.3, help="--simulated: joint feedback noise")
+    parser.add_argument("--out", default="out/identify_bags", help="output folder (default %(default)s)")
+    args = parser.parse_args(argv)
+    positive = {"--window": args.window, "--stride": args.stride, "--max-gap": args.max_gap,
+                "--duration": args.duration}
+    for flag, value in positive.items():
+        if not (math.isfinite(value) and value > 0.0):
+            parser.error("%s must be a positive number of seconds, got %r" % (flag, value))
+    if args.every < 1 or args.evaluations < 1 or args.popsize < 2 or args.seed < 0:
+        parser.error("--every and --evaluations must be >= 1, --popsize >= 2, --seed >= 0")
+    if not (math.isfinite(args.sigma) and 0.0 < args.sigma <= 0.5):
+        parser.error("--sigma must lie in (0, 0.5], a step of the scaled [0, 1] range; got %r" % args.sigma)
+    for flag in ("attitude_noise_deg", "joint_noise_deg"):
+        value = getattr(args, flag)
+        if not (math.isfinite(value) and value >= 0.0):
+            parser.error("--%s must be a finite std >= 0, got %r" % (flag.replace("_", "-"), value))
+    steps, stride = int(round(args.window / GRID_DT)), max(1, int(round(args.stride / GRID_DT)))
+    if steps < args.every:
+        parser.error("--window must hold at least --every steps of %g s" % GRID_DT)
+    if args.simulated and (args.runs or args.hold_out):
+        parser.error("give recorded runs or --simulated, not both")
+    if not args.simulated and (args.rpy or args.hold_out_rpy):
+        parser.error("--rpy and --hold-out-rpy belong to --simulated")
+    try:
+        names = _check_parameters(args.parameters)
+        start_time = time.perf_counter()
+        robot = load_robot_params(args.robot_yaml)
+        base = load_tank_params(args.tank_yaml)
+        nominal = nominal_values(base)
+        training, held_out, skipped = _records(args, robot)
+        objective = ReplayObjective(robot, base, nominal, training, steps, stride, args.every)
+        if objective.window_count == 0:
+            raise StudyError("identify_bags: no window of %g s fits in the valid samples of the training runs"
+                             % args.window)
+        # the base itself competes: a short search need not find a set better than its start
+        evaluated = sorted(objective([{n: nominal[n] for n in names}])
+                           + fit(objective, names, nominal, nominal, args.evaluations, args.popsize, args.seed, None,
+                                 "fit", sigma=args.sigma), key=lambda r: r["objective"])
+        best = evaluated[0]["values"]
+        fitted = {n: float(best[n]) for n in names}
+        check = ReplayObjective(robot, base, nominal, held_out, steps, stride, args.every)
+        truth_tank = load_tank_params(args.simulated) if args.simulated else None
+        truth = nominal_values(truth_tank) if truth_tank is not None else None
+        sides = {}
+        for part, side, records in (("training", objective, training), ("held_out", check, held_out)):
+            summary: Dict[str, Any] = {"windows": side.window_count, "runs": []}
+            if side.window_count:
+                summary.update(still=side.still_deg(), base=side([{}])[0]["objective"],
+                               fitted=side([fitted])[0]["objective"])
+                if truth_tank is not None:  # the whole truth, whatever the base holds outside the parameters
+                    summary["truth"] = float(side.rms_deg(side.errors_of([truth_tank]))[0])
+            for record, per_window in zip(records, side.per_window_deg(fitted) if side.window_count else
+                                          [[] for _ in records]):
+                summary["runs"].append({"source": record.source, "duration": record.duration,
+                                        "valid_fraction": float(np.mean(record.valid)),
+                                        "fitted_per_window": per_window})
+            sides[part] = summary
+    except (StudyError, ParameterError) as exc:
+        print(str(exc), file=sys.stderr)
+        return 1
+    os.makedirs(args.out, exist_ok=True)
+    report: Dict[str, Any] = {
+        "study": "identify_bags", "command": ["python", "-m", "quadruped_control.studies.identify_bags"]
+        + list(argv if argv is not None else sys.argv[1:]), "code": code_fingerprint(),
+        "tank_yaml": os.path.abspath(args.tank_yaml or config_path("tank.yaml")), "parameters": names,
+        "window": args.window, "stride": args.stride, "every": args.every, "seed": args.seed,
+        "joint_filter_hz": args.joint_filter_hz,
+        "evaluations": objective.evaluations, "popsize": args.popsize, "sigma": args.sigma,
+        "skipped_joint_samples": skipped, "base": {n: nominal[n] for n in names}, "fitted": fitted,
+        "fit_objective": evaluated[0]["objective"], "training": sides["training"], "held_out": sides["held_out"],
+        "wall_time": time.perf_counter() - start_time}
+    if truth is not None:
+        report["truth"] = {"tank_yaml": os.path.abspath(args.simulated), "values": {n: truth[n] for n in names},
+                           "attitude_noise_deg": args.attitude_noise_deg, "joint_noise_deg": args.joint_noise_deg}
+    with open(os.path.join(args.out, "identify_bags.json"), "w") as stream:
+        json.dump(report, stream, indent=1, allow_nan=False)
+    with open(args.tank_yaml or config_path("tank.yaml")) as stream:
+        template = stream.read()
+    with open(os.path.join(args.out, "tank_fitted.yaml"), "w") as stream:
+        stream.write(update_tank_yaml(template, fitted, "identify_bags (code %s), objective %.2f deg"
+                                      % (report["code"], report["fit_objective"])))
+    shown, side = (held_out[0], check) if held_out and check.window_count else (training[0], objective)
+    _plot(os.path.join(args.out, "identify_bags.png"), shown, side, fitted,
+          "%s: recorded, and replayed windows of %g s" % (shown.source, args.window))
+    text = _text(report)
+    with open(os.path.join(args.out, "identify_bags.md"), "w") as stream:
+        stream.write(text)
+    print(text, end="")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

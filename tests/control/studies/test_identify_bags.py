@@ -1,0 +1,233 @@
+"""Identification from recorded runs: a bag becomes a record on the plant's grid (corrupt samples skipped,
+gaps marked), the joint filter removes noise without delay, the fit recovers the parameters of a
+simulated run, and bad input is refused."""
+from __future__ import annotations
+
+import json
+import math
+import os
+
+import numpy as np
+import pytest
+
+from quadruped_common.robot import JOINT_NAMES
+from quadruped_common.so3 import geodesic_angles, rot_to_quat, rot_z
+from quadruped_control.analysis.bag_report import BagData
+from quadruped_control.model.params import load_robot_params
+from quadruped_control.sim.plants import load_tank_params
+from quadruped_control.sim.replay import Record
+from quadruped_control.studies import StudyError
+from quadruped_control.studies import identify_bags as ib
+from quadruped_control.studies.identify import nominal_values, update_tank_yaml
+
+TANK = "config/tank_identified.yaml"
+ROBOT = load_robot_params(None)
+
+
+def _stance() -> np.ndarray:
+    """The twelve joint angles of the nominal stance: inside every servo range, and the five-bar closes."""
+    from quadruped_control.control.strokes.paper import StrokeCycle
+
+    return np.array(StrokeCycle(ROBOT).nominal_joints, dtype=float).reshape(12)
+
+
+def _bag_data(imu_rate: float = 200.0, joint_rate: float = 50.0, duration: float = 2.0) -> BagData:
+    """A yaw turn at 0.3 rad/s and joints moving as slow sines about the stance, on their own clocks."""
+    data = BagData()
+    stance = _stance()
+    for k in range(int(duration * imu_rate) + 1):
+        t = 100.0 + k / imu_rate
+        data.imu_t.append(t)
+        data.imu_q.append(tuple(rot_to_quat(rot_z(0.3 * (t - 100.0)))))
+        data.imu_w.append((0.0, 0.0, 0.3))
+    for k in range(int(duration * joint_rate) + 1):
+        t = 100.003 + k / joint_rate
+        data.joint_t.append(t)
+        data.joint_q.append(list(stance + 0.05 * math.sin(2.0 * (t - 100.0))))
+    return data
+
+
+def test_a_bag_becomes_a_record_on_the_plants_grid() -> None:
+    data = _bag_data()
+    record, skipped = ib.record_from_bag(data, ROBOT, source="synthetic")
+    assert skipped == 0 and record.dt == 0.01 and record.valid.all()
+    assert record.t[0] == 0.0 and record.duration == pytest.approx(1.99, abs=1e-9)  # the span both cover
+    start = 100.003
+    expected = np.array([rot_z(0.3 * (start - 100.0 + tk)) for tk in record.t])
+    assert geodesic_angles(expected, record.rotation).max() < 1e-9  # slerp of a steady turn is exact
+    np.testing.assert_allclose(record.omega[:, 2], 0.3)
+    stance = _stance().reshape(4, 3)
+    exact = stance[None] + 0.05 * np.sin(2.0 * (start - 100.0 + record.t))[:, None, None]
+    assert np.abs(record.joints - exact).max() < 2e-4  # linear between 50 Hz samples of a slow sine
+
+
+def test_corrupt_joint_samples_are_skipped_and_gaps_marked_invalid() -> None:
+    data = _bag_data()
+    data.joint_q[20] = [math.nan] * 12
+    data.joint_q[30] = [10.0] * 12  # outside every servo range
+    record, skipped = ib.record_from_bag(data, ROBOT)
+    assert skipped == 2
+    assert record.valid.all()  # one missing 20 ms sample is no gap of 0.1 s
+    del data.imu_t[100:160], data.imu_q[100:160], data.imu_w[100:160]  # 0.3 s without /imu/data
+    record, _ = ib.record_from_bag(data, ROBOT)
+    gap = (record.t > 0.5 - 0.003) & (record.t < 0.8 - 0.003)
+    assert not record.valid[gap][1:-1].any() and record.valid[~gap].all()
+
+
+def test_a_bag_without_a_stream_or_an_overlap_is_refused() -> None:
+    data = _bag_data()
+    data.joint_t, data.joint_q = [], []
+    with pytest.raises(StudyError, match="no /joint_states"):
+        ib.record_from_bag(data, ROBOT, source="x.bag")
+    data = _bag_data()
+    data.joint_t = [t + 10.0 for t in data.joint_t]
+    with pytest.raises(StudyError, match="do not overlap"):
+        ib.record_from_bag(data, ROBOT)
+
+
+def test_the_joint_filter_removes_noise_without_delay() -> None:
+    t = np.arange(1001) * 0.01
+    slow = 0.2 * np.sin(2.0 * math.pi * 0.5 * t)
+    noise = np.random.default_rng(1).normal(0.0, math.radians(0.3), size=(1001, 4, 3))
+    valid = np.ones(1001, dtype=bool)
+    valid[500:505] = False
+    valid[3:8] = False  # leaves samples 0-2: too short to filter
+    record = Record(t=t, rotation=np.tile(np.eye(3), (1001, 1, 1)), omega=np.zeros((1001, 3)),
+                    joints=slow[:, None, None] + noise, valid=valid, dt=0.01)
+    record.joints[~valid] = 1e3  # invalid samples must not leak into their neighbours
+    out = ib.smoothed(record, 10.0)
+    inner = np.r_[30:480, 525:980]
+    residual = out.joints[inner] - slow[inner, None, None]
+    # the replay differentiates the joints: their rate's noise is what matters, and most of it is gone
+    assert np.std(np.diff(residual, axis=0)) < 0.15 * np.std(np.diff(noise, axis=0))
+    assert np.std(residual) < 0.5 * np.std(noise)
+    assert abs(np.mean(residual)) < 1e-3  # and the 0.5 Hz motion passes without delay or loss
+    assert not out.valid[:8].any() and out.valid[8:500].all() and out.valid[505:].all()
+    assert ib.smoothed(record, 0.0) is record
+    with pytest.raises(StudyError, match="cutoff"):
+        ib.smoothed(record, 50.0)
+
+
+def _write_bag(path: str, record: Record) -> None:
+    rosbags = pytest.importorskip("rosbags")  # noqa: F841
+    from rosbags.rosbag1 import Writer
+    from rosbags.typesys import Stores, get_typestore
+
+    store = get_typestore(Stores.ROS1_NOETIC)
+    Header, Time = store.types["std_msgs/msg/Header"], store.types["builtin_interfaces/msg/Time"]
+    Quaternion, Vector3 = store.types["geometry_msgs/msg/Quaternion"], store.types["geometry_msgs/msg/Vector3"]
+    Imu, JointState = store.types["sensor_msgs/msg/Imu"], store.types["sensor_msgs/msg/JointState"]
+    cov = np.zeros(9)
+    with Writer(path) as writer:
+        imu_c = writer.add_connection("/imu/data", Imu.__msgtype__, typestore=store)
+        joint_c = writer.add_connection("/joint_states", JointState.__msgtype__, typestore=store)
+        for k, tk in enumerate(record.t):
+            ns = 1_000_000_000_000 + int(round(tk * 1e9))
+            header = Header(seq=k, stamp=Time(sec=ns // 1000000000, nanosec=ns % 1000000000), frame_id="")
+            x, y, z, w = rot_to_quat(record.rotation[k])
+            wx, wy, wz = record.omega[k]
+            writer.write(imu_c, ns, store.serialize_ros1(Imu(
+                header=header, orientation=Quaternion(x=x, y=y, z=z, w=w), orientation_covariance=cov,
+                angular_velocity=Vector3(x=wx, y=wy, z=wz), angular_velocity_covariance=cov,
+                linear_acceleration=Vector3(x=0.0, y=0.0, z=0.0), linear_acceleration_covariance=cov),
+                Imu.__msgtype__))
+            writer.write(joint_c, ns, store.serialize_ros1(JointState(
+                header=header, name=list(JOINT_NAMES), position=record.joints[k].reshape(12),
+                velocity=np.zeros(0), effort=np.zeros(0)), JointState.__msgtype__))
+
+
+@pytest.fixture(scope="module")
+def run(tmp_path_factory):
+    """A 12 s roll manoeuvre simulated on the sixth identified set, noise-free, and its bag."""
+    record = ib.simulated_record(TANK, (45.0, 0.0, 0.0), (0.0, 0.0, 60.0), 12.0)
+    path = str(tmp_path_factory.mktemp("bags") / "run.bag")
+    _write_bag(path, record)
+    return record, path
+
+
+def test_a_bag_reads_back_as_the_run_it_recorded(run) -> None:
+    record, path = run
+    read, skipped = ib.read_run(path, ROBOT, max_gap=0.1)
+    assert skipped == 0 and read.valid.all() and read.t.size == record.t.size
+    assert geodesic_angles(record.rotation, read.rotation).max() < 1e-6
+    np.testing.assert_allclose(read.joints, record.joints, atol=1e-9)
+    np.testing.assert_allclose(read.omega, record.omega, atol=1e-9)
+
+
+def test_the_fit_recovers_what_a_simulated_run_was_made_with(tmp_path) -> None:
+    """The base is the truth with the centre of buoyancy and the roll/pitch damping moved away; a 20 s run
+    with the IMU's and the feedback's noise pins both down again."""
+    pytest.importorskip("cma")
+    truth = nominal_values(load_tank_params(TANK))
+    with open(TANK) as stream:
+        base = update_tank_yaml(stream.read(), {"cob_z": 0.0, "appendage_linear_xy": 0.05,
+                                                "appendage_linear_z": truth["appendage_linear_z"]}, "moved")
+    base_yaml = str(tmp_path / "base.yaml")
+    with open(base_yaml, "w") as stream:
+        stream.write(base)
+    out = str(tmp_path / "out")
+    assert ib.main(["--simulated", TANK, "--tank-yaml", base_yaml, "--rpy", "45", "0", "0", "--hold-out-rpy", "0",
+                    "30", "0", "--duration", "20", "--window", "5", "--stride", "2.5", "--parameters", "cob_z",
+                    "appendage_linear_xy", "--evaluations", "96", "--popsize", "8", "--out", out]) == 0
+    with open(os.path.join(out, "identify_bags.json")) as stream:
+        report = json.load(stream)
+    assert report["fitted"]["cob_z"] == pytest.approx(truth["cob_z"], abs=1e-4)  # 0.1 mm of its 8 mm range
+    assert report["fitted"]["appendage_linear_xy"] == pytest.approx(truth["appendage_linear_xy"], abs=0.05)
+    for side in ("training", "held_out"):
+        s = report[side]
+        assert s["windows"] == 7
+        assert s["fitted"] < 1.5 * s["truth"] and s["fitted"] < 0.2 * s["base"] and s["fitted"] < 0.2 * s["still"]
+    assert report["truth"]["values"]["cob_z"] == truth["cob_z"]
+    fitted = load_tank_params(os.path.join(out, "tank_fitted.yaml"))
+    assert fitted.center_of_buoyancy[2] == pytest.approx(report["fitted"]["cob_z"], abs=1e-12)
+    for name in ("identify_bags.md", "identify_bags.png"):
+        assert os.path.getsize(os.path.join(out, name)) > 0
+    # the same command gives the same fit
+    again = str(tmp_path / "again")
+    assert ib.main(report["command"][3:-2] + ["--out", again]) == 0
+    with open(os.path.join(again, "identify_bags.json")) as stream:
+        assert json.load(stream)["fitted"] == report["fitted"]
+
+
+def test_a_recorded_run_is_fitted_end_to_end(run, tmp_path) -> None:
+    pytest.importorskip("cma")
+    _, path = run
+    out = str(tmp_path / "out")
+    assert ib.main([path, "--hold-out", path, "--tank-yaml", TANK, "--parameters", "cob_z", "net_weight",
+                    "--window", "4", "--stride", "4", "--evaluations", "8", "--popsize", "4", "--out", out]) == 0
+    with open(os.path.join(out, "identify_bags.json")) as stream:
+        report = json.load(stream)
+    assert report["training"]["windows"] == report["held_out"]["windows"] == 3  # at 0, 4 and 8 s
+    assert report["training"]["runs"][0]["source"] == path and report["skipped_joint_samples"] == [0, 0]
+    # the base competes with the search's sets: the fit is never worse than its start
+    assert report["evaluations"] >= 9 and report["fit_objective"] <= report["training"]["base"]
+
+
+@pytest.mark.parametrize("argv, message", [
+    (["--parameters", "cob_z", "servo_lag_scale"], "servo model"),
+    (["--parameters", "cob_z", "gravity"], "unknown parameter"),
+    (["--parameters", "cob_z"], "two or more"),
+    (["--parameters", "cob_z", "cob_z"], "named twice"),
+    (["missing.bag"], "no such bag"),
+    (["--simulated", TANK], "--rpy"),
+    ([], "at least one recorded run"),
+])
+def test_bad_input_is_refused(argv, message, capsys, tmp_path) -> None:
+    assert ib.main(argv + ["--out", str(tmp_path)]) == 1
+    assert message in capsys.readouterr().err
+
+
+def test_a_broken_tank_yaml_is_named(capsys, tmp_path) -> None:
+    broken = tmp_path / "tank.yaml"
+    broken.write_text("effects: [\n")
+    assert ib.main(["--simulated", TANK, "--rpy", "45", "0", "0", "--tank-yaml", str(broken), "--parameters",
+                    "cob_z", "net_weight", "--out", str(tmp_path / "out")]) == 1
+    assert str(broken) in capsys.readouterr().err
+
+
+@pytest.mark.parametrize("argv", [["--simulated", TANK, "run.bag"], ["run.bag", "--rpy", "1", "2", "3"],
+                                  ["--window", "0"], ["--stride", "nan"], ["--sigma", "0.9"], ["--every", "0"],
+                                  ["--joint-noise-deg", "-1"], ["--window", "0.05", "--every", "10"]])
+def test_bad_options_are_refused(argv) -> None:
+    with pytest.raises(SystemExit):
+        ib.main(argv)
