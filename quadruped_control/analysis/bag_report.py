@@ -116,6 +116,9 @@ class BagData:
     joint_t: List[float] = field(default_factory=list)
     #: measured joint angles in the order of JOINT_NAMES (NaN for a joint the message did not name)
     joint_q: List[Sequence[float]] = field(default_factory=list)
+    #: the controller's joint targets (/servo_command joint_target, rad) in the order of JOINT_NAMES
+    command_t: List[float] = field(default_factory=list)
+    command_q: List[Sequence[float]] = field(default_factory=list)
     truth_t: List[float] = field(default_factory=list)
     truth_q: List[Sequence[float]] = field(default_factory=list)
     diagnostics: Dict[str, Dict[str, str]] = field(default_factory=dict)
@@ -173,7 +176,7 @@ def missing_spans(data: BagData, max_gap: float = MAX_RECORD_GAP) -> List[Dict[s
 def _read_into(data: BagData, reader) -> None:
     """The report's messages from an open AnyReader."""
     wanted = [c for c in reader.connections if c.topic in (
-        "/imu/data", "/controller_state", "/sim/pose", "/diagnostics", "/joint_states")]
+        "/imu/data", "/controller_state", "/sim/pose", "/diagnostics", "/joint_states", "/servo_command")]
     for connection, _timestamp, raw in reader.messages(connections=wanted):
         msg = reader.deserialize(raw, connection.msgtype)
         if connection.topic == "/imu/data":
@@ -196,6 +199,10 @@ def _read_into(data: BagData, reader) -> None:
             angles = dict(zip(msg.name, msg.position))
             data.joint_t.append(_stamp(msg))
             data.joint_q.append([float(angles.get(name, math.nan)) for name in JOINT_NAMES])
+        elif connection.topic == "/servo_command":
+            targets = dict(zip(msg.name, msg.joint_target))
+            data.command_t.append(_stamp(msg))
+            data.command_q.append([float(targets.get(name, math.nan)) for name in JOINT_NAMES])
         elif connection.topic == "/sim/pose":
             o = msg.pose.orientation
             data.truth_t.append(_stamp(msg))

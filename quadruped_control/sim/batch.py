@@ -79,7 +79,8 @@ class BatchResult:
     """Recorded batch: ``t`` (T,), ``rpy`` (N, T, 3) rad, ``geodesic`` (N, T) rad, ``setpoint_rpy``
     (N, 3) rad; ``failed`` (N,) trials whose plant step failed (kinematics or a non-finite state) and
     ``refused`` (N,) trials whose measurement the robot's controller would have refused (it would hold),
-    both untrustworthy from then on; ``states``: the first steps' (p, v, R, omega, joint positions) per
+    both untrustworthy from then on; ``states``: the first steps' (p, v, R, omega, joint positions, and the
+    joint targets the controller computed at the sample, held to the next: one fewer at the run's end) per
     trial when recorded; ``ik_fallbacks`` (N,); ``stroke_metrics``: per trial, when asked for
     (:class:`~quadruped_control.sim.stroke_metrics.StrokeTorqueMetrics`)."""
 
@@ -234,7 +235,7 @@ class BatchSimulation:
         times = np.empty(samples)
         kept = min(int(record_states), samples)
         states: Dict[str, List[np.ndarray]] = {"position": [], "velocity": [], "rotation": [], "omega": [],
-                                               "joints": []}
+                                               "joints": [], "targets": []}
         setpoints = self.controller.R_d
         metrics = StrokeTorqueMetrics(self.robot, n) if stroke_metrics else None
         start = time.perf_counter()
@@ -242,7 +243,7 @@ class BatchSimulation:
         with np.errstate(all="ignore"):
             self._record_loop(samples, steps, kept, times, rpy, geodesic, states, setpoints, metrics)
         wall = time.perf_counter() - start
-        recorded = {key: np.stack(values, axis=1) for key, values in states.items()} if kept else None
+        recorded = {key: np.stack(values, axis=1) for key, values in states.items() if values} if kept else None
         return BatchResult(t=times, rpy=rpy, geodesic=geodesic, setpoint_rpy=rotations_to_rpy(setpoints),
                            failed=self.plant.failed.copy(), refused=self.controller.refused.copy(),
                            ik_fallbacks=self.controller.ik_fallbacks.copy(), wall_time=wall, states=recorded,
@@ -261,11 +262,16 @@ class BatchSimulation:
                     states[key].append(value.copy())
             if metrics is None:
                 if i < steps:
-                    self.step()
+                    targets = self._control()
+                    if i < kept:
+                        states["targets"].append(targets.copy())
+                    self._advance(targets)
                 continue
             # The state of sample i and the controller's answer to it (metrics.add copies; the plant steps
             # its arrays in place).
             targets = self._control()
+            if i < kept and i < steps:
+                states["targets"].append(targets.copy())
             metrics.add(times[i], self.q.reshape(self.n, 12), self.rotation, self.omega, self.controller.tau_sat,
                         np.any(self.controller.power, axis=1))
             if i < steps:

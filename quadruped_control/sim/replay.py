@@ -25,7 +25,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
-from typing import Sequence
+from typing import Optional, Sequence
 
 import numpy as np
 
@@ -33,8 +33,10 @@ from quadruped_common.so3 import geodesic_angles
 from quadruped_control.model.params import RobotParams
 from quadruped_control.sim.plants.tank import TankParams
 from quadruped_control.sim.plants.tank_batch import TankPlantBatch
+from quadruped_control.sim.servo_model import servo_batch_step
 
-__all__ = ["Record", "ReplayResult", "attitude_errors", "replay", "still_errors", "window_starts"]
+__all__ = ["Record", "ReplayResult", "attitude_errors", "joint_errors", "replay", "replay_servos", "still_errors",
+           "window_starts"]
 
 
 @dataclass(frozen=True)
@@ -51,12 +53,15 @@ class Record:
     valid: np.ndarray
     dt: float
     source: str = ""
+    #: (K, 4, 3) the joint targets commanded at each sample and held to the next, rad (the controller's
+    #: /servo_command); NaN where none was recorded; None: the record has no commands.
+    commands: Optional[np.ndarray] = None
 
     def __post_init__(self) -> None:
         k = self.t.shape[0] if self.t.ndim == 1 else -1
-        shapes = {"rotation": (k, 3, 3), "omega": (k, 3), "joints": (k, 4, 3), "valid": (k,)}
+        shapes = {"rotation": (k, 3, 3), "omega": (k, 3), "joints": (k, 4, 3), "valid": (k,), "commands": (k, 4, 3)}
         for name, shape in shapes.items():
-            if getattr(self, name).shape != shape:
+            if getattr(self, name) is not None and getattr(self, name).shape != shape:
                 raise ValueError("record %s must have shape %s, got %s" % (name, shape, getattr(self, name).shape))
         if k < 2:
             raise ValueError("a record needs at least two samples, got %d" % max(k, 0))
@@ -74,12 +79,17 @@ class Record:
         return float(self.t[-1] - self.t[0])
 
 
-def window_starts(record: Record, steps: int, stride: int) -> np.ndarray:
+def window_starts(record: Record, steps: int, stride: int, commanded: bool = False) -> np.ndarray:
     """The first sample of each window of ``steps`` steps (``steps`` + 1 samples, all valid), one every
-    ``stride`` samples from the record's start (a window over an invalid sample is left out)."""
+    ``stride`` samples from the record's start (a window over an invalid sample is left out);
+    ``commanded``: every sample of the window has a command too (:func:`replay_servos`)."""
     if steps < 1 or stride < 1:
         raise ValueError("window steps and stride must be >= 1, got %d and %d" % (steps, stride))
     valid = record.valid.astype(bool)
+    if commanded:
+        if record.commands is None:
+            return np.zeros(0, dtype=int)
+        valid = valid & np.all(np.isfinite(record.commands.reshape(valid.size, 12)), axis=1)
     # bad[k] = number of invalid samples before k: a window k..k+steps is clean when the count does not grow
     bad = np.concatenate(([0], np.cumsum(~valid)))
     last = valid.size - steps - 1
@@ -164,3 +174,45 @@ def still_errors(record: Record, starts: Sequence[int], steps: int, every: int =
     starts = np.asarray(starts, dtype=int)
     recorded = _recorded_samples(record, starts, steps // every, every)
     return _angles(record.rotation[starts][:, None], recorded)
+
+
+def replay_servos(record: Record, starts: Sequence[int], steps: int, max_speeds: Sequence[float],
+                  time_constants: Sequence[float], every: int = 10) -> np.ndarray:
+    """The servos' half of a record: from the measured joints at each window start, the rate-limited lag
+    (:func:`~quadruped_control.sim.servo_model.servo_batch_step`, the closed loop's servo step) driven by the
+    recorded commands, each held over its step, for each (max speed, time constant) pair (rad/s, s).
+    Returns the joint angles every ``every`` steps, (S, W, M, 4, 3), as :func:`replay`'s samples."""
+    starts = np.asarray(starts, dtype=int)
+    speeds, lags = np.asarray(max_speeds, dtype=float), np.asarray(time_constants, dtype=float)
+    n_sets, n_windows = speeds.size, starts.size
+    if record.commands is None:
+        raise ValueError("the record has no commands")
+    if n_sets < 1 or n_windows < 1 or lags.size != n_sets:
+        raise ValueError("replay_servos needs a time constant per speed, one or more, and a window")
+    if every < 1 or steps < every or starts.min() < 0 or starts.max() + steps >= record.t.size:
+        raise ValueError("replay_servos needs steps >= every >= 1 within the record")
+    n = n_sets * n_windows
+    q = np.ascontiguousarray(np.tile(record.joints[starts], (n_sets, 1, 1)))
+    out, mid, rate = np.empty_like(q), np.empty_like(q), np.empty_like(q)
+    command = np.empty_like(q)
+    held = command.reshape(n_sets, n_windows, 4, 3)  # a view
+    speed, lag = np.repeat(speeds, n_windows), np.repeat(lags, n_windows)
+    ideal, loads, stall = np.zeros(n, dtype=bool), np.zeros((n, 4, 3)), np.zeros(n)
+    samples = np.empty((n, steps // every, 4, 3))
+    for k in range(steps):
+        held[:] = record.commands[starts + k]
+        servo_batch_step(q, command, ideal, speed, lag, stall, loads, record.dt, out, mid, rate)
+        q, out = out, q
+        if (k + 1) % every == 0:
+            samples[:, (k + 1) // every - 1] = q
+    return samples.reshape(n_sets, n_windows, steps // every, 4, 3)
+
+
+def joint_errors(replayed: np.ndarray, record: Record, starts: Sequence[int], every: int) -> np.ndarray:
+    """(S, W, M) root mean square over the twelve joints (rad) of :func:`replay_servos`' angles against the
+    record's measured joints at the same samples."""
+    starts = np.asarray(starts, dtype=int)
+    samples = replayed.shape[2]
+    index = starts[:, None] + every * np.arange(1, samples + 1)[None, :]
+    difference = replayed - record.joints[index][None]
+    return np.sqrt(np.mean(difference.reshape(difference.shape[:3] + (12,)) ** 2, axis=-1))

@@ -29,6 +29,14 @@ runs and the held-out runs alike, beside two references: the base tank.yaml, and
 predicts no motion (the attitude held at each window's start). A plant that does not beat "still" on
 held-out runs predicts nothing.
 
+The servos' half: where the runs recorded the controller's commands (``/servo_command``), the robot's
+servo model (the rate-limited lag of config/simulation.yaml and robot.yaml, scaled by ``servo_speed_scale``
+and ``servo_lag_scale``) is driven by the recorded commands from the measured joints at each window start
+and compared with the measured joints (:func:`quadruped_control.sim.replay.replay_servos`); the two
+scales are fitted on a grid over their bounds (:func:`fit_servos`), beside the paper's ideal servo and the
+base's scales. The two halves meet only in the measured joints: the plant's fit does not depend on the
+servo model, nor the servos' on the plant.
+
 ``--simulated TRUTH_YAML`` replaces the bags with runs of the simulated robot on the tank plant of
 TRUTH_YAML (the robot's controller, the ``--gains`` set and rate-limited servos, from ``--initial-rpy`` to
 ``--rpy``, one run per ``--rpy``, for ``--duration`` s) with the IMU's attitude noise and the feedback's
@@ -43,6 +51,7 @@ and ``tank_fitted.yaml``, the base tank.yaml with the fitted values.
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import json
 import math
 import os
@@ -58,7 +67,9 @@ from quadruped_control.analysis.bag_report import BagData, BagReportError, read_
 from quadruped_control.analysis.strokes import foot_paths
 from quadruped_control.model.params import RobotParams, load_robot_params
 from quadruped_control.sim.plants.tank import TankParams, load_tank_params
-from quadruped_control.sim.replay import Record, attitude_errors, replay, still_errors, window_starts
+from quadruped_control.sim.replay import (Record, attitude_errors, joint_errors, replay, replay_servos, still_errors,
+                                          window_starts)
+from quadruped_control.sim.servo_model import ServoParams, load_servo_params
 from quadruped_control.studies import StudyError
 from quadruped_control.studies.identify import (BOUNDS, PARAMETERS, fit, nominal_values, tank_overrides,
                                                 update_tank_yaml)
@@ -134,7 +145,23 @@ def record_from_bag(data: BagData, robot: RobotParams, dt: float = GRID_DT, max_
     omega = np.column_stack([np.interp(grid, imu_t, rates[:, axis]) for axis in range(3)])
     angles = np.column_stack([np.interp(grid, joint_t, joints[:, j]) for j in range(12)]).reshape(-1, 4, 3)
     valid = _covered(imu_t, grid, max_gap) & _covered(joint_t, grid, max_gap)
-    return Record(t=grid, rotation=rotation, omega=omega, joints=angles, valid=valid, dt=dt, source=source), skipped
+    return Record(t=grid, rotation=rotation, omega=omega, joints=angles, valid=valid, dt=dt, source=source,
+                  commands=_held_commands(data, start, grid, max_gap)), skipped
+
+
+def _held_commands(data: BagData, start: float, grid: np.ndarray, max_gap: float) -> Optional[np.ndarray]:
+    """The /servo_command joint targets on the grid, each held from its stamp to the next (as the servos
+    hold them); NaN before the first, after a gap of more than ``max_gap`` s, and where a target is not
+    finite. None when the record has no commands."""
+    if len(data.command_t) < 2:
+        return None
+    times, targets = _sorted_rows(data.command_t, data.command_q, "/servo_command")
+    times = times - start
+    index = np.searchsorted(times, grid + 1e-9, side="right") - 1  # the last command at or before each sample
+    held = targets[np.clip(index, 0, None)].copy()
+    stale = (index < 0) | (grid - times[np.clip(index, 0, None)] > max_gap)
+    held[stale] = math.nan
+    return held.reshape(-1, 4, 3)
 
 
 def smoothed(record: Record, cutoff_hz: float) -> Record:
@@ -160,8 +187,7 @@ def smoothed(record: Record, cutoff_hz: float) -> Record:
             joints[first:end] = sosfiltfilt(sos, joints[first:end], axis=0)
         except ValueError:  # shorter than the filter's padding
             valid[first:end] = False
-    return Record(t=record.t, rotation=record.rotation, omega=record.omega, joints=joints, valid=valid,
-                  dt=record.dt, source=record.source)
+    return dataclasses.replace(record, joints=joints, valid=valid)
 
 
 def read_run(run: str, robot: RobotParams, max_gap: float) -> Tuple[Record, int]:
@@ -200,6 +226,8 @@ def simulated_record(truth_yaml: str, setpoint_rpy_deg: Sequence[float], initial
         raise StudyError("identify_bags: the simulated run on %s failed" % truth_yaml)
     states = result.states
     rotation, omega, joints = states["rotation"][0].copy(), states["omega"][0].copy(), states["joints"][0].copy()
+    commands = np.full_like(joints, math.nan)
+    commands[:-1] = states["targets"][0]  # none after the last step
     rng = np.random.default_rng(seed)
     if attitude_noise_deg > 0.0:
         noise = rng.normal(0.0, math.radians(attitude_noise_deg), size=(samples, 3))
@@ -207,7 +235,7 @@ def simulated_record(truth_yaml: str, setpoint_rpy_deg: Sequence[float], initial
     if joint_noise_deg > 0.0:
         joints += rng.normal(0.0, math.radians(joint_noise_deg), size=joints.shape)
     return Record(t=result.t - result.t[0], rotation=rotation, omega=omega, joints=joints,
-                  valid=np.ones(samples, dtype=bool), dt=simulation.dt,
+                  valid=np.ones(samples, dtype=bool), dt=simulation.dt, commands=commands,
                   source="simulated: %s, rpy %s from %s, %g s" % (truth_yaml, list(setpoint_rpy_deg),
                                                                  list(initial_rpy_deg), duration))
 
@@ -276,6 +304,73 @@ class ReplayObjective:
                 for _, starts in self.windows]
 
 
+class ServoObjective:
+    """The servos' half (module docstring): the rate-limited lag of ``servo`` (the robot's servo, before
+    tank.yaml's scales) driven by the recorded commands from the measured joints at each window start
+    (:func:`~quadruped_control.sim.replay.replay_servos`), against the measured joints: the root mean square
+    over the twelve joints, every window and sample, in degrees. Windows as :class:`ReplayObjective`'s,
+    where every sample has a command."""
+
+    def __init__(self, servo: ServoParams, records: Sequence[Record], steps: int, stride: int, every: int) -> None:
+        self.servo, self.steps, self.every = servo, steps, every
+        self.windows = [(record, window_starts(record, steps, stride, commanded=True)) for record in records]
+
+    @property
+    def window_count(self) -> int:
+        return int(sum(starts.size for _, starts in self.windows))
+
+    def _rms_deg(self, speeds: np.ndarray, lags: np.ndarray) -> np.ndarray:
+        squares = [joint_errors(replay_servos(record, starts, self.steps, speeds, lags, self.every), record, starts,
+                                self.every).reshape(speeds.size, -1) ** 2
+                   for record, starts in self.windows if starts.size]
+        return np.degrees(np.sqrt(np.concatenate(squares, axis=1).mean(axis=1)))
+
+    def __call__(self, speed_scales: Sequence[float], lag_scales: Sequence[float]) -> np.ndarray:
+        """(S,) objective of each (servo_speed_scale, servo_lag_scale) pair."""
+        return self._rms_deg(self.servo.max_speed * np.asarray(speed_scales, dtype=float),
+                             self.servo.time_constant * np.asarray(lag_scales, dtype=float))
+
+    def ideal_deg(self) -> float:
+        """The paper's ideal servo: each joint at its command at once."""
+        return float(self._rms_deg(np.array([math.inf]), np.array([0.0]))[0])
+
+
+#: The servo fit's first grid (:func:`fit_servos`): servo_speed_scale in steps of 0.05, servo_lag_scale in
+#: steps of 0.1 (3 ms) over their bounds; the second grid has as many points, one step either side of the
+#: first's best.
+SERVO_GRID = (11, 71)
+
+
+def fit_servos(objective: ServoObjective) -> Dict[str, float]:
+    """servo_speed_scale and servo_lag_scale (bounds of identify.PARAMETERS) that minimise ``objective``: the
+    grid :data:`SERVO_GRID` over the bounds, then a finer one around its best point (two
+    parameters: the grid shows the whole landscape, and costs a few seconds). Also each parameter's range on
+    the first grid where its profile (the best over the other parameter) lies within 1 % of the best
+    (``within_1_percent``): a wide range says the runs do not pin that parameter down (a rate limit that
+    never binds, a lag the strokes never reveal)."""
+    (s_low, s_high), (l_low, l_high) = BOUNDS["servo_speed_scale"], BOUNDS["servo_lag_scale"]
+    speeds, lags = np.linspace(s_low, s_high, SERVO_GRID[0]), np.linspace(l_low, l_high, SERVO_GRID[1])
+    best = (math.inf, 0.0, 0.0)
+    near: Dict[str, List[float]] = {}
+    for round_ in range(2):
+        S, L = np.meshgrid(speeds, lags, indexing="ij")
+        values = objective(S.ravel(), L.ravel())
+        k = int(np.argmin(values))
+        if round_ == 0:  # how flat the landscape is: each parameter's profile (best over the other) on the grid
+            table = values.reshape(speeds.size, lags.size)
+            limit = 1.01 * values[k]
+            close_speeds = speeds[table.min(axis=1) <= limit]
+            close_lags = lags[table.min(axis=0) <= limit]
+            near = {"servo_speed_scale": [float(close_speeds.min()), float(close_speeds.max())],
+                    "servo_lag_scale": [float(close_lags.min()), float(close_lags.max())]}
+        if values[k] < best[0]:
+            best = (float(values[k]), float(S.ravel()[k]), float(L.ravel()[k]))
+        ds, dl = speeds[1] - speeds[0], lags[1] - lags[0]
+        speeds = np.linspace(max(s_low, best[1] - ds), min(s_high, best[1] + ds), SERVO_GRID[0])
+        lags = np.linspace(max(l_low, best[2] - dl), min(l_high, best[2] + dl), SERVO_GRID[0])
+    return {"servo_speed_scale": best[1], "servo_lag_scale": best[2], "objective": best[0], "within_1_percent": near}
+
+
 # --------------------------------------------------------------------------------------------------
 # The study
 # --------------------------------------------------------------------------------------------------
@@ -313,6 +408,37 @@ def _records(args: argparse.Namespace, robot: RobotParams) -> Tuple[List[Record]
     held_out = [read_run(run, robot, args.max_gap) for run in args.hold_out or []]
     return ([smoothed(r, args.joint_filter_hz) for r, _ in training],
             [smoothed(r, args.joint_filter_hz) for r, _ in held_out], [s for _, s in training + held_out])
+
+
+#: The servo parameters the servos' half fits (:func:`fit_servos`); the load (servo_load_slope) needs the
+#: plant's joint loads and is not fitted.
+SERVO_FITTED = ("servo_speed_scale", "servo_lag_scale")
+
+
+def _servo_study(servo: ServoParams, nominal: Dict[str, float], truth: Optional[Dict[str, float]],
+                 training: Sequence[Record], held_out: Sequence[Record], steps: int, stride: int,
+                 every: int) -> Optional[Dict[str, Any]]:
+    """The servos' half of the report, None when no training run recorded its commands."""
+    fitting = ServoObjective(servo, training, steps, stride, every)
+    if fitting.window_count == 0:
+        return None
+    best = fit_servos(fitting)
+    report: Dict[str, Any] = {"fitted": {n: best[n] for n in SERVO_FITTED}, "base": {n: nominal[n] for n in SERVO_FITTED},
+                              "within_1_percent": best["within_1_percent"],
+                              "servo": {"max_speed": servo.max_speed, "time_constant": servo.time_constant}}
+    if truth is not None:
+        report["truth"] = {n: truth[n] for n in SERVO_FITTED}
+    for part, records in (("training", training), ("held_out", held_out)):
+        side = fitting if part == "training" else ServoObjective(servo, records, steps, stride, every)
+        summary: Dict[str, Any] = {"windows": side.window_count}
+        if side.window_count:
+            rows = [report["base"], report["fitted"]] + ([report["truth"]] if truth is not None else [])
+            values = side([r["servo_speed_scale"] for r in rows], [r["servo_lag_scale"] for r in rows])
+            summary.update(ideal=side.ideal_deg(), base=float(values[0]), fitted=float(values[1]))
+            if truth is not None:
+                summary["truth"] = float(values[2])
+        report[part] = summary
+    return report
 
 
 def _plot(path: str, record: Record, objective: ReplayObjective, best: Dict[str, float], title: str) -> None:
@@ -371,6 +497,30 @@ def _text(report: Dict[str, Any]) -> str:
         if "truth" in report:
             row += " %.4g |" % report["truth"]["values"][name]
         lines.append(row)
+    servos = report.get("servos")
+    lines.append("")
+    if servos is None:
+        lines.append("No training run recorded /servo_command: the servos are not fitted.")
+    else:
+        truth = "truth" in servos
+        lines += ["The servos: the rate-limited lag driven by the recorded commands from the measured joints, root "
+                  "mean square joint error [deg] (no-load speed %.2f rad/s and lag %.3f s before the scales):"
+                  % (servos["servo"]["max_speed"], servos["servo"]["time_constant"]), "",
+                  "| runs | windows | ideal servo | base | fitted |%s" % (" truth |" if truth else ""),
+                  "|---|---|---|---|---|%s" % ("---|" if truth else "")]
+        for part in ("training", "held_out"):
+            side = servos[part]
+            if side["windows"]:
+                lines.append("| %s | %d | %.3f | %.3f | %.3f |%s" % (
+                    part.replace("_", " "), side["windows"], side["ideal"], side["base"], side["fitted"],
+                    " %.3f |" % side["truth"] if truth else ""))
+        lines += ["", "| servo parameter | bounds | base | fitted | within 1 %% of the best |%s"
+                  % (" truth |" if truth else ""), "|---|---|---|---|---|%s" % ("---|" if truth else "")]
+        for name in SERVO_FITTED:
+            low, high = BOUNDS[name]
+            lines.append("| %s | %.4g .. %.4g | %.4g | %.4g | %.4g .. %.4g |%s" % (
+                name, low, high, servos["base"][name], servos["fitted"][name], *servos["within_1_percent"][name],
+                " %.4g |" % servos["truth"][name] if truth else ""))
     for part in ("training", "held_out"):
         for run in report[part]["runs"]:
             lines.append("")
@@ -467,6 +617,8 @@ def main(argv: Optional[Sequence[str]] = None) -> int:
                                         "valid_fraction": float(np.mean(record.valid)),
                                         "fitted_per_window": per_window})
             sides[part] = summary
+        servos = _servo_study(load_servo_params(None, robot_yaml=args.robot_yaml), nominal, truth, training, held_out,
+                              steps, stride, args.every)
     except (StudyError, ParameterError) as exc:
         print(str(exc), file=sys.stderr)
         return 1
@@ -480,7 +632,7 @@ def main(argv: Optional[Sequence[str]] = None) -> int:
         "evaluations": objective.evaluations, "popsize": args.popsize, "sigma": args.sigma,
         "skipped_joint_samples": skipped, "base": {n: nominal[n] for n in names}, "fitted": fitted,
         "fit_objective": evaluated[0]["objective"], "training": sides["training"], "held_out": sides["held_out"],
-        "wall_time": time.perf_counter() - start_time}
+        "servos": servos, "wall_time": time.perf_counter() - start_time}
     if truth is not None:
         report["truth"] = {"tank_yaml": os.path.abspath(args.simulated), "values": {n: truth[n] for n in names},
                            "attitude_noise_deg": args.attitude_noise_deg, "joint_noise_deg": args.joint_noise_deg}
@@ -489,8 +641,9 @@ def main(argv: Optional[Sequence[str]] = None) -> int:
     with open(args.tank_yaml or config_path("tank.yaml")) as stream:
         template = stream.read()
     with open(os.path.join(args.out, "tank_fitted.yaml"), "w") as stream:
-        stream.write(update_tank_yaml(template, fitted, "identify_bags (code %s), objective %.2f deg"
-                                      % (report["code"], report["fit_objective"])))
+        servo_values = {n: servos["fitted"][n] for n in SERVO_FITTED} if servos else {}
+        stream.write(update_tank_yaml(template, dict(fitted, **servo_values), "identify_bags (code %s), objective "
+                                      "%.2f deg" % (report["code"], report["fit_objective"])))
     shown, side = (held_out[0], check) if held_out and check.window_count else (training[0], objective)
     _plot(os.path.join(args.out, "identify_bags.png"), shown, side, fitted,
           "%s: recorded, and replayed windows of %g s" % (shown.source, args.window))

@@ -11,7 +11,8 @@ from quadruped_common.so3 import rot_z, rpy_to_rot
 from quadruped_control.model.params import load_robot_params
 from quadruped_control.sim.batch import BatchSimulation, BatchTrial
 from quadruped_control.sim.plants import load_tank_params
-from quadruped_control.sim.replay import Record, attitude_errors, replay, still_errors, window_starts
+from quadruped_control.sim.replay import (Record, attitude_errors, joint_errors, replay, replay_servos, still_errors,
+                                          window_starts)
 from quadruped_control.studies.trial import TrialSpec, trial_setup
 
 TANK = "config/tank_identified.yaml"
@@ -29,15 +30,17 @@ def simulated():
                        servo_params=setup.servo_params, tank=setup.model.tank)
     result = BatchSimulation(setup.robot, [trial]).run(6.0, record_states=601)
     states = result.states
+    commands = np.full_like(states["joints"][0], math.nan)
+    commands[:-1] = states["targets"][0]  # the controller's targets, none after the last step
     record = Record(t=result.t, rotation=states["rotation"][0], omega=states["omega"][0], joints=states["joints"][0],
-                    valid=np.ones(result.t.size, dtype=bool), dt=0.01)
-    return setup.robot, setup.model.tank, record
+                    valid=np.ones(result.t.size, dtype=bool), dt=0.01, commands=commands)
+    return setup.robot, setup.model.tank, record, setup.servo_params
 
 
 def test_a_simulated_run_replays_to_the_bit_from_its_start(simulated) -> None:
     """The replay holds the joints as the closed loop did (midpoint, finite-difference rate), and the run
     starts at rest on a vertical rope as a window does: the same plant gives the same attitude."""
-    robot, tank, record = simulated
+    robot, tank, record, _ = simulated
     result = replay(robot, [tank], record, [0], 600, every=1)
     assert not result.failed.any()
     np.testing.assert_array_equal(result.rotation[0, 0], record.rotation[1:601])
@@ -45,7 +48,7 @@ def test_a_simulated_run_replays_to_the_bit_from_its_start(simulated) -> None:
 
 
 def test_every_parameter_set_and_window_is_its_own_trial(simulated) -> None:
-    robot, tank, record = simulated
+    robot, tank, record, _ = simulated
     other = tank.with_values(appendage_damping_linear=(0.0, 0.0, 0.0))
     starts = window_starts(record, 200, 150)
     assert list(starts) == [0, 150, 300]
@@ -61,6 +64,30 @@ def test_every_parameter_set_and_window_is_its_own_trial(simulated) -> None:
     # error for the truth, and far less than for the plant without its damping
     assert 0.0 < errors[0, 1:].max() < math.radians(1.0)
     assert errors[1].mean() > 5.0 * errors[0].mean()
+
+
+def test_the_servos_replay_to_the_bit_from_the_measured_joints(simulated) -> None:
+    """The servo step of the closed loop, driven by the recorded targets from the recorded joints: the same
+    joints, at every window (the servos have no state beyond their angles); slower servos miss them."""
+    _, _, record, servo = simulated
+    starts = window_starts(record, 100, 100, commanded=True)
+    assert list(starts) == [0, 100, 200, 300, 400]  # 500 would need the last sample's command
+    replayed = replay_servos(record, starts, 100, [servo.max_speed, servo.max_speed],
+                             [servo.time_constant, 2.0 * servo.time_constant], every=10)
+    assert replayed.shape == (2, 5, 10, 4, 3)
+    index = starts[:, None] + 10 * np.arange(1, 11)[None, :]
+    np.testing.assert_array_equal(replayed[0], record.joints[index])
+    errors = joint_errors(replayed, record, starts, 10)
+    assert errors[0].max() == 0.0 and errors[1].mean() > math.radians(0.1)
+
+
+def test_a_record_without_commands_has_no_servo_windows(simulated) -> None:
+    _, _, record, servo = simulated
+    bare = Record(t=record.t, rotation=record.rotation, omega=record.omega, joints=record.joints, valid=record.valid,
+                  dt=record.dt)
+    assert window_starts(bare, 100, 100, commanded=True).size == 0
+    with pytest.raises(ValueError, match="no commands"):
+        replay_servos(bare, [0], 100, [servo.max_speed], [servo.time_constant])
 
 
 def test_the_still_baseline_is_the_turn_since_the_window_start() -> None:

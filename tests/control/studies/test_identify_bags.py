@@ -19,8 +19,10 @@ from quadruped_control.sim.replay import Record
 from quadruped_control.studies import StudyError
 from quadruped_control.studies import identify_bags as ib
 from quadruped_control.studies.identify import nominal_values, update_tank_yaml
+from tests.repo import REPO_ROOT
 
 TANK = "config/tank_identified.yaml"
+COMMAND_TYPE = "underwater_quadruped/msg/ServoCommand"
 ROBOT = load_robot_params(None)
 
 
@@ -74,6 +76,40 @@ def test_corrupt_joint_samples_are_skipped_and_gaps_marked_invalid() -> None:
     assert not record.valid[gap][1:-1].any() and record.valid[~gap].all()
 
 
+def test_commands_are_held_to_the_next_and_missing_where_stale() -> None:
+    data = _bag_data()
+    record, _ = ib.record_from_bag(data, ROBOT)
+    assert record.commands is None  # no /servo_command in this record
+    stance = _stance()
+    data.command_t = [100.1 + 0.05 * k for k in range(20)] + [101.5 + 0.05 * k for k in range(10)]
+    data.command_q = [list(stance + 0.01 * k) for k in range(30)]
+    record, _ = ib.record_from_bag(data, ROBOT)
+    commands = record.commands.reshape(-1, 12)
+    t = record.t + 0.003  # the grid's times on the bag's clock, less 100 s
+    before = t < 0.1 - 1e-9
+    assert np.isnan(commands[before]).all()
+    k = np.searchsorted(t, 0.32)  # after the command stamped at 0.30 s (k = 4), before 0.35 s
+    np.testing.assert_array_equal(commands[k], stance + 0.04)
+    stale = (t > 1.05 + 0.1 + 1e-9) & (t < 1.5 - 1e-9)  # the last of the first burst, 1.05 s, is 0.1 s old
+    assert np.isnan(commands[stale]).all() and np.isfinite(commands[(t >= 1.5) & (t < 1.9)]).all()
+
+
+def test_the_servo_fit_recovers_the_lag_and_says_what_it_cannot_pin_down() -> None:
+    """The sixth set's servos (lag 6.185 x 30 ms) in a 20 s run: the lag comes back to a step of its grid;
+    the rate limit hardly binds at that lag (a stroke's error stays below w_max T), so the speed's profile is
+    flat over most of its bounds, and the report says so."""
+    record = ib.simulated_record(TANK, (45.0, 0.0, 0.0), (0.0, 0.0, 60.0), 20.0)
+    objective = ib.ServoObjective(ib.load_servo_params(), [record], 500, 500, 10)
+    assert objective.window_count == 3
+    best = ib.fit_servos(objective)
+    assert best["servo_lag_scale"] == pytest.approx(6.185, abs=0.1)
+    speed_low, speed_high = best["within_1_percent"]["servo_speed_scale"]
+    assert speed_low <= 0.6 and speed_high == 1.0  # 40 % of the range and more, the truth (1) in it
+    low, high = best["within_1_percent"]["servo_lag_scale"]
+    assert 6.185 - 0.2 <= low <= high <= 6.185 + 0.2  # pinned to a step or two of its 0.1 grid
+    assert best["objective"] < 0.01 < objective.ideal_deg()
+
+
 def test_a_bag_without_a_stream_or_an_overlap_is_refused() -> None:
     data = _bag_data()
     data.joint_t, data.joint_q = [], []
@@ -111,9 +147,12 @@ def test_the_joint_filter_removes_noise_without_delay() -> None:
 def _write_bag(path: str, record: Record) -> None:
     rosbags = pytest.importorskip("rosbags")  # noqa: F841
     from rosbags.rosbag1 import Writer
-    from rosbags.typesys import Stores, get_typestore
+    from rosbags.typesys import Stores, get_types_from_msg, get_typestore
 
     store = get_typestore(Stores.ROS1_NOETIC)
+    with open(os.path.join(REPO_ROOT, "quadruped_msgs", "msg", "ServoCommand.msg")) as stream:
+        store.register(get_types_from_msg(stream.read(), COMMAND_TYPE))
+    Command = store.types[COMMAND_TYPE]
     Header, Time = store.types["std_msgs/msg/Header"], store.types["builtin_interfaces/msg/Time"]
     Quaternion, Vector3 = store.types["geometry_msgs/msg/Quaternion"], store.types["geometry_msgs/msg/Vector3"]
     Imu, JointState = store.types["sensor_msgs/msg/Imu"], store.types["sensor_msgs/msg/JointState"]
@@ -121,6 +160,7 @@ def _write_bag(path: str, record: Record) -> None:
     with Writer(path) as writer:
         imu_c = writer.add_connection("/imu/data", Imu.__msgtype__, typestore=store)
         joint_c = writer.add_connection("/joint_states", JointState.__msgtype__, typestore=store)
+        command_c = writer.add_connection("/servo_command", COMMAND_TYPE, typestore=store)
         for k, tk in enumerate(record.t):
             ns = 1_000_000_000_000 + int(round(tk * 1e9))
             header = Header(seq=k, stamp=Time(sec=ns // 1000000000, nanosec=ns % 1000000000), frame_id="")
@@ -134,6 +174,10 @@ def _write_bag(path: str, record: Record) -> None:
             writer.write(joint_c, ns, store.serialize_ros1(JointState(
                 header=header, name=list(JOINT_NAMES), position=record.joints[k].reshape(12),
                 velocity=np.zeros(0), effort=np.zeros(0)), JointState.__msgtype__))
+            if np.all(np.isfinite(record.commands[k])):
+                writer.write(command_c, ns, store.serialize_ros1(Command(
+                    header=header, name=list(JOINT_NAMES), pulse_width_us=np.full(12, 1500.0),
+                    joint_target=record.commands[k].reshape(12)), COMMAND_TYPE))
 
 
 @pytest.fixture(scope="module")
@@ -152,6 +196,8 @@ def test_a_bag_reads_back_as_the_run_it_recorded(run) -> None:
     assert geodesic_angles(record.rotation, read.rotation).max() < 1e-6
     np.testing.assert_allclose(read.joints, record.joints, atol=1e-9)
     np.testing.assert_allclose(read.omega, record.omega, atol=1e-9)
+    # the commands, each held to the next; the run's last sample has none, and the bag holds none for it
+    np.testing.assert_array_equal(read.commands[:-1], record.commands[:-1])
 
 
 def test_the_fit_recovers_what_a_simulated_run_was_made_with(tmp_path) -> None:
@@ -201,6 +247,12 @@ def test_a_recorded_run_is_fitted_end_to_end(run, tmp_path) -> None:
     assert report["training"]["runs"][0]["source"] == path and report["skipped_joint_samples"] == [0, 0]
     # the base competes with the search's sets: the fit is never worse than its start
     assert report["evaluations"] >= 9 and report["fit_objective"] <= report["training"]["base"]
+    servos = report["servos"]  # the bag holds /servo_command: the servos' half runs too
+    assert servos["training"]["windows"] == 3  # the bag holds each command until the next: the last too
+    assert servos["fitted"]["servo_lag_scale"] == pytest.approx(6.185, abs=0.1)
+    assert servos["training"]["fitted"] < 0.1 * servos["training"]["ideal"]
+    fitted = load_tank_params(os.path.join(out, "tank_fitted.yaml"))
+    assert fitted.servo_lag_scale == servos["fitted"]["servo_lag_scale"]
 
 
 @pytest.mark.parametrize("argv, message", [
