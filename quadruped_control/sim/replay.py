@@ -15,6 +15,10 @@ joints held over each step as the closed-loop engines hold them (midpoint and fi
 :func:`~quadruped_control.sim.servo_model.servo_batch_step`), so a record of a simulated run replays to
 the same bits from the same state.
 
+:func:`replay_servos` is the servos' half: the closed loop's servo step
+(:func:`~quadruped_control.sim.servo_model.servo_batch_step`) driven by the recorded commands from the
+measured joints at each window start, for several (speed, time constant) pairs at once.
+
 Multiple shooting: a window starts from the recorded attitude and body rate. What no sensor on the
 robot measures starts as at rest: the body on a vertical rope under its anchor
 (:meth:`~quadruped_control.sim.plants.tank.TankModel.attach`), still water in the paws' and the body's

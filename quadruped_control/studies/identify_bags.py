@@ -2,22 +2,26 @@
 plant, its parameters fitted to the recorded attitude, and checked on runs held out of the fit.
 
     python -m quadruped_control.studies.identify_bags RUN [RUN ...] [--hold-out RUN ...] --out DIR
-        [--tank-yaml Y] [--parameters P ...] [--window 10] [--stride 5] [--every 10]
-        [--evaluations 600] [--popsize 16] [--sigma 0.25] [--seed 0]
+        [--tank-yaml Y] [--parameters P ...] [--window 10] [--stride 5] [--every 10] [--max-gap 0.1]
+        [--joint-filter-hz 10] [--evaluations 600] [--popsize 16] [--sigma 0.25] [--seed 0]
+    python -m quadruped_control.studies.identify_bags --simulated TRUTH_YAML --rpy R P Y [--rpy ...]
+        [--hold-out-rpy R P Y ...] [--initial-rpy R P Y] [--duration 120] [--gains experiment]
+        [--attitude-noise-deg 0.2] [--joint-noise-deg 0.3] (and the options above)
 
 A RUN is a recorded bag, or the parts of one split recording joined by commas (``a_0.bag,a_1.bag``).
 Each is read with :func:`quadruped_control.analysis.bag_report.read_bags` (``/imu/data`` attitude and
 body rate, ``/joint_states`` the ADS1115 feedback) and put on the plant's 10 ms grid
 (:func:`record_from_bag`), and its joint angles are low-passed without delay at ``--joint-filter-hz``
-(:func:`smoothed`: the replay differentiates them). Joint samples that are not finite, outside the servo ranges or that the
-five-bar cannot close are skipped (:func:`quadruped_control.analysis.strokes.foot_paths`); a gap of
-more than ``--max-gap`` s in either stream makes its samples invalid, and no window crosses them.
+(:func:`smoothed`: the replay differentiates them). Joint samples that are not finite, outside the servo
+ranges or that the five-bar cannot close are skipped (:func:`quadruped_control.analysis.strokes.foot_paths`);
+a gap of more than ``--max-gap`` s in either stream makes its samples invalid, and no window crosses them.
 
 Why (docs/identification.md, "Identification from recorded runs"): Table 1 gives fifteen rows of summary
 metrics, and fits to it leave the plant's physics undecided. A recorded run gives the attitude and every
 joint angle at 100-200 Hz. Replayed with the measured joints (:mod:`quadruped_control.sim.replay`), the
 plant runs without the controller and the servo model, so the servos' parameters (speed, lag, load) do
-not enter and are refused here: what the fit explains is the body's response to its legs' motion.
+not enter it and ``--parameters`` refuses them: what the fit explains is the body's response to its legs'
+motion. The servos have their own half (below).
 
 Objective: the root mean square, over every window of ``--window`` s (one every ``--stride`` s) and every
 ``--every``-th step in it, of the geodesic angle between the replayed and the recorded attitude, in
@@ -75,8 +79,8 @@ from quadruped_control.studies.identify import (BOUNDS, PARAMETERS, fit, nominal
                                                 update_tank_yaml)
 from quadruped_control.studies.runner import code_fingerprint
 
-__all__ = ["PLANT_PARAMETERS", "SERVO_PARAMETERS", "ReplayObjective", "main", "read_run", "record_from_bag",
-           "simulated_record", "smoothed"]
+__all__ = ["PLANT_PARAMETERS", "SERVO_FITTED", "SERVO_GRID", "SERVO_PARAMETERS", "ReplayObjective", "ServoObjective",
+           "fit_servos", "main", "read_run", "record_from_bag", "simulated_record", "smoothed"]
 
 #: The identification's parameters of the servo model: the replay drives the plant with the measured
 #: joints, so these do not enter it.
@@ -423,8 +427,8 @@ def _servo_study(servo: ServoParams, nominal: Dict[str, float], truth: Optional[
     if fitting.window_count == 0:
         return None
     best = fit_servos(fitting)
-    report: Dict[str, Any] = {"fitted": {n: best[n] for n in SERVO_FITTED}, "base": {n: nominal[n] for n in SERVO_FITTED},
-                              "within_1_percent": best["within_1_percent"],
+    report: Dict[str, Any] = {"fitted": {n: best[n] for n in SERVO_FITTED},
+                              "base": {n: nominal[n] for n in SERVO_FITTED}, "within_1_percent": best["within_1_percent"],
                               "servo": {"max_speed": servo.max_speed, "time_constant": servo.time_constant}}
     if truth is not None:
         report["truth"] = {n: truth[n] for n in SERVO_FITTED}
