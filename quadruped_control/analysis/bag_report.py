@@ -303,7 +303,7 @@ def analyse(data: BagData) -> Dict:
         raise BagReportError("need /imu/data and /controller_state in the bag (got %d and %d messages)"
                              % (len(data.imu_t), len(data.state_t)))
     start = _trial_start(data)
-    imu_t, imu_q = _sorted_unique(data.imu_t, data.imu_q)
+    imu_t, imu_q = sorted_unique(data.imu_t, data.imu_q)
     keep = imu_t >= start
     if np.count_nonzero(keep) < 10:
         raise BagReportError("fewer than 10 IMU samples after the maneuver started")
@@ -336,7 +336,7 @@ def analyse(data: BagData) -> Dict:
     return metrics
 
 
-def _sorted_unique(t: Sequence[float], values: Sequence) -> tuple:
+def sorted_unique(t: Sequence[float], values: Sequence) -> tuple:
     """Samples in stamp order with repeated stamps dropped: bags need not be in stamp order (split bags,
     several publishers)."""
     order = np.argsort(np.array(t, dtype=float), kind="stable")
@@ -350,8 +350,8 @@ def stroke_figures(data: BagData, start: float):
     package's robot.yaml and controller.yaml (leg pairs); None without joint angles, pair phases or a
     complete stroke cycle."""
     pairs = load_leg_pairs()
-    phase_t, power = _sorted_unique(data.state_t, data.state_pair_power)
-    joint_t, joints = _sorted_unique(data.joint_t, data.joint_q)
+    phase_t, power = sorted_unique(data.state_t, data.state_pair_power)
+    joint_t, joints = sorted_unique(data.joint_t, data.joint_q)
     steps = [k for k, (t, p) in enumerate(zip(phase_t, power)) if t >= start and len(p) == len(pairs)]
     samples = [k for k, t in enumerate(joint_t) if t >= start]
     if len(steps) < 2 or len(samples) < 2:

@@ -39,8 +39,8 @@ from quadruped_control.sim.plants.tank import TankParams
 from quadruped_control.sim.plants.tank_batch import TankPlantBatch
 from quadruped_control.sim.servo_model import servo_batch_step
 
-__all__ = ["Record", "ReplayResult", "attitude_errors", "joint_errors", "replay", "replay_servos", "still_errors",
-           "window_starts"]
+__all__ = ["Record", "ReplayResult", "attitude_errors", "joint_errors", "replay", "replay_servos", "sample_index",
+           "still_errors", "window_starts"]
 
 
 @dataclass(frozen=True)
@@ -158,9 +158,14 @@ def _angles(recorded: np.ndarray, replayed: np.ndarray) -> np.ndarray:
     return geodesic_angles(recorded.reshape(-1, 3, 3), replayed.reshape(-1, 3, 3)).reshape(shape)
 
 
+def sample_index(starts: Sequence[int], samples: int, every: int) -> np.ndarray:
+    """(W, M) the record's sample of each of :func:`replay`'s (and :func:`replay_servos`') samples: the
+    first ``every`` steps after each window start, then every ``every`` steps."""
+    return np.asarray(starts, dtype=int)[:, None] + every * np.arange(1, samples + 1)[None, :]
+
+
 def _recorded_samples(record: Record, starts: np.ndarray, samples: int, every: int) -> np.ndarray:
-    index = starts[:, None] + every * np.arange(1, samples + 1)[None, :]
-    return record.rotation[index]  # (W, M, 3, 3)
+    return record.rotation[sample_index(starts, samples, every)]  # (W, M, 3, 3)
 
 
 def attitude_errors(result: ReplayResult, record: Record) -> np.ndarray:
@@ -215,8 +220,5 @@ def replay_servos(record: Record, starts: Sequence[int], steps: int, max_speeds:
 def joint_errors(replayed: np.ndarray, record: Record, starts: Sequence[int], every: int) -> np.ndarray:
     """(S, W, M) root mean square over the twelve joints (rad) of :func:`replay_servos`' angles against the
     record's measured joints at the same samples."""
-    starts = np.asarray(starts, dtype=int)
-    samples = replayed.shape[2]
-    index = starts[:, None] + every * np.arange(1, samples + 1)[None, :]
-    difference = replayed - record.joints[index][None]
+    difference = replayed - record.joints[sample_index(starts, replayed.shape[2], every)][None]
     return np.sqrt(np.mean(difference.reshape(difference.shape[:3] + (12,)) ** 2, axis=-1))

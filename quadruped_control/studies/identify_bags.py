@@ -67,12 +67,12 @@ import numpy as np
 
 from quadruped_common.config import ParameterError, config_path
 from quadruped_common.so3 import exp_so3, rpy_to_rot
-from quadruped_control.analysis.bag_report import BagData, BagReportError, read_bags
+from quadruped_control.analysis.bag_report import BagData, BagReportError, read_bags, sorted_unique
 from quadruped_control.analysis.strokes import foot_paths
 from quadruped_control.model.params import RobotParams, load_robot_params
 from quadruped_control.sim.plants.tank import TankParams, load_tank_params
-from quadruped_control.sim.replay import (Record, attitude_errors, joint_errors, replay, replay_servos, still_errors,
-                                          window_starts)
+from quadruped_control.sim.replay import (Record, attitude_errors, joint_errors, replay, replay_servos,
+                                          sample_index, still_errors, window_starts)
 from quadruped_control.sim.servo_model import ServoParams, load_servo_params
 from quadruped_control.studies import StudyError
 from quadruped_control.studies.identify import (BOUNDS, PARAMETERS, fit, nominal_values, tank_overrides,
@@ -97,15 +97,13 @@ GRID_DT = 0.01
 # --------------------------------------------------------------------------------------------------
 
 def _sorted_rows(t: Sequence[float], rows: Sequence[Sequence[float]], name: str) -> Tuple[np.ndarray, np.ndarray]:
-    """Samples in stamp order, repeated stamps dropped (split bags, several publishers)."""
-    times = np.asarray(t, dtype=float)
-    values = np.asarray(rows, dtype=float).reshape(times.size, -1)
-    order = np.argsort(times, kind="stable")
-    times, values = times[order], values[order]
-    keep = np.concatenate(([True], np.diff(times) > 0.0)) if times.size else np.zeros(0, dtype=bool)
-    if np.count_nonzero(keep) < 2:
+    """The samples of one stream in stamp order, repeated stamps dropped (the bag report's
+    :func:`~quadruped_control.analysis.bag_report.sorted_unique`), as (times, rows) arrays; StudyError if
+    fewer than two remain."""
+    times, kept = sorted_unique(t, rows)
+    if times.size < 2:
         raise StudyError("identify_bags: the record has fewer than two %s samples" % name)
-    return times[keep], values[keep]
+    return times, np.asarray(kept, dtype=float).reshape(times.size, -1)
 
 
 def _covered(times: np.ndarray, grid: np.ndarray, max_gap: float) -> np.ndarray:
@@ -301,10 +299,11 @@ class ReplayObjective:
                   for record, starts in self.windows if starts.size]
         return float(self.rms_deg(errors)[0])
 
-    def per_window_deg(self, values: Dict[str, float]) -> List[List[float]]:
-        """Per record, each window's root mean square error (deg) of one set."""
-        errors = iter(self.errors([values]))
-        return [[float(np.degrees(np.sqrt(np.mean(row ** 2)))) for row in next(errors)[0]] if starts.size else []
+    def per_window_deg(self, errors: Sequence[np.ndarray], row: int) -> List[List[float]]:
+        """Per record, each window's root mean square error (deg) of set ``row`` of :meth:`errors`' result
+        (a record without a window: an empty list)."""
+        rows = iter(errors)
+        return [[float(v) for v in np.degrees(np.sqrt(np.mean(next(rows)[row] ** 2, axis=-1)))] if starts.size else []
                 for _, starts in self.windows]
 
 
@@ -428,7 +427,8 @@ def _servo_study(servo: ServoParams, nominal: Dict[str, float], truth: Optional[
         return None
     best = fit_servos(fitting)
     report: Dict[str, Any] = {"fitted": {n: best[n] for n in SERVO_FITTED},
-                              "base": {n: nominal[n] for n in SERVO_FITTED}, "within_1_percent": best["within_1_percent"],
+                              "base": {n: nominal[n] for n in SERVO_FITTED},
+                              "within_1_percent": best["within_1_percent"],
                               "servo": {"max_speed": servo.max_speed, "time_constant": servo.time_constant}}
     if truth is not None:
         report["truth"] = {n: truth[n] for n in SERVO_FITTED}
@@ -462,7 +462,7 @@ def _plot(path: str, record: Record, objective: ReplayObjective, best: Dict[str,
         for label, values, style in (("fitted", best, "tab:blue"), ("base tank.yaml", {}, "tab:red")):
             result = replay(objective.robot, [objective.tank(values)], record, starts, objective.steps, objective.every)
             for w, start in enumerate(starts):
-                t = record.t[start + objective.every * np.arange(1, result.rotation.shape[2] + 1)]
+                t = record.t[sample_index([start], result.rotation.shape[2], objective.every)[0]]
                 replayed = np.degrees(rotations_to_rpy(result.rotation[0, w]))
                 for axis in range(3):
                     axes[axis].plot(t, replayed[:, axis], color=style, lw=1.0, label=label if w == 0 else None)
@@ -595,10 +595,8 @@ def main(argv: Optional[Sequence[str]] = None) -> int:
         nominal = nominal_values(base)
         training, held_out, skipped = _records(args, robot)
         objective = ReplayObjective(robot, base, nominal, training, steps, stride, args.every)
-        if objective.window_count == 0:
-            raise StudyError("identify_bags: no window of %g s fits in the valid samples of the training runs"
-                             % args.window)
-        # the base itself competes: a short search need not find a set better than its start
+        # the base itself competes: a short search need not find a set better than its start (and its
+        # evaluation refuses training runs without a window)
         evaluated = sorted(objective([{n: nominal[n] for n in names}])
                            + fit(objective, names, nominal, nominal, args.evaluations, args.popsize, args.seed, None,
                                  "fit", sigma=args.sigma), key=lambda r: r["objective"])
@@ -610,16 +608,18 @@ def main(argv: Optional[Sequence[str]] = None) -> int:
         sides = {}
         for part, side, records in (("training", objective, training), ("held_out", check, held_out)):
             summary: Dict[str, Any] = {"windows": side.window_count, "runs": []}
+            per_window: List[List[float]] = [[] for _ in records]
             if side.window_count:
-                summary.update(still=side.still_deg(), base=side([{}])[0]["objective"],
-                               fitted=side([fitted])[0]["objective"])
+                errors = side.errors([{}, fitted])  # the base and the fit in one batch
+                base_deg, fitted_deg = side.rms_deg(errors)
+                summary.update(still=side.still_deg(), base=float(base_deg), fitted=float(fitted_deg))
+                per_window = side.per_window_deg(errors, 1)
                 if truth_tank is not None:  # the whole truth, whatever the base holds outside the parameters
                     summary["truth"] = float(side.rms_deg(side.errors_of([truth_tank]))[0])
-            for record, per_window in zip(records, side.per_window_deg(fitted) if side.window_count else
-                                          [[] for _ in records]):
+            for record, windows in zip(records, per_window):
                 summary["runs"].append({"source": record.source, "duration": record.duration,
                                         "valid_fraction": float(np.mean(record.valid)),
-                                        "fitted_per_window": per_window})
+                                        "fitted_per_window": windows})
             sides[part] = summary
         servos = _servo_study(load_servo_params(None, robot_yaml=args.robot_yaml), nominal, truth, training, held_out,
                               steps, stride, args.every)

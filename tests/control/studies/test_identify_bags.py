@@ -269,6 +269,12 @@ def test_bad_input_is_refused(argv, message, capsys, tmp_path) -> None:
     assert message in capsys.readouterr().err
 
 
+def test_runs_shorter_than_a_window_are_refused(capsys, tmp_path) -> None:
+    assert ib.main(["--simulated", TANK, "--rpy", "45", "0", "0", "--duration", "2", "--window", "5", "--parameters",
+                    "cob_z", "net_weight", "--out", str(tmp_path)]) == 1
+    assert "no window of 5.00 s" in capsys.readouterr().err
+
+
 def test_a_broken_tank_yaml_is_named(capsys, tmp_path) -> None:
     broken = tmp_path / "tank.yaml"
     broken.write_text("effects: [\n")
