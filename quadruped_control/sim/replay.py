@@ -20,10 +20,16 @@ the same bits from the same state.
 measured joints at each window start, for several (speed, time constant) pairs at once.
 
 Multiple shooting: a window starts from the recorded attitude and body rate. What no sensor on the
-robot measures starts as at rest: the body on a vertical rope under its anchor
-(:meth:`~quadruped_control.sim.plants.tank.TankModel.attach`), still water in the paws' and the body's
-wakes, the floating block at rest. The body's swing on the rope (a slow pendulum) is the largest of
-these; windows short against it keep the error small, and the tests measure it on simulated records.
+robot measures (the body's position and velocity, the water in the paws' and the body's wakes, the
+floating block) either starts at rest (``lead`` = 0): the body on a vertical rope under its anchor
+(:meth:`~quadruped_control.sim.plants.tank.TankModel.attach`), still wakes, the block at rest; or comes
+from a lead-in: the plant runs ``lead`` steps before the window with the recorded joints, and after each
+step its attitude and body rate are set to the record's. The unmeasured states then follow the measured
+motion as they did on the robot (an observer with full gain on what is measured, none on the rest), and
+the window starts from them. Why: a free body swims while it turns, and the paws' drag depends on that
+velocity; started at rest, the paper's free body misses its own run by about 2.5 deg within 3 s, by
+0.5 deg after a lead-in of 3 s and by 0.13 deg after 5 s (tests/control/sim/test_replay.py). On a rope
+the body hardly translates, and the lead-in matters less.
 """
 from __future__ import annotations
 
@@ -83,22 +89,24 @@ class Record:
         return float(self.t[-1] - self.t[0])
 
 
-def window_starts(record: Record, steps: int, stride: int, commanded: bool = False) -> np.ndarray:
+def window_starts(record: Record, steps: int, stride: int, commanded: bool = False, lead: int = 0) -> np.ndarray:
     """The first sample of each window of ``steps`` steps (``steps`` + 1 samples, all valid), one every
-    ``stride`` samples from the record's start (a window over an invalid sample is left out);
-    ``commanded``: every sample of the window has a command too (:func:`replay_servos`)."""
-    if steps < 1 or stride < 1:
-        raise ValueError("window steps and stride must be >= 1, got %d and %d" % (steps, stride))
+    ``stride`` samples from the record's start plus ``lead`` (a window over an invalid sample is left out);
+    ``commanded``: every sample of the window has a command too (:func:`replay_servos`); ``lead``: the
+    window's lead-in of :func:`replay` (``lead`` samples before the start) must be valid too."""
+    if steps < 1 or stride < 1 or lead < 0:
+        raise ValueError("window steps and stride must be >= 1 and lead >= 0, got %d, %d and %d"
+                         % (steps, stride, lead))
     valid = record.valid.astype(bool)
     if commanded:
         if record.commands is None:
             return np.zeros(0, dtype=int)
         valid = valid & np.all(np.isfinite(record.commands.reshape(valid.size, 12)), axis=1)
-    # bad[k] = number of invalid samples before k: a window k..k+steps is clean when the count does not grow
+    # bad[k] = number of invalid samples before k: samples first..last are clean when the count does not grow
     bad = np.concatenate(([0], np.cumsum(~valid)))
     last = valid.size - steps - 1
-    starts = np.arange(0, last + 1, stride) if last >= 0 else np.zeros(0, dtype=int)
-    return starts[bad[starts + steps + 1] == bad[starts]].astype(int)
+    starts = np.arange(lead, last + 1, stride) if last >= lead else np.zeros(0, dtype=int)
+    return starts[bad[starts + steps + 1] == bad[starts - lead]].astype(int)
 
 
 @dataclass
@@ -115,23 +123,29 @@ class ReplayResult:
 
 
 def replay(robot: RobotParams, tanks: Sequence[TankParams], record: Record, starts: Sequence[int], steps: int,
-           every: int = 10) -> ReplayResult:
+           every: int = 10, lead: int = 0) -> ReplayResult:
     """Replay ``record``'s joints from each window start (:func:`window_starts`) for ``steps`` steps on the
-    tank plant of each of ``tanks`` (module docstring): one batch of len(tanks) x len(starts) trials."""
+    tank plant of each of ``tanks`` (module docstring): one batch of len(tanks) x len(starts) trials.
+
+    ``lead`` > 0 runs a lead-in of ``lead`` steps before each start, with the attitude and body rate held to
+    the record's after every step (module docstring): the states no sensor measures (the body's drift on
+    its rope, the wakes, the block) follow the measured motion, and the window starts from them instead of
+    from rest. ``lead`` = 0: they start at rest."""
     starts = np.asarray(starts, dtype=int)
     n_sets, n_windows = len(tanks), starts.size
     if n_sets < 1 or n_windows < 1:
         raise ValueError("replay needs at least one parameter set and one window")
-    if every < 1 or steps < every:
-        raise ValueError("replay needs steps >= every >= 1, got %d and %d" % (steps, every))
-    if starts.min() < 0 or starts.max() + steps >= record.t.size:
-        raise ValueError("a window runs past the record (%d samples)" % record.t.size)
+    if every < 1 or steps < every or lead < 0:
+        raise ValueError("replay needs steps >= every >= 1 and lead >= 0, got %d, %d and %d" % (steps, every, lead))
+    if starts.min() - lead < 0 or starts.max() + steps >= record.t.size:
+        raise ValueError("a window or its lead-in runs past the record (%d samples)" % record.t.size)
+    first = starts - lead
     plant = TankPlantBatch(robot, [tank for tank in tanks for _ in range(n_windows)])
     n = plant.n
     windows = np.tile(np.arange(n_windows), n_sets)
     p, v = np.zeros((n, 3)), np.zeros((n, 3))
-    R = np.ascontiguousarray(record.rotation[starts[windows]], dtype=float)
-    w = np.ascontiguousarray(record.omega[starts[windows]], dtype=float)
+    R = np.ascontiguousarray(record.rotation[first[windows]], dtype=float)
+    w = np.ascontiguousarray(record.omega[first[windows]], dtype=float)
     plant.attach(p, R)
     joints = record.joints
     samples = steps // every
@@ -139,14 +153,18 @@ def replay(robot: RobotParams, tanks: Sequence[TankParams], record: Record, star
     dt = record.dt
     mid, rate = np.empty((n, 4, 3)), np.empty((n, 4, 3))
     held_mid, held_rate = mid.reshape(n_sets, n_windows, 4, 3), rate.reshape(n_sets, n_windows, 4, 3)  # views
-    for k in range(steps):
-        q0, q1 = joints[starts + k], joints[starts + k + 1]
+    forced_R, forced_w = R.reshape(n_sets, n_windows, 3, 3), w.reshape(n_sets, n_windows, 3)  # views
+    for k in range(lead + steps):
+        q0, q1 = joints[first + k], joints[first + k + 1]
         # the closed-loop engines' joint hold (servo_batch_step): midpoint and finite-difference rate
         held_mid[:] = 0.5 * (q0 + q1)
         held_rate[:] = (q1 - q0) / dt
         p, v, R, w = plant.step(p, v, R, w, mid, rate, dt)
-        if (k + 1) % every == 0:
-            out[:, (k + 1) // every - 1] = R
+        if k < lead:  # the lead-in: the measured states held to the record (the step advanced them in place)
+            forced_R[:] = record.rotation[first + k + 1]
+            forced_w[:] = record.omega[first + k + 1]
+        elif (k + 1 - lead) % every == 0:
+            out[:, (k + 1 - lead) // every - 1] = R
     return ReplayResult(rotation=out.reshape(n_sets, n_windows, samples, 3, 3),
                         failed=plant.failed.reshape(n_sets, n_windows).copy(), starts=starts, every=every)
 

@@ -2,8 +2,8 @@
 plant, its parameters fitted to the recorded attitude, and checked on runs held out of the fit.
 
     python -m quadruped_control.studies.identify_bags RUN [RUN ...] [--hold-out RUN ...] --out DIR
-        [--tank-yaml Y] [--parameters P ...] [--window 10] [--stride 5] [--every 10] [--max-gap 0.1]
-        [--joint-filter-hz 10] [--evaluations 600] [--popsize 16] [--sigma 0.25] [--seed 0]
+        [--tank-yaml Y] [--parameters P ...] [--window 10] [--stride 5] [--lead-in 5] [--every 10]
+        [--max-gap 0.1] [--joint-filter-hz 10] [--evaluations 600] [--popsize 16] [--sigma 0.25] [--seed 0]
     python -m quadruped_control.studies.identify_bags --simulated TRUTH_YAML --rpy R P Y [--rpy ...]
         [--hold-out-rpy R P Y ...] [--initial-rpy R P Y] [--duration 120] [--gains experiment]
         [--attitude-noise-deg 0.2] [--joint-noise-deg 0.3] (and the options above)
@@ -25,8 +25,11 @@ motion. The servos have their own half (below).
 
 Objective: the root mean square, over every window of ``--window`` s (one every ``--stride`` s) and every
 ``--every``-th step in it, of the geodesic angle between the replayed and the recorded attitude, in
-degrees. Each window starts from the recorded attitude and body rate, with the unmeasured states at rest
-(:mod:`quadruped_control.sim.replay`). Fit: CMA-ES over the named parameters scaled into their bounds
+degrees. Each window starts from the recorded attitude and body rate. The states no sensor measures (the
+body's drift on its rope or in open water, the wakes, the floating block) come from a lead-in of
+``--lead-in`` s before the window, in which the plant's attitude and body rate are held to the record's
+(:func:`quadruped_control.sim.replay.replay`); 0 starts them at rest. Why: a free-floating body swims,
+and a window that starts it at rest costs 2-3 deg of its error (docs/identification.md). Fit: CMA-ES over the named parameters scaled into their bounds
 (:data:`quadruped_control.studies.identify.PARAMETERS`, with their physical reasons), from the base
 tank.yaml's values, seeded (:func:`quadruped_control.studies.identify.fit`). Reported on the training
 runs and the held-out runs alike, beside two references: the base tank.yaml, and "still", a model that
@@ -248,16 +251,16 @@ def simulated_record(truth_yaml: str, setpoint_rpy_deg: Sequence[float], initial
 
 class ReplayObjective:
     """The replay's objective (module docstring) over ``records``' windows of ``steps`` steps, one every
-    ``stride`` samples, sampled every ``every`` steps; parameter sets are partial: the rest is
+    ``stride`` samples, sampled every ``every`` steps, each after a lead-in of ``lead`` steps; parameter sets are partial: the rest is
     ``nominal`` (the base tank.yaml's values), applied to ``base``. Callable as
     :func:`~quadruped_control.studies.identify.fit` evaluates: ``objective(sets, cases, tag)`` -> one
     ``{"values", "objective"}`` per set (``cases`` and ``tag`` unused: every window counts)."""
 
     def __init__(self, robot: RobotParams, base: TankParams, nominal: Dict[str, float], records: Sequence[Record],
-                 steps: int, stride: int, every: int) -> None:
+                 steps: int, stride: int, every: int, lead: int = 0) -> None:
         self.robot, self.base, self.nominal = robot, base, dict(nominal)
-        self.steps, self.every = steps, every
-        self.windows = [(record, window_starts(record, steps, stride)) for record in records]
+        self.steps, self.every, self.lead = steps, every, lead
+        self.windows = [(record, window_starts(record, steps, stride, lead=lead)) for record in records]
         self.evaluations = 0
 
     @property
@@ -277,7 +280,8 @@ class ReplayObjective:
         out = []
         for record, starts in self.windows:
             if starts.size:
-                out.append(attitude_errors(replay(self.robot, tanks, record, starts, self.steps, self.every), record))
+                out.append(attitude_errors(replay(self.robot, tanks, record, starts, self.steps, self.every,
+                                                  self.lead), record))
         return out
 
     @staticmethod
@@ -288,8 +292,8 @@ class ReplayObjective:
 
     def __call__(self, sets: Sequence[Dict[str, float]], cases: Any = None, tag: str = "") -> List[Dict[str, Any]]:
         if self.window_count == 0:
-            raise StudyError("identify_bags: no window of %.2f s fits in the valid samples of the records"
-                             % (self.steps * GRID_DT))
+            raise StudyError("identify_bags: no window of %.2f s (after a lead-in of %.2f s) fits in the valid "
+                             "samples of the records" % (self.steps * GRID_DT, self.lead * GRID_DT))
         objective = self.rms_deg(self.errors(sets))
         return [{"values": dict(values), "objective": float(value)} for values, value in zip(sets, objective)]
 
@@ -452,7 +456,8 @@ def _plot(path: str, record: Record, objective: ReplayObjective, best: Dict[str,
 
     from quadruped_common.so3 import rotations_to_rpy
 
-    starts = window_starts(record, objective.steps, objective.steps)  # windows that do not overlap
+    # windows that do not overlap
+    starts = window_starts(record, objective.steps, objective.steps, lead=objective.lead)
     fig, axes = plt.subplots(3, 1, figsize=(10, 7), sharex=True)
     rpy = np.degrees(rotations_to_rpy(record.rotation))
     for axis, name in enumerate(("roll", "pitch", "yaw")):
@@ -460,7 +465,8 @@ def _plot(path: str, record: Record, objective: ReplayObjective, best: Dict[str,
         axes[axis].set_ylabel(name + " [deg]")
     if starts.size:
         for label, values, style in (("fitted", best, "tab:blue"), ("base tank.yaml", {}, "tab:red")):
-            result = replay(objective.robot, [objective.tank(values)], record, starts, objective.steps, objective.every)
+            result = replay(objective.robot, [objective.tank(values)], record, starts, objective.steps, objective.every,
+                            objective.lead)
             for w, start in enumerate(starts):
                 t = record.t[sample_index([start], result.rotation.shape[2], objective.every)[0]]
                 replayed = np.degrees(rotations_to_rpy(result.rotation[0, w]))
@@ -491,8 +497,10 @@ def _text(report: Dict[str, Any]) -> str:
         if "truth" in report:
             row += " %.2f |" % side["truth"]
         lines.append(row)
+    start = ("after a lead-in of %g s with the attitude held to the record's" % report["lead_in"] if report["lead_in"]
+             else "from the unmeasured states at rest")
     lines += ["", "Root mean square geodesic error between the replayed and the recorded attitude over windows "
-              "of %g s, one every %g s." % (report["window"], report["stride"]), ""]
+              "of %g s, one every %g s, each %s." % (report["window"], report["stride"], start), ""]
     lines += ["| parameter | bounds | base | fitted |%s" % (" truth |" if "truth" in report else ""),
               "|---|---|---|---|%s" % ("---|" if "truth" in report else "")]
     for name in report["parameters"]:
@@ -545,6 +553,8 @@ def main(argv: Optional[Sequence[str]] = None) -> int:
                         help="parameters to fit (default: every plant parameter of identify.PARAMETERS)")
     parser.add_argument("--window", type=float, default=10.0, help="window length, s (default %(default)s)")
     parser.add_argument("--stride", type=float, default=5.0, help="one window every so many s (default %(default)s)")
+    parser.add_argument("--lead-in", type=float, default=5.0, help="before each window, so many s with the "
+                        "attitude held to the record's, 0: the unmeasured states start at rest (default %(default)s)")
     parser.add_argument("--every", type=int, default=10, help="compare every n-th step (default %(default)s)")
     parser.add_argument("--max-gap", type=float, default=0.1,
                         help="a longer gap (s) in a stream makes its samples invalid (default %(default)s)")
@@ -572,6 +582,8 @@ def main(argv: Optional[Sequence[str]] = None) -> int:
     for flag, value in positive.items():
         if not (math.isfinite(value) and value > 0.0):
             parser.error("%s must be a positive number of seconds, got %r" % (flag, value))
+    if not (math.isfinite(args.lead_in) and args.lead_in >= 0.0):
+        parser.error("--lead-in must be a number of seconds >= 0, got %r" % (args.lead_in,))
     if args.every < 1 or args.evaluations < 1 or args.popsize < 2 or args.seed < 0:
         parser.error("--every and --evaluations must be >= 1, --popsize >= 2, --seed >= 0")
     if not (math.isfinite(args.sigma) and 0.0 < args.sigma <= 0.5):
@@ -581,6 +593,7 @@ def main(argv: Optional[Sequence[str]] = None) -> int:
         if not (math.isfinite(value) and value >= 0.0):
             parser.error("--%s must be a finite std >= 0, got %r" % (flag.replace("_", "-"), value))
     steps, stride = int(round(args.window / GRID_DT)), max(1, int(round(args.stride / GRID_DT)))
+    lead = int(round(args.lead_in / GRID_DT))
     if steps < args.every:
         parser.error("--window must hold at least --every steps of %g s" % GRID_DT)
     if args.simulated and (args.runs or args.hold_out):
@@ -594,7 +607,7 @@ def main(argv: Optional[Sequence[str]] = None) -> int:
         base = load_tank_params(args.tank_yaml)
         nominal = nominal_values(base)
         training, held_out, skipped = _records(args, robot)
-        objective = ReplayObjective(robot, base, nominal, training, steps, stride, args.every)
+        objective = ReplayObjective(robot, base, nominal, training, steps, stride, args.every, lead)
         # the base itself competes: a short search need not find a set better than its start (and its
         # evaluation refuses training runs without a window)
         evaluated = sorted(objective([{n: nominal[n] for n in names}])
@@ -602,7 +615,7 @@ def main(argv: Optional[Sequence[str]] = None) -> int:
                                  "fit", sigma=args.sigma), key=lambda r: r["objective"])
         best = evaluated[0]["values"]
         fitted = {n: float(best[n]) for n in names}
-        check = ReplayObjective(robot, base, nominal, held_out, steps, stride, args.every)
+        check = ReplayObjective(robot, base, nominal, held_out, steps, stride, args.every, lead)
         truth_tank = load_tank_params(args.simulated) if args.simulated else None
         truth = nominal_values(truth_tank) if truth_tank is not None else None
         sides = {}
@@ -631,7 +644,7 @@ def main(argv: Optional[Sequence[str]] = None) -> int:
         "study": "identify_bags", "command": ["python", "-m", "quadruped_control.studies.identify_bags"]
         + list(argv if argv is not None else sys.argv[1:]), "code": code_fingerprint(),
         "tank_yaml": os.path.abspath(args.tank_yaml or config_path("tank.yaml")), "parameters": names,
-        "window": args.window, "stride": args.stride, "every": args.every, "seed": args.seed,
+        "window": args.window, "stride": args.stride, "lead_in": args.lead_in, "every": args.every, "seed": args.seed,
         "joint_filter_hz": args.joint_filter_hz,
         "evaluations": objective.evaluations, "popsize": args.popsize, "sigma": args.sigma,
         "skipped_joint_samples": skipped, "base": {n: nominal[n] for n in names}, "fitted": fitted,

@@ -1,5 +1,6 @@
 """The open-loop replay: a simulated run's joints replayed from its start give its attitude to the bit; each
-(parameter set, window) trial is its own; the baseline of no motion; records and windows checked."""
+(parameter set, window) trial is its own; a lead-in held to the record brings the unmeasured states (a free
+body's drift) into a later window; the baseline of no motion; records and windows checked."""
 from __future__ import annotations
 
 import math
@@ -13,6 +14,7 @@ from quadruped_control.sim.batch import BatchSimulation, BatchTrial
 from quadruped_control.sim.plants import load_tank_params
 from quadruped_control.sim.replay import (Record, attitude_errors, joint_errors, replay, replay_servos, still_errors,
                                           window_starts)
+from quadruped_control.studies import identify_bags as ib
 from quadruped_control.studies.trial import TrialSpec, trial_setup
 
 TANK = "config/tank_identified.yaml"
@@ -64,6 +66,36 @@ def test_every_parameter_set_and_window_is_its_own_trial(simulated) -> None:
     # error for the truth, and far less than for the plant without its damping
     assert 0.0 < errors[0, 1:].max() < math.radians(1.0)
     assert errors[1].mean() > 5.0 * errors[0].mean()
+
+
+def test_a_lead_in_from_the_runs_start_is_the_run_itself(simulated) -> None:
+    """Held to a record of the same plant, the lead-in's attitude and body rate are the plant's own: the
+    window after it is the run, to the bit."""
+    robot, tank, record, _ = simulated
+    result = replay(robot, [tank], record, [250], 300, every=1, lead=250)
+    np.testing.assert_array_equal(result.rotation[0, 0], record.rotation[251:551])
+
+
+def test_a_lead_in_brings_a_free_bodys_drift_into_the_window(tmp_path) -> None:
+    """The paper's free body (no rope, no hydrostatics, no added mass) swims while it turns. A window that
+    starts it at rest misses that drift, and the paws' drag then turns it wrongly: about 2.5 deg within 3 s
+    for the truth itself. A lead-in of 3 s held to the record gives the body its drift back."""
+    with open("config/tank.yaml") as stream:
+        text = stream.read()
+    for effect in ("suspension", "hydrostatics", "torso_added_mass", "paw_added_mass"):
+        assert "  %s: true" % effect in text
+        text = text.replace("  %s: true" % effect, "  %s: false" % effect)
+    free = str(tmp_path / "free.yaml")
+    with open(free, "w") as stream:
+        stream.write(text)
+    record = ib.simulated_record(free, (45.0, 0.0, 0.0), (0.0, 0.0, 60.0), 12.0)
+    robot, tank = load_robot_params(None), load_tank_params(free)
+    starts = window_starts(record, 300, 300, lead=500)
+    assert list(starts) == [500, 800]
+    at_rest = attitude_errors(replay(robot, [tank], record, starts, 300, 10), record)
+    led_in = attitude_errors(replay(robot, [tank], record, starts, 300, 10, lead=300), record)
+    assert at_rest.max(axis=2).min() > math.radians(1.5)
+    assert np.all(led_in.max(axis=2) < 0.25 * at_rest.max(axis=2))
 
 
 def test_the_servos_replay_to_the_bit_from_the_measured_joints(simulated) -> None:
@@ -119,6 +151,10 @@ def test_windows_leave_out_invalid_samples() -> None:
                     joints=np.zeros((100, 4, 3)), valid=valid, dt=0.01)
     assert list(window_starts(record, 20, 10)) == [0, 10, 20, 50, 60, 70]  # 30 and 40 would cross 45
     assert list(window_starts(record, 99, 1)) == []
+    # a lead-in of 10 samples must be valid too, and the first window starts after it
+    assert list(window_starts(record, 20, 10, lead=10)) == [10, 20, 60, 70]  # 30..50 would reach 45
+    with pytest.raises(ValueError, match="lead"):
+        window_starts(record, 20, 10, lead=-1)
     with pytest.raises(ValueError, match="stride"):
         window_starts(record, 0, 10)
 
@@ -143,3 +179,5 @@ def test_a_record_is_checked() -> None:
     Record(**dict(good, omega=nan, valid=invalid))  # an invalid sample's value is not used
     with pytest.raises(ValueError, match="past the record"):
         replay(load_robot_params(None), [load_tank_params(TANK)], Record(**good), [2], 3, every=1)
+    with pytest.raises(ValueError, match="lead-in runs past the record"):
+        replay(load_robot_params(None), [load_tank_params(TANK)], Record(**good), [1], 3, every=1, lead=2)

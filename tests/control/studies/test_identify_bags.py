@@ -201,7 +201,7 @@ def test_a_bag_reads_back_as_the_run_it_recorded(run) -> None:
 
 
 def test_the_fit_recovers_what_a_simulated_run_was_made_with(tmp_path) -> None:
-    """The base is the truth with the centre of buoyancy and the roll/pitch damping moved away; a 20 s run
+    """The base is the truth with the centre of buoyancy and the roll/pitch damping moved away; a 25 s run
     with the IMU's and the feedback's noise pins both down again."""
     pytest.importorskip("cma")
     truth = nominal_values(load_tank_params(TANK))
@@ -213,7 +213,7 @@ def test_the_fit_recovers_what_a_simulated_run_was_made_with(tmp_path) -> None:
         stream.write(base)
     out = str(tmp_path / "out")
     assert ib.main(["--simulated", TANK, "--tank-yaml", base_yaml, "--rpy", "45", "0", "0", "--hold-out-rpy", "0",
-                    "30", "0", "--duration", "20", "--window", "5", "--stride", "2.5", "--parameters", "cob_z",
+                    "30", "0", "--duration", "25", "--window", "5", "--stride", "2.5", "--parameters", "cob_z",
                     "appendage_linear_xy", "--evaluations", "96", "--popsize", "8", "--out", out]) == 0
     with open(os.path.join(out, "identify_bags.json")) as stream:
         report = json.load(stream)
@@ -221,7 +221,7 @@ def test_the_fit_recovers_what_a_simulated_run_was_made_with(tmp_path) -> None:
     assert report["fitted"]["appendage_linear_xy"] == pytest.approx(truth["appendage_linear_xy"], abs=0.05)
     for side in ("training", "held_out"):
         s = report[side]
-        assert s["windows"] == 7
+        assert s["windows"] == 7  # from 5 s (after the default lead-in) to 20 s
         assert s["fitted"] < 1.5 * s["truth"] and s["fitted"] < 0.2 * s["base"] and s["fitted"] < 0.2 * s["still"]
     assert report["truth"]["values"]["cob_z"] == truth["cob_z"]
     fitted = load_tank_params(os.path.join(out, "tank_fitted.yaml"))
@@ -240,7 +240,7 @@ def test_a_recorded_run_is_fitted_end_to_end(run, tmp_path) -> None:
     _, path = run
     out = str(tmp_path / "out")
     assert ib.main([path, "--hold-out", path, "--tank-yaml", TANK, "--parameters", "cob_z", "net_weight",
-                    "--window", "4", "--stride", "4", "--evaluations", "8", "--popsize", "4", "--out", out]) == 0
+                    "--window", "4", "--stride", "4", "--lead-in", "0", "--evaluations", "8", "--popsize", "4", "--out", out]) == 0
     with open(os.path.join(out, "identify_bags.json")) as stream:
         report = json.load(stream)
     assert report["training"]["windows"] == report["held_out"]["windows"] == 3  # at 0, 4 and 8 s
@@ -285,7 +285,8 @@ def test_a_broken_tank_yaml_is_named(capsys, tmp_path) -> None:
 
 @pytest.mark.parametrize("argv", [["--simulated", TANK, "run.bag"], ["run.bag", "--rpy", "1", "2", "3"],
                                   ["--window", "0"], ["--stride", "nan"], ["--sigma", "0.9"], ["--every", "0"],
-                                  ["--joint-noise-deg", "-1"], ["--window", "0.05", "--every", "10"]])
+                                  ["--joint-noise-deg", "-1"],
+                                  ["--lead-in", "-1"], ["--lead-in", "nan"], ["--window", "0.05", "--every", "10"]])
 def test_bad_options_are_refused(argv) -> None:
     with pytest.raises(SystemExit):
         ib.main(argv)
