@@ -29,12 +29,13 @@ degrees. Each window starts from the recorded attitude and body rate. The states
 body's drift on its rope or in open water, the wakes, the floating block) come from a lead-in of
 ``--lead-in`` s before the window, in which the plant's attitude and body rate are held to the record's
 (:func:`quadruped_control.sim.replay.replay`); 0 starts them at rest. Why: a free-floating body swims,
-and a window that starts it at rest costs 2-3 deg of its error (docs/identification.md). Fit: CMA-ES over the named parameters scaled into their bounds
-(:data:`quadruped_control.studies.identify.PARAMETERS`, with their physical reasons), from the base
-tank.yaml's values, seeded (:func:`quadruped_control.studies.identify.fit`). Reported on the training
-runs and the held-out runs alike, beside two references: the base tank.yaml, and "still", a model that
-predicts no motion (the attitude held at each window's start). A plant that does not beat "still" on
-held-out runs predicts nothing.
+and a window that starts it at rest costs 2-3 deg of its error (docs/identification.md). Fit: CMA-ES over
+the named parameters scaled into their bounds (:data:`quadruped_control.studies.identify.PARAMETERS`,
+with their physical reasons), from the base tank.yaml's values, seeded
+(:func:`quadruped_control.studies.identify.fit`). Reported on the training runs and the held-out runs
+alike, beside two references: the base tank.yaml, and "still", a model that predicts no motion (the
+attitude held at each window's start). A plant that does not beat "still" on held-out runs predicts
+nothing.
 
 The servos' half: where the runs recorded the controller's commands (``/servo_command``), the robot's
 servo model (the rate-limited lag of config/simulation.yaml and robot.yaml, scaled by ``servo_speed_scale``
@@ -251,8 +252,8 @@ def simulated_record(truth_yaml: str, setpoint_rpy_deg: Sequence[float], initial
 
 class ReplayObjective:
     """The replay's objective (module docstring) over ``records``' windows of ``steps`` steps, one every
-    ``stride`` samples, sampled every ``every`` steps, each after a lead-in of ``lead`` steps; parameter sets are partial: the rest is
-    ``nominal`` (the base tank.yaml's values), applied to ``base``. Callable as
+    ``stride`` samples, sampled every ``every`` steps, each after a lead-in of ``lead`` steps; parameter
+    sets are partial: the rest is ``nominal`` (the base tank.yaml's values), applied to ``base``. Callable as
     :func:`~quadruped_control.studies.identify.fit` evaluates: ``objective(sets, cases, tag)`` -> one
     ``{"values", "objective"}`` per set (``cases`` and ``tag`` unused: every window counts)."""
 

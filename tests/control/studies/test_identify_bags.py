@@ -240,7 +240,8 @@ def test_a_recorded_run_is_fitted_end_to_end(run, tmp_path) -> None:
     _, path = run
     out = str(tmp_path / "out")
     assert ib.main([path, "--hold-out", path, "--tank-yaml", TANK, "--parameters", "cob_z", "net_weight",
-                    "--window", "4", "--stride", "4", "--lead-in", "0", "--evaluations", "8", "--popsize", "4", "--out", out]) == 0
+                    "--window", "4", "--stride", "4", "--lead-in", "0", "--evaluations", "8", "--popsize", "4",
+                    "--out", out]) == 0
     with open(os.path.join(out, "identify_bags.json")) as stream:
         report = json.load(stream)
     assert report["training"]["windows"] == report["held_out"]["windows"] == 3  # at 0, 4 and 8 s
