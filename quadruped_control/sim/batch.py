@@ -260,19 +260,15 @@ class BatchSimulation:
                 for key, value in (("position", self.position), ("velocity", self.velocity),
                                    ("rotation", self.rotation), ("omega", self.omega), ("joints", self.q)):
                     states[key].append(value.copy())
-            if metrics is None:
-                if i < steps:
-                    targets = self._control()
-                    if i < kept:
-                        states["targets"].append(targets.copy())
-                    self._advance(targets)
-                continue
-            # The state of sample i and the controller's answer to it (metrics.add copies; the plant steps
-            # its arrays in place).
+            if i >= steps and metrics is None:
+                continue  # the last sample: only the stroke metrics need the controller's answer to it
             targets = self._control()
             if i < kept and i < steps:
                 states["targets"].append(targets.copy())
-            metrics.add(times[i], self.q.reshape(self.n, 12), self.rotation, self.omega, self.controller.tau_sat,
-                        np.any(self.controller.power, axis=1))
+            if metrics is not None:
+                # The state of sample i and the controller's answer to it (metrics.add copies; the plant
+                # steps its arrays in place).
+                metrics.add(times[i], self.q.reshape(self.n, 12), self.rotation, self.omega,
+                            self.controller.tau_sat, np.any(self.controller.power, axis=1))
             if i < steps:
                 self._advance(targets)

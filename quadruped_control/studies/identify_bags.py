@@ -403,13 +403,13 @@ def _records(args: argparse.Namespace, robot: RobotParams) -> Tuple[List[Record]
     if args.simulated:
         if not args.rpy:
             raise StudyError("identify_bags: --simulated needs at least one --rpy")
-        records = [smoothed(simulated_record(args.simulated, rpy, args.initial_rpy, args.duration, args.gains,
-                                             args.attitude_noise_deg, args.joint_noise_deg, args.seed + i),
-                            args.joint_filter_hz) for i, rpy in enumerate(args.rpy)]
-        held = [smoothed(simulated_record(args.simulated, rpy, args.initial_rpy, args.duration, args.gains,
-                                          args.attitude_noise_deg, args.joint_noise_deg, args.seed + len(args.rpy) + i),
-                         args.joint_filter_hz) for i, rpy in enumerate(args.hold_out_rpy or [])]
-        return records, held, []
+
+        def runs(setpoints: Sequence[Sequence[float]], first_seed: int) -> List[Record]:
+            return [smoothed(simulated_record(args.simulated, rpy, args.initial_rpy, args.duration, args.gains,
+                                              args.attitude_noise_deg, args.joint_noise_deg, first_seed + i),
+                             args.joint_filter_hz) for i, rpy in enumerate(setpoints)]
+
+        return runs(args.rpy, args.seed), runs(args.hold_out_rpy or [], args.seed + len(args.rpy)), []
     if not args.runs:
         raise StudyError("identify_bags: name at least one recorded run (or --simulated)")
     training = [read_run(run, robot, args.max_gap) for run in args.runs]
