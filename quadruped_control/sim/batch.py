@@ -174,6 +174,7 @@ class BatchSimulation:
         self.time_constant = np.array([t.servo_params.time_constant if t.servo_params else 0.0
                                        for t in trials])
         self.stall_torque = np.array([t.servo_params.stall_torque if t.servo_params else 0.0 for t in trials])
+        self.dead_band = np.array([t.servo_params.dead_band if t.servo_params else 0.0 for t in trials])
         # the joint loads of loaded servos (the tank plant's, else none)
         self._loads = self.plant.loads if isinstance(self.plant, TankPlantBatch) else np.zeros((n, 4, 3))
         self.position = np.zeros((n, 3))
@@ -213,7 +214,7 @@ class BatchSimulation:
         # alternates between two buffers: the step reads one and writes the other.
         q_end = self._q_buffers[0] if self.q is self._q_buffers[1] else self._q_buffers[1]
         servo_batch_step(self.q, targets, self.ideal, self.max_speed, self.time_constant, self.stall_torque,
-                         self._loads, h, q_end, self._mid, self._rate)
+                         self.dead_band, self._loads, h, q_end, self._mid, self._rate)
         self.position, self.velocity, self.rotation, self.omega = self.plant.step(
             self.position, self.velocity, self.rotation, self.omega, self._mid, self._rate, h)
         self.q = q_end

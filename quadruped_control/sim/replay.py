@@ -224,11 +224,11 @@ def replay_servos(record: Record, starts: Sequence[int], steps: int, max_speeds:
     command = np.empty_like(q)
     held = command.reshape(n_sets, n_windows, 4, 3)  # a view
     speed, lag = np.repeat(speeds, n_windows), np.repeat(lags, n_windows)
-    ideal, loads, stall = np.zeros(n, dtype=bool), np.zeros((n, 4, 3)), np.zeros(n)
+    ideal, loads, stall, dead_band = np.zeros(n, dtype=bool), np.zeros((n, 4, 3)), np.zeros(n), np.zeros(n)
     samples = np.empty((n, steps // every, 4, 3))
     for k in range(steps):
         held[:] = record.commands[starts + k]
-        servo_batch_step(q, command, ideal, speed, lag, stall, loads, record.dt, out, mid, rate)
+        servo_batch_step(q, command, ideal, speed, lag, stall, dead_band, loads, record.dt, out, mid, rate)
         q, out = out, q
         if (k + 1) % every == 0:
             samples[:, (k + 1) // every - 1] = q

@@ -12,7 +12,9 @@ first-order position loop whose speed is limited by the servo's no-load speed (9
     dq/dt = clip((q_cmd - q) / T, -w_max, w_max)
 
 integrated exactly over each step for a command held over the step. Its parameters live in the
-``simulation.servo`` section of ``config/simulation.yaml`` and are estimates (see there).
+``simulation.servo`` section of ``config/simulation.yaml`` and are estimates (see there). On the tank
+plant it can also carry a dead band (:func:`dead_band_command`, off by default): the error a hobby
+servo's position loop ignores.
 
 Joint arrays are (12,) in the :data:`~quadruped_common.robot.JOINT_NAMES` order or (4, 3)
 (legs 1..4 x (theta1, theta2, theta3)); models return the shape they are given.
@@ -40,6 +42,7 @@ __all__ = [
     "SERVO_MODELS",
     "ServoModel",
     "ServoParams",
+    "dead_band_command",
     "load_servo_params",
     "loaded_speed",
     "rate_limited_lag_step",
@@ -60,13 +63,15 @@ def _joints(value: ArrayLike, name: str) -> np.ndarray:
 
 @dataclass(frozen=True)
 class ServoParams:
-    """Parameters of :class:`RateLimitedServo`: ``max_speed`` w_max (rad/s), ``time_constant`` T (s) and
+    """Parameters of :class:`RateLimitedServo`: ``max_speed`` w_max (rad/s), ``time_constant`` T (s),
     ``stall_torque`` tau_stall (N m) of the loaded-servo speed :func:`loaded_speed` (0: the speed does not
-    depend on the load)."""
+    depend on the load) and ``dead_band`` d (rad), the half-width of the error the position loop ignores
+    (:func:`dead_band_command`; 0: none)."""
 
     max_speed: float
     time_constant: float
     stall_torque: float = 0.0
+    dead_band: float = 0.0
 
     def __post_init__(self) -> None:
         if not (math.isfinite(self.max_speed) and self.max_speed > 0.0):
@@ -77,6 +82,9 @@ class ServoParams:
         if not (math.isfinite(self.stall_torque) and self.stall_torque >= 0.0):
             raise ParameterError("servo stall_torque must be a finite number >= 0 N m (0: off), got %r"
                                  % (self.stall_torque,))
+        if not (math.isfinite(self.dead_band) and self.dead_band >= 0.0):
+            raise ParameterError("servo dead_band must be a finite half-width >= 0 rad (0: off), got %r"
+                                 % (self.dead_band,))
 
 
 class ServoModel:
@@ -134,7 +142,8 @@ class IdealServo(ServoModel):
 
 
 class RateLimitedServo(ServoModel):
-    """First-order lag with a speed limit, dq/dt = clip((q_cmd - q) / T, -w_max, w_max), exact per step.
+    """First-order lag with a speed limit, dq/dt = clip((q_cmd - q) / T, -w_max, w_max), exact per step,
+    on the error beyond the ``dead_band`` (:func:`dead_band_command`; :class:`ServoParams`).
 
     With the command held over the step and error e = q_cmd - q, the joint moves at w_max while
     |e| > w_max T, then decays as exp(-t / T). T = 0 is a pure rate limiter. With a ``stall_torque``
@@ -157,12 +166,43 @@ class RateLimitedServo(ServoModel):
 
     def _advance(self, q: np.ndarray, command: np.ndarray, dt: float) -> np.ndarray:
         w_max, tau, stall = self.params.max_speed, self.params.time_constant, self.params.stall_torque
+        band = self.params.dead_band
+        targets = [dead_band_command(x, c, band) for x, c in zip(q.ravel().tolist(), command.ravel().tolist())]
         if stall <= 0.0 or self.loads is None:
             return np.array([rate_limited_lag_step(x, c, w_max, tau, dt)
-                             for x, c in zip(q.ravel().tolist(), command.ravel().tolist())]).reshape(q.shape)
+                             for x, c in zip(q.ravel().tolist(), targets)]).reshape(q.shape)
         loads = [value for row in self.loads for value in row]
         return np.array([rate_limited_lag_step(x, c, loaded_speed(w_max, c - x, load, stall), tau, dt)
-                         for x, c, load in zip(q.ravel().tolist(), command.ravel().tolist(), loads)]).reshape(q.shape)
+                         for x, c, load in zip(q.ravel().tolist(), targets, loads)]).reshape(q.shape)
+
+
+@jitable
+def dead_band_command(q: float, command: float, dead_band: float) -> float:
+    """The command a servo with a dead band of half-width ``dead_band`` d (rad) acts on, from the joint at
+    ``q``: the servo's position loop drives only the error beyond the band,
+    dq/dt = clip(dz(q_cmd - q) / T, -w_max, w_max) with dz(e) = sign(e) max(|e| - d, 0).
+
+    Physics: a hobby servo's amplifier ignores a pulse-width error below its dead band (1-10 us of pulse,
+    0.1-0.9 deg at the IB53BHU's ~11 us/deg) so that it does not hunt, and its gear train adds backlash
+    of the same order; the joint stops up to d short of each command and a reversal first crosses 2 d of
+    command before the joint moves back (the play of a backlash). A stroke of a few degrees loses a
+    share of its amplitude that grows as the stroke shrinks near the setpoint: less gain there, none at
+    large errors. (docs/identification.md, "The servos' dead band".)
+
+    Exact for a held command: while |e| > d the lag drives q towards q_cmd - sign(e) d, which it never
+    passes, so over a step dz(e) = (q_cmd - sign(e) d) - q and :func:`rate_limited_lag_step` towards that
+    command is the exact solution; inside the band the joint stays (returns ``q``). d = 0 returns
+    ``command`` unchanged, a NaN command NaN."""
+    if dead_band <= 0.0:
+        return command
+    error = command - q
+    if error > dead_band:
+        return command - dead_band
+    if error < -dead_band:
+        return command + dead_band
+    if error != error:
+        return error
+    return q
 
 
 @jitable
@@ -217,12 +257,12 @@ def rate_limited_lag_step(q: float, command: float, max_speed: float, time_const
 
 
 @kernel
-def servo_batch_step(q, command, ideal, max_speed, time_constant, stall_torque, loads, dt, out, mid, rate):
+def servo_batch_step(q, command, ideal, max_speed, time_constant, stall_torque, dead_band, loads, dt, out, mid, rate):
     """Every trial's servos after ``dt`` s with ``command`` held, into ``out`` (N, 4, 3): the command itself
     for an ``ideal`` trial, else :func:`rate_limited_lag_step` per joint with the trial's ``max_speed``
-    and ``time_constant`` (N,), the speed the :func:`loaded_speed` against the joint ``loads`` (N, 4, 3)
-    where the trial's ``stall_torque`` (N,) is positive: the per-trial functions in a compiled loop
-    (:mod:`quadruped_common.jit`).
+    and ``time_constant`` (N,) towards the :func:`dead_band_command` of its ``dead_band`` (N,), the speed
+    the :func:`loaded_speed` against the joint ``loads`` (N, 4, 3) where the trial's ``stall_torque`` (N,)
+    is positive: the per-trial functions in a compiled loop (:mod:`quadruped_common.jit`).
     Also the joints as the plant holds them over the step
     (:class:`~quadruped_control.sim.simulation.PlantSimulator`), into ``mid`` (q + out) / 2 and ``rate``
     (out - q) / dt, in the same loop (``out``, ``mid``, ``rate`` must not alias ``q``)."""
@@ -233,7 +273,7 @@ def servo_batch_step(q, command, ideal, max_speed, time_constant, stall_torque, 
                 if ideal[i]:
                     end = command[i, leg, joint]
                 else:
-                    target = command[i, leg, joint]
+                    target = dead_band_command(start, command[i, leg, joint], dead_band[i])
                     speed = loaded_speed(max_speed[i], target - start, loads[i, leg, joint], stall_torque[i])
                     end = rate_limited_lag_step(start, target, speed, time_constant[i], dt)
                 out[i, leg, joint] = end
@@ -243,11 +283,12 @@ def servo_batch_step(q, command, ideal, max_speed, time_constant, stall_torque, 
 
 def tank_servo_params(params: ServoParams, tank: Any) -> ServoParams:
     """The servos on the tank plant: ``params`` with the tank's ``servo_speed_scale`` and
-    ``servo_lag_scale`` applied and its loaded-servo ``servo_stall_torque``
+    ``servo_lag_scale`` applied, its loaded-servo ``servo_stall_torque`` and its ``servo_dead_band``
     (:class:`~quadruped_control.sim.plants.tank.TankParams`, the ``servos`` section of tank.yaml). The one
     place both the offline trials and the simulated robot (sim_node) take them from."""
     return replace(params, max_speed=params.max_speed * tank.servo_speed_scale,
-                   time_constant=params.time_constant * tank.servo_lag_scale, stall_torque=tank.servo_stall_torque)
+                   time_constant=params.time_constant * tank.servo_lag_scale, stall_torque=tank.servo_stall_torque,
+                   dead_band=tank.servo_dead_band)
 
 
 def servo_params_from_dict(tree: Mapping[str, Any], robot_yaml: Optional[str] = None) -> ServoParams:

@@ -96,6 +96,7 @@ PARAMETERS: Tuple[Tuple[str, float, float], ...] = (
     ("block_drag", 0.2, 20.0),             # N s^2/m^2: 1/2 rho C_D A of the block's draft, plus its lines
     ("block_tie_stiffness", 0.0, 20.0),    # N/m: a slack tie (0) to ten times the rope's pendulum T / L
     ("paw_buoyancy_offset", -0.05, 0.13),  # N per paw beyond robot.yaml's -0.029: a 40 g paw to a floating one
+    ("servo_dead_band", 0.0, 0.02),        # rad, half-width: none to a 10 us amplifier band plus 0.7 deg backlash
 )
 
 #: Each parameter's (low, high): :data:`PARAMETERS` by name.
@@ -152,6 +153,7 @@ _PLACES: Dict[str, _Place] = {
     "block_drag": _Place("block_drag", (), "suspension", "block_drag"),
     "block_tie_stiffness": _Place("block_tie_stiffness", (), "suspension", "block_tie_stiffness"),
     "paw_buoyancy_offset": _Place("paw_buoyancy_offset", (), "hydrostatics", "paw_buoyancy_offset"),
+    "servo_dead_band": _Place("servo_dead_band", (), "servos", "dead_band"),
 }
 
 

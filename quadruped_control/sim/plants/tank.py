@@ -94,6 +94,12 @@ Candidate effects of the identification against Table 1, each zero (today's mode
   vertical): a floating paw opposes the tilt strokes, a sinking one helps them. The plant's paws only;
   the robot's controller feeds forward robot.yaml's estimate, as the real controller does. The rope's
   static load follows (net weight minus 4 B_net). 0 (the default) is today's model exactly.
+- ``servo dead band`` (``servo_dead_band``, :func:`~quadruped_control.sim.servo_model.dead_band_command`):
+  the servos' position loop ignores an error below a half-width d (rad): a hobby servo's amplifier dead
+  band (1-10 us of pulse width, about 0.1-0.9 deg on the IB53BHU) plus its gear train's backlash. A joint
+  stops up to d short of its command and reverses only after the command has crossed 2 d, so small
+  strokes near the setpoint lose more of their amplitude than large ones far from it. In the servos, not
+  in this plant's dynamics; 0 (the default) is today's model exactly.
 
 Each effect has a switch (:class:`TankParams`); with all of them off the equations reduce to the paper's
 eq. (trans), (rot) (tested). Parameters: ``config/tank.yaml``.
@@ -133,6 +139,11 @@ _MAX_STEP = 0.01
 _STILL: Vec3 = (0.0, 0.0, 0.0)
 
 
+#: The widest servo dead band tank.yaml accepts (rad, half-width; 0.1 rad = 5.7 deg): an order of magnitude
+#: past a worn hobby servo's, so that a unit slip (degrees, microseconds) is refused rather than simulated
+#: as servos that never move.
+MAX_SERVO_DEAD_BAND = 0.1
+
 @dataclass(frozen=True)
 class TankParams:
     """``config/tank.yaml``: effect switches and parameters (see the file for units and reasoning)."""
@@ -163,6 +174,9 @@ class TankParams:
     #: loaded servos: stall torque tau_stall (N m) of the servos' torque-speed line; 0: the speed does not
     #: depend on the load (:func:`~quadruped_control.sim.servo_model.loaded_speed`)
     servo_stall_torque: float = 0.0
+    #: servo dead band: the half-width d (rad) of the error the servos' position loop ignores; 0: none
+    #: (:func:`~quadruped_control.sim.servo_model.dead_band_command`)
+    servo_dead_band: float = 0.0
     #: rotational damping of appendages per body axis: linear (N m s/rad), quadratic (N m s^2/rad^2)
     appendage_damping_linear: Vec3 = (0.0, 0.0, 0.0)
     appendage_damping_quadratic: Vec3 = (0.0, 0.0, 0.0)
@@ -198,6 +212,9 @@ class TankParams:
         if not (math.isfinite(self.servo_stall_torque) and self.servo_stall_torque >= 0.0):
             raise ParameterError("tank servo_stall_torque must be finite and >= 0 (0: off), got %r"
                                  % (self.servo_stall_torque,))
+        if not (math.isfinite(self.servo_dead_band) and 0.0 <= self.servo_dead_band <= MAX_SERVO_DEAD_BAND):
+            raise ParameterError("tank servo_dead_band must be a half-width in [0, %g] rad (0: off), got %r"
+                                 % (MAX_SERVO_DEAD_BAND, self.servo_dead_band))
         if not (math.isfinite(self.servo_lag_scale) and self.servo_lag_scale > 0.0):
             raise ParameterError("tank servo_lag_scale must be finite and > 0, got %r" % (self.servo_lag_scale,))
         if not (math.isfinite(self.servo_speed_scale) and 0.0 < self.servo_speed_scale <= 1.0):
@@ -270,7 +287,8 @@ def tank_params_from_dict(data: Mapping[str, Any]) -> TankParams:
                        required=("net_weight", "center_of_buoyancy"))
     added = check_keys(data["added_mass"], "added_mass", ("scale", "paw_scale"), required=("scale", "paw_scale"))
     paw_drag = check_keys(_optional_section(data, "paw_drag"), "paw_drag", ("scale",))
-    servos = check_keys(_optional_section(data, "servos"), "servos", ("speed_scale", "lag_scale", "stall_torque"))
+    servos = check_keys(_optional_section(data, "servos"), "servos", ("speed_scale", "lag_scale", "stall_torque",
+                                                                               "dead_band"))
     appendage = check_keys(_optional_section(data, "appendage_damping"), "appendage_damping",
                            ("linear", "quadratic", "wake_fraction", "wake_time_constant"))
     wake = check_keys(_optional_section(data, "paw_wake"), "paw_wake", ("fraction", "time_constant", "body_share"))
@@ -301,6 +319,7 @@ def tank_params_from_dict(data: Mapping[str, Any]) -> TankParams:
         servo_speed_scale=number(servos.get("speed_scale", 1.0), "servos.speed_scale", 0.0, 10.0, low_open=True),
         servo_stall_torque=number(servos.get("stall_torque", 0.0), "servos.stall_torque", 0.0, 100.0),
         servo_lag_scale=number(servos.get("lag_scale", 1.0), "servos.lag_scale", 0.0, 100.0, low_open=True),
+        servo_dead_band=number(servos.get("dead_band", 0.0), "servos.dead_band", 0.0, MAX_SERVO_DEAD_BAND),
         appendage_damping_linear=axes(appendage, "linear", 100.0),
         appendage_damping_quadratic=axes(appendage, "quadratic", 100.0),
         rope_torsion_stiffness=number(rope.get("torsion_stiffness", 0.0), "suspension.torsion_stiffness", 0.0, 1e4),

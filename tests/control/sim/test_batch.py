@@ -168,7 +168,7 @@ def test_tank_batch_agrees_with_the_per_trial_tank_plant_bit_for_bit_over_10_s(r
                               paw_wake_fraction=0.5, paw_wake_time_constant=0.2, paw_wake_body_share=0.3,
                               servo_stall_torque=3.9, paw_buoyancy_offset=0.06),
              base.with_values(added_mass_scale=3.0, paw_added_mass_scale=2.0, net_weight=2.0, servo_stall_torque=1.5,
-                              block_mass=1.0, block_drag=10.0, block_tie_stiffness=5.0),
+                              block_mass=1.0, block_drag=10.0, block_tie_stiffness=5.0, servo_dead_band=0.01),
              base.with_values(suspension=False, hydrostatics=False)]
     trials, sims = [], []
     for spec, tank in zip(specs, tanks):
@@ -177,8 +177,9 @@ def test_tank_batch_agrees_with_the_per_trial_tank_plant_bit_for_bit_over_10_s(r
         model = TankModel(setup.robot, tank)
         initial = rpy_to_rot(*np.radians(spec.initial_rpy_deg))
         setpoint = rpy_to_rot(*np.radians(spec.setpoint_rpy_deg))
-        # as trial_setup passes a tank's loaded servos to the servo model
-        servo_params = dataclasses.replace(setup.servo_params, stall_torque=tank.servo_stall_torque)
+        # as trial_setup passes a tank's loaded servos and dead band to the servo model
+        servo_params = dataclasses.replace(setup.servo_params, stall_torque=tank.servo_stall_torque,
+                                           dead_band=tank.servo_dead_band)
         trials.append(BatchTrial(config=setup.config, setpoint=setpoint, initial=initial,
                                  servo_model=spec.servo_model, servo_params=servo_params, tank=tank))
         sims.append(ClosedLoopSimulation(setup.robot, setup.config,
@@ -205,8 +206,9 @@ def test_compiled_loops_compute_what_their_plain_python_computes(robot, plant, p
 
     config = load_controller_config(None, "experiment")
     # the tank with its loaded servos on (the plant computes the joint loads, the servo step reads them)
-    tank = load_tank_params().with_values(servo_stall_torque=2.0) if plant == "tank" else None
-    servo_params = dataclasses.replace(load_servo_params(), stall_torque=2.0 if plant == "tank" else 0.0)
+    tank = load_tank_params().with_values(servo_stall_torque=2.0, servo_dead_band=0.005) if plant == "tank" else None
+    servo_params = dataclasses.replace(load_servo_params(), stall_torque=2.0 if plant == "tank" else 0.0,
+                                       dead_band=0.005 if plant == "tank" else 0.0)
     trials = [BatchTrial(config=config, setpoint=rpy_to_rot(*np.radians(rpy)), tank=tank, servo_model=servo,
                          servo_params=servo_params)
               for rpy, servo in (((45.0, 0.0, 0.0), "ideal"), ((0.0, 30.0, 20.0), "rate-limited"),

@@ -14,6 +14,7 @@ from quadruped_control.sim.servo_model import (
     IdealServo,
     RateLimitedServo,
     ServoParams,
+    dead_band_command,
     load_servo_params,
     make_servo_model,
     rate_limited_lag_step,
@@ -144,6 +145,18 @@ def test_update_trusted_matches_update() -> None:
         np.testing.assert_array_equal(checked.update(command, 0.01), trusted.update_trusted(command, 0.01))
 
 
+def _rk4(rate, x: float, dt: float, n: int = 20000) -> float:
+    """x after ``dt`` of dx/dt = rate(x) in ``n`` RK4 sub-steps: the reference for the exact steps."""
+    h = dt / n
+    for _ in range(n):
+        k1 = rate(x)
+        k2 = rate(x + 0.5 * h * k1)
+        k3 = rate(x + 0.5 * h * k2)
+        k4 = rate(x + h * k3)
+        x += h / 6.0 * (k1 + 2.0 * k2 + 2.0 * k3 + k4)
+    return x
+
+
 @settings(max_examples=30, deadline=None)
 @given(st.floats(-2.0, 2.0), st.floats(-2.0, 2.0), st.floats(1.0, 20.0), st.sampled_from([0.0, 0.005, 0.03, 0.2]),
        st.sampled_from([0.001, 0.01, 0.05]))
@@ -158,14 +171,7 @@ def test_exact_step_agrees_with_a_fine_integration_of_the_servo_ode(q, command, 
     def rate(x: float) -> float:
         return max(-max_speed, min(max_speed, (command - x) / tau))
 
-    x, n = q, 20000
-    h = dt / n
-    for _ in range(n):
-        k1 = rate(x)
-        k2 = rate(x + 0.5 * h * k1)
-        k3 = rate(x + 0.5 * h * k2)
-        k4 = rate(x + h * k3)
-        x += h / 6.0 * (k1 + 2.0 * k2 + 2.0 * k3 + k4)
+    x = _rk4(rate, q, dt)
     assert exact == pytest.approx(x, abs=1e-7)  # RK4 meets the kink at |e| = w_max T once
 
 
@@ -185,18 +191,23 @@ def test_the_batch_servo_step_is_the_exact_float_step_per_joint_compiled_or_not(
     lag = rng.choice([0.0, 1e-13, 0.01, 0.03], 50)  # pure rate limiter included
     ideal = rng.random(50) < 0.2
     stall = np.where(rng.random(50) < 0.5, 0.0, rng.uniform(0.5, 4.0, 50))  # loaded servos on half the trials
+    band = np.where(rng.random(50) < 0.5, 0.0, rng.uniform(0.0, 0.3, 50))   # dead bands on half, some errors inside
     loads = rng.normal(0.0, 1.0, (50, 4, 3))
 
+    def target_of(i, leg, j):
+        return dead_band_command(q[i, leg, j], command[i, leg, j], band[i])
+
     def speed_of(i, leg, j):
-        return servo_model.loaded_speed(speed[i], command[i, leg, j] - q[i, leg, j], loads[i, leg, j], stall[i])
+        return servo_model.loaded_speed(speed[i], target_of(i, leg, j) - q[i, leg, j], loads[i, leg, j], stall[i])
 
     expected = np.array([[[command[i, leg, j] if ideal[i] else
-                           servo_model.rate_limited_lag_step(q[i, leg, j], command[i, leg, j], speed_of(i, leg, j),
+                           servo_model.rate_limited_lag_step(q[i, leg, j], target_of(i, leg, j), speed_of(i, leg, j),
                                                              lag[i], 0.01)
                            for j in range(3)] for leg in range(4)] for i in range(50)])
+    assert (np.abs(command - q) < band[:, None, None]).any()  # some joints held by their dead band
     for step in (servo_model.servo_batch_step, servo_model.servo_batch_step.py_func):
         out, mid, rate = np.empty_like(q), np.empty_like(q), np.empty_like(q)
-        step(q, command, ideal, speed, lag, stall, loads, 0.01, out, mid, rate)
+        step(q, command, ideal, speed, lag, stall, band, loads, 0.01, out, mid, rate)
         np.testing.assert_allclose(out, expected, rtol=0, atol=1e-15)
         # the held joints of PlantSimulator, bit for bit as numpy computes them
         assert np.array_equal(mid, 0.5 * (q + out), equal_nan=True)
@@ -222,3 +233,60 @@ def test_a_loaded_servo_follows_its_torque_speed_line_against_the_load_and_only_
     np.testing.assert_allclose(q, [[0.05, 0.1, 0.1]] * 4)
     servo.reset(np.zeros((4, 3)))
     assert servo.loads is None
+
+
+@settings(max_examples=60, deadline=None)
+@given(st.floats(-2.0, 2.0), st.floats(-2.0, 2.0))
+def test_no_dead_band_is_the_command_itself_bit_for_bit(q, command) -> None:
+    assert dead_band_command(q, command, 0.0) == command
+
+
+def test_a_dead_band_holds_errors_inside_it_and_shortens_the_rest_by_its_width() -> None:
+    assert dead_band_command(0.1, 0.105, 0.01) == 0.1           # inside: the joint stays
+    assert dead_band_command(0.1, 0.095, 0.01) == 0.1
+    assert dead_band_command(0.0, 0.5, 0.01) == pytest.approx(0.49)
+    assert dead_band_command(0.0, -0.5, 0.01) == pytest.approx(-0.49)
+    assert math.isnan(dead_band_command(0.0, math.nan, 0.01))
+
+
+@settings(max_examples=30, deadline=None)
+@given(st.floats(-1.0, 1.0), st.floats(-1.0, 1.0), st.floats(1.0, 20.0), st.sampled_from([0.005, 0.03, 0.2]),
+       st.sampled_from([0.001, 0.01, 0.05]), st.sampled_from([0.002, 0.01, 0.05]))
+def test_the_dead_band_step_agrees_with_a_fine_integration_of_its_ode(q, command, max_speed, tau, dt, band) -> None:
+    """rate_limited_lag_step towards dead_band_command against RK4 sub-steps of
+    dq/dt = clip(dz(q_cmd - q) / T, -w_max, w_max), dz(e) = sign(e) max(|e| - d, 0)."""
+    exact = rate_limited_lag_step(q, dead_band_command(q, command, band), max_speed, tau, dt)
+
+    def rate(x: float) -> float:
+        error = command - x
+        beyond = math.copysign(max(abs(error) - band, 0.0), error)
+        return max(-max_speed, min(max_speed, beyond / tau))
+
+    x = _rk4(rate, q, dt)
+    assert exact == pytest.approx(x, abs=1e-7)
+
+
+def test_a_servo_with_a_dead_band_stops_short_and_plays_like_backlash() -> None:
+    """A step settles d short of the command; a command reversed by less than 2 d does not move the joint;
+    a sine of amplitude A (slow next to the servo) moves the joint by A - d either side, a quarter of
+    whose amplitude a stroke of A = 4 d loses."""
+    band = 0.01
+    servo = RateLimitedServo(ServoParams(max_speed=W_MAX, time_constant=0.03, dead_band=band))
+    servo.reset(np.zeros((4, 3)))
+    for _ in range(200):
+        q = servo.update(np.full((4, 3), 0.2), 0.01)
+    np.testing.assert_allclose(q, 0.2 - band, atol=1e-9)
+    for _ in range(50):
+        held = servo.update(np.full((4, 3), 0.2 - 1.9 * band), 0.01)   # reversed by 1.9 d: still inside
+    np.testing.assert_array_equal(held, q)
+    servo.reset(np.zeros((4, 3)))
+    amplitude, t = 4.0 * band, np.arange(0.0, 8.0, 0.01)
+    joint = np.array([servo.update(np.full((4, 3), amplitude * math.sin(2.0 * math.pi * 0.25 * k)), 0.01)[0, 0]
+                      for k in t])
+    late = joint[t > 4.0]
+    assert late.max() == pytest.approx(amplitude - band, abs=2e-3) and late.min() == pytest.approx(-(amplitude - band),
+                                                                                                  abs=2e-3)
+    with pytest.raises(ParameterError, match="dead_band"):
+        ServoParams(max_speed=W_MAX, time_constant=0.03, dead_band=-0.01)
+    with pytest.raises(ParameterError, match="dead_band"):
+        ServoParams(max_speed=W_MAX, time_constant=0.03, dead_band=math.nan)

@@ -329,7 +329,8 @@ def test_controller_off_holds_the_nominal_pose() -> None:
 def test_empty_optional_tank_section_means_defaults_but_a_wrong_type_is_refused(tmp_path) -> None:
     text = open(config_path("tank.yaml")).read()
     assert "  speed_scale: 1.0" in text and "  stall_torque: 0.0 " in text
-    text = "\n".join(line for line in text.splitlines() if not line.startswith(("  stall_torque:", "  lag_scale:")))
+    text = "\n".join(line for line in text.splitlines()
+                     if not line.startswith(("  stall_torque:", "  lag_scale:", "  dead_band:")))
     path = tmp_path / "tank.yaml"
     path.write_text(text.replace("  speed_scale: 1.0", "", 1))          # 'servos:' left empty (null)
     assert load_tank_params(str(path)).servo_speed_scale == 1.0
@@ -580,7 +581,8 @@ def test_loaded_servos_slow_the_strokes_and_no_stall_torque_is_todays_model() ->
 
 def test_the_tank_servos_lag_and_speed_scales_reach_the_servo_model() -> None:
     """servos.speed_scale and servos.lag_scale of the tank scale simulation.yaml's servo (trial_setup, the
-    one place both engines take their servo parameters from); stall_torque is passed on as it is."""
+    one place both engines take their servo parameters from); stall_torque and dead_band are passed on as
+    they are."""
     import argparse
     from quadruped_control.studies.paper_experiments import experiment_specs
     from quadruped_control.studies.trial import trial_setup
@@ -588,9 +590,11 @@ def test_the_tank_servos_lag_and_speed_scales_reach_the_servo_model() -> None:
     spec = experiment_specs(args, "tank", "experiment", "rate-limited", 10.0, keep_trace=False)[0][0]
     plain = trial_setup(spec).servo_params
     scaled = trial_setup(dataclasses.replace(spec, tank_overrides=(("servo_lag_scale", 4.0), ("servo_speed_scale", 0.5),
-                                                                   ("servo_stall_torque", 2.0)))).servo_params
+                                                                   ("servo_stall_torque", 2.0),
+                                                                   ("servo_dead_band", 0.01)))).servo_params
     assert scaled.time_constant == 4.0 * plain.time_constant and scaled.max_speed == 0.5 * plain.max_speed
     assert scaled.stall_torque == 2.0 and plain.stall_torque == 0.0
+    assert scaled.dead_band == 0.01 and plain.dead_band == 0.0
 
 
 def test_body_wake_relaxes_exactly_in_world_axes_and_is_seen_in_body_axes() -> None:
@@ -729,3 +733,37 @@ def test_block_parameters_are_validated() -> None:
         with pytest.raises(ParameterError, match="block"):
             TANK.with_values(**values)
     assert TANK.with_values(block_mass=0.06).block_mass == 0.06
+
+
+def test_a_servo_dead_band_is_read_from_tank_yaml_and_a_unit_slip_is_refused(tmp_path) -> None:
+    """servos.dead_band (rad) reaches TankParams; 0 (the default) is today's trajectory bit for bit; a value
+    in degrees or microseconds (past 0.1 rad) or negative is refused with the key's name; a dead band
+    changes a tank trial."""
+    from quadruped_control.sim.servo_model import RateLimitedServo, load_servo_params, tank_servo_params
+    text = open(config_path("tank.yaml")).read()
+    assert "  dead_band: 0.0 " in text and load_tank_params().servo_dead_band == 0.0
+    path = tmp_path / "tank.yaml"
+    path.write_text(text.replace("  dead_band: 0.0 ", "  dead_band: 0.008 ", 1))
+    assert load_tank_params(str(path)).servo_dead_band == 0.008
+    for wrong in ("0.5", "-0.001", "8"):
+        path.write_text(text.replace("  dead_band: 0.0 ", "  dead_band: %s " % wrong, 1))
+        with pytest.raises(ParameterError, match="servos.dead_band"):
+            load_tank_params(str(path))
+    with pytest.raises(ParameterError, match="servo_dead_band"):
+        load_tank_params().with_values(servo_dead_band=0.2)
+    config = load_controller_config(None, "experiment")
+
+    def run(band):
+        tank = load_tank_params().with_values(servo_dead_band=band)
+        servo = RateLimitedServo(tank_servo_params(load_servo_params(), tank))
+        sim = ClosedLoopSimulation(ROBOT, config, servo, initial_R=np.eye(3), setpoint_R=rpy_to_rot(0.5, 0.0, 0.0),
+                                   model=TankModel(ROBOT, tank))
+        return sim.run(4.0)
+
+    plain, banded = run(0.0), run(0.01)
+    before = ClosedLoopSimulation(ROBOT, config, RateLimitedServo(load_servo_params()), initial_R=np.eye(3),
+                                  setpoint_R=rpy_to_rot(0.5, 0.0, 0.0),
+                                  model=TankModel(ROBOT, load_tank_params())).run(4.0)
+    np.testing.assert_array_equal(plain.rpy, before.rpy)
+    lag = np.abs(banded.joint_targets - banded.joint_positions)
+    assert lag.max() > 0.01 and not np.array_equal(plain.rpy, banded.rpy)
