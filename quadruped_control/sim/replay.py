@@ -204,18 +204,22 @@ def still_errors(record: Record, starts: Sequence[int], steps: int, every: int =
 
 
 def replay_servos(record: Record, starts: Sequence[int], steps: int, max_speeds: Sequence[float],
-                  time_constants: Sequence[float], every: int = 10) -> np.ndarray:
+                  time_constants: Sequence[float], every: int = 10,
+                  dead_bands: Optional[Sequence[float]] = None) -> np.ndarray:
     """The servos' half of a record: from the measured joints at each window start, the rate-limited lag
     (:func:`~quadruped_control.sim.servo_model.servo_batch_step`, the closed loop's servo step) driven by the
-    recorded commands, each held over its step, for each (max speed, time constant) pair (rad/s, s).
-    Returns the joint angles every ``every`` steps, (S, W, M, 4, 3), as :func:`replay`'s samples."""
+    recorded commands, each held over its step, for each (max speed, time constant, dead band) set (rad/s,
+    s, rad; ``dead_bands`` None: none). Returns the joint angles every ``every`` steps, (S, W, M, 4, 3), as
+    :func:`replay`'s samples."""
     starts = np.asarray(starts, dtype=int)
     speeds, lags = np.asarray(max_speeds, dtype=float), np.asarray(time_constants, dtype=float)
+    bands = np.zeros(speeds.size) if dead_bands is None else np.asarray(dead_bands, dtype=float)
     n_sets, n_windows = speeds.size, starts.size
     if record.commands is None:
         raise ValueError("the record has no commands")
-    if n_sets < 1 or n_windows < 1 or lags.size != n_sets:
-        raise ValueError("replay_servos needs a time constant per speed, one or more, and a window")
+    if n_sets < 1 or n_windows < 1 or lags.size != n_sets or bands.size != n_sets:
+        raise ValueError("replay_servos needs a time constant (and a dead band) per speed, one or more, and a "
+                         "window")
     if every < 1 or steps < every or starts.min() < 0 or starts.max() + steps >= record.t.size:
         raise ValueError("replay_servos needs steps >= every >= 1 within the record")
     n = n_sets * n_windows
@@ -223,8 +227,8 @@ def replay_servos(record: Record, starts: Sequence[int], steps: int, max_speeds:
     out, mid, rate = np.empty_like(q), np.empty_like(q), np.empty_like(q)
     command = np.empty_like(q)
     held = command.reshape(n_sets, n_windows, 4, 3)  # a view
-    speed, lag = np.repeat(speeds, n_windows), np.repeat(lags, n_windows)
-    ideal, loads, stall, dead_band = np.zeros(n, dtype=bool), np.zeros((n, 4, 3)), np.zeros(n), np.zeros(n)
+    speed, lag, dead_band = np.repeat(speeds, n_windows), np.repeat(lags, n_windows), np.repeat(bands, n_windows)
+    ideal, loads, stall = np.zeros(n, dtype=bool), np.zeros((n, 4, 3)), np.zeros(n)
     samples = np.empty((n, steps // every, 4, 3))
     for k in range(steps):
         held[:] = record.commands[starts + k]

@@ -39,10 +39,10 @@ nothing.
 
 The servos' half: where the runs recorded the controller's commands (``/servo_command``), the robot's
 servo model (the rate-limited lag of config/simulation.yaml and robot.yaml, scaled by ``servo_speed_scale``
-and ``servo_lag_scale``) is driven by the recorded commands from the measured joints at each window start
-and compared with the measured joints (:func:`quadruped_control.sim.replay.replay_servos`); the two
-scales are fitted on a grid over their bounds (:func:`fit_servos`), beside the paper's ideal servo and the
-base's scales. The two halves meet only in the measured joints: the plant's fit does not depend on the
+and ``servo_lag_scale``, with the dead band ``servo_dead_band``) is driven by the recorded commands from the
+measured joints at each window start and compared with the measured joints
+(:func:`quadruped_control.sim.replay.replay_servos`); the three are fitted on a grid over their bounds
+(:func:`fit_servos`), beside the paper's ideal servo and the base's values. The two halves meet only in the measured joints: the plant's fit does not depend on the
 servo model, nor the servos' on the plant.
 
 ``--simulated TRUTH_YAML`` replaces the bags with runs of the simulated robot on the tank plant of
@@ -88,7 +88,7 @@ __all__ = ["PLANT_PARAMETERS", "SERVO_FITTED", "SERVO_GRID", "SERVO_PARAMETERS",
 
 #: The identification's parameters of the servo model: the replay drives the plant with the measured
 #: joints, so these do not enter it.
-SERVO_PARAMETERS = ("servo_speed_scale", "servo_lag_scale", "servo_load_slope")
+SERVO_PARAMETERS = ("servo_speed_scale", "servo_lag_scale", "servo_load_slope", "servo_dead_band")
 #: Every parameter of :data:`~quadruped_control.studies.identify.PARAMETERS` that the replay can fit.
 PLANT_PARAMETERS = tuple(name for name, _, _ in PARAMETERS if name not in SERVO_PARAMETERS)
 
@@ -327,56 +327,61 @@ class ServoObjective:
     def window_count(self) -> int:
         return int(sum(starts.size for _, starts in self.windows))
 
-    def _rms_deg(self, speeds: np.ndarray, lags: np.ndarray) -> np.ndarray:
-        squares = [joint_errors(replay_servos(record, starts, self.steps, speeds, lags, self.every), record, starts,
-                                self.every).reshape(speeds.size, -1) ** 2
+    def _rms_deg(self, speeds: np.ndarray, lags: np.ndarray, bands: np.ndarray) -> np.ndarray:
+        squares = [joint_errors(replay_servos(record, starts, self.steps, speeds, lags, self.every, bands), record,
+                                starts, self.every).reshape(speeds.size, -1) ** 2
                    for record, starts in self.windows if starts.size]
         return np.degrees(np.sqrt(np.concatenate(squares, axis=1).mean(axis=1)))
 
-    def __call__(self, speed_scales: Sequence[float], lag_scales: Sequence[float]) -> np.ndarray:
-        """(S,) objective of each (servo_speed_scale, servo_lag_scale) pair."""
+    def __call__(self, speed_scales: Sequence[float], lag_scales: Sequence[float],
+                 dead_bands: Sequence[float]) -> np.ndarray:
+        """(S,) objective of each (servo_speed_scale, servo_lag_scale, servo_dead_band) set."""
         return self._rms_deg(self.servo.max_speed * np.asarray(speed_scales, dtype=float),
-                             self.servo.time_constant * np.asarray(lag_scales, dtype=float))
+                             self.servo.time_constant * np.asarray(lag_scales, dtype=float),
+                             np.asarray(dead_bands, dtype=float))
 
     def ideal_deg(self) -> float:
         """The paper's ideal servo: each joint at its command at once."""
-        return float(self._rms_deg(np.array([math.inf]), np.array([0.0]))[0])
+        return float(self._rms_deg(np.array([math.inf]), np.array([0.0]), np.array([0.0]))[0])
 
 
-#: The servo fit's first grid (:func:`fit_servos`): servo_speed_scale in steps of 0.05, servo_lag_scale in
-#: steps of 0.1 (3 ms) over their bounds; the second grid has as many points, one step either side of the
-#: first's best.
-SERVO_GRID = (11, 71)
+#: The servo fit's first grid (:func:`fit_servos`), in the order of :data:`SERVO_FITTED`: servo_speed_scale
+#: in steps of 0.05, servo_lag_scale in steps of 0.1 (3 ms), servo_dead_band in steps of 0.002 rad (0.11 deg)
+#: over their bounds; the second grid has as many points per parameter as the first's speeds, one step
+#: either side of the first's best.
+SERVO_GRID = (11, 71, 11)
 
 
-def fit_servos(objective: ServoObjective) -> Dict[str, float]:
-    """servo_speed_scale and servo_lag_scale (bounds of identify.PARAMETERS) that minimise ``objective``: the
-    grid :data:`SERVO_GRID` over the bounds, then a finer one around its best point (two
-    parameters: the grid shows the whole landscape, and costs a few seconds). Also each parameter's range on
-    the first grid where its profile (the best over the other parameter) lies within 1 % of the best
-    (``within_1_percent``): a wide range says the runs do not pin that parameter down (a rate limit that
-    never binds, a lag the strokes never reveal)."""
-    (s_low, s_high), (l_low, l_high) = BOUNDS["servo_speed_scale"], BOUNDS["servo_lag_scale"]
-    speeds, lags = np.linspace(s_low, s_high, SERVO_GRID[0]), np.linspace(l_low, l_high, SERVO_GRID[1])
-    best = (math.inf, 0.0, 0.0)
+def fit_servos(objective: ServoObjective) -> Dict[str, Any]:
+    """The :data:`SERVO_FITTED` values (bounds of identify.PARAMETERS) that minimise ``objective``: the grid
+    :data:`SERVO_GRID` over the bounds, then a finer one around its best point (three parameters: the grid
+    shows the whole landscape, and costs seconds; it is evaluated a dead band at a time, which bounds the
+    replay's memory). Also each parameter's range on the first grid where its profile (the best over the
+    others) lies within 1 % of the best (``within_1_percent``): a wide range says the runs do not pin that
+    parameter down (a rate limit that never binds, a lag the strokes never reveal)."""
+    bounds = [BOUNDS[name] for name in SERVO_FITTED]
+    axes = [np.linspace(low, high, points) for (low, high), points in zip(bounds, SERVO_GRID)]
+    best: Tuple[float, ...] = (math.inf, 0.0, 0.0, 0.0)
     near: Dict[str, List[float]] = {}
     for round_ in range(2):
-        S, L = np.meshgrid(speeds, lags, indexing="ij")
-        values = objective(S.ravel(), L.ravel())
-        k = int(np.argmin(values))
-        if round_ == 0:  # how flat the landscape is: each parameter's profile (best over the other) on the grid
-            table = values.reshape(speeds.size, lags.size)
-            limit = 1.01 * values[k]
-            close_speeds = speeds[table.min(axis=1) <= limit]
-            close_lags = lags[table.min(axis=0) <= limit]
-            near = {"servo_speed_scale": [float(close_speeds.min()), float(close_speeds.max())],
-                    "servo_lag_scale": [float(close_lags.min()), float(close_lags.max())]}
-        if values[k] < best[0]:
-            best = (float(values[k]), float(S.ravel()[k]), float(L.ravel()[k]))
-        ds, dl = speeds[1] - speeds[0], lags[1] - lags[0]
-        speeds = np.linspace(max(s_low, best[1] - ds), min(s_high, best[1] + ds), SERVO_GRID[0])
-        lags = np.linspace(max(l_low, best[2] - dl), min(l_high, best[2] + dl), SERVO_GRID[0])
-    return {"servo_speed_scale": best[1], "servo_lag_scale": best[2], "objective": best[0], "within_1_percent": near}
+        S, L = np.meshgrid(axes[0], axes[1], indexing="ij")
+        table = np.array([objective(S.ravel(), L.ravel(), np.full(S.size, band)).reshape(S.shape)
+                          for band in axes[2]])  # (bands, speeds, lags)
+        b, i, j = np.unravel_index(int(np.argmin(table)), table.shape)
+        if round_ == 0:  # how flat the landscape is: each parameter's profile (best over the others) on the grid
+            limit = 1.01 * table[b, i, j]
+            profiles = (table.min(axis=(0, 2)), table.min(axis=(0, 1)), table.min(axis=(1, 2)))
+            for name, axis, profile in zip(SERVO_FITTED, axes, profiles):
+                close = axis[profile <= limit]
+                near[name] = [float(close.min()), float(close.max())]
+        if table[b, i, j] < best[0]:
+            best = (float(table[b, i, j]), float(axes[0][i]), float(axes[1][j]), float(axes[2][b]))
+        steps = [axis[1] - axis[0] for axis in axes]
+        axes = [np.linspace(max(low, centre - step), min(high, centre + step), SERVO_GRID[0])
+                for (low, high), centre, step in zip(bounds, best[1:], steps)]
+    fitted: Dict[str, Any] = dict(zip(SERVO_FITTED, best[1:]))
+    fitted.update(objective=best[0], within_1_percent=near)
+    return fitted
 
 
 # --------------------------------------------------------------------------------------------------
@@ -420,7 +425,7 @@ def _records(args: argparse.Namespace, robot: RobotParams) -> Tuple[List[Record]
 
 #: The servo parameters the servos' half fits (:func:`fit_servos`); the load (servo_load_slope) needs the
 #: plant's joint loads and is not fitted.
-SERVO_FITTED = ("servo_speed_scale", "servo_lag_scale")
+SERVO_FITTED = ("servo_speed_scale", "servo_lag_scale", "servo_dead_band")
 
 
 def _servo_study(servo: ServoParams, nominal: Dict[str, float], truth: Optional[Dict[str, float]],
@@ -442,7 +447,7 @@ def _servo_study(servo: ServoParams, nominal: Dict[str, float], truth: Optional[
         summary: Dict[str, Any] = {"windows": side.window_count}
         if side.window_count:
             rows = [report["base"], report["fitted"]] + ([report["truth"]] if truth is not None else [])
-            values = side([r["servo_speed_scale"] for r in rows], [r["servo_lag_scale"] for r in rows])
+            values = side(*([r[n] for r in rows] for n in SERVO_FITTED))
             summary.update(ideal=side.ideal_deg(), base=float(values[0]), fitted=float(values[1]))
             if truth is not None:
                 summary["truth"] = float(values[2])

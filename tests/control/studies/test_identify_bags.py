@@ -95,9 +95,9 @@ def test_commands_are_held_to_the_next_and_missing_where_stale() -> None:
 
 
 def test_the_servo_fit_recovers_the_lag_and_says_what_it_cannot_pin_down() -> None:
-    """The sixth set's servos (lag 6.185 x 30 ms) in a 20 s run: the lag comes back to a step of its grid;
-    the rate limit hardly binds at that lag (a stroke's error stays below w_max T), so the speed's profile is
-    flat over most of its bounds, and the report says so."""
+    """The sixth set's servos (lag 6.185 x 30 ms, no dead band) in a 20 s run: the lag comes back to a step
+    of its grid and the dead band to 0; the rate limit hardly binds at that lag (a stroke's error stays
+    below w_max T), so the speed's profile is flat over most of its bounds, and the report says so."""
     record = ib.simulated_record(TANK, (45.0, 0.0, 0.0), (0.0, 0.0, 60.0), 20.0)
     objective = ib.ServoObjective(ib.load_servo_params(), [record], 500, 500, 10)
     assert objective.window_count == 3
@@ -107,7 +107,29 @@ def test_the_servo_fit_recovers_the_lag_and_says_what_it_cannot_pin_down() -> No
     assert speed_low <= 0.6 and speed_high == 1.0  # 40 % of the range and more, the truth (1) in it
     low, high = best["within_1_percent"]["servo_lag_scale"]
     assert 6.185 - 0.2 <= low <= high <= 6.185 + 0.2  # pinned to a step or two of its 0.1 grid
+    assert best["servo_dead_band"] == 0.0 and best["within_1_percent"]["servo_dead_band"] == [0.0, 0.0]
     assert best["objective"] < 0.01 < objective.ideal_deg()
+
+
+def test_the_servo_fit_measures_a_dead_band_from_the_commands_and_the_feedback(tmp_path) -> None:
+    """The same run with the servos' dead band at 0.007 rad (0.4 deg), the feedback's noise at 0.05 deg:
+    the dead band comes back to a step of its 0.002 rad grid and the lag to a step of its own, the fit's
+    error to the noise; the same servos without the dead band miss by several times more."""
+    with open(os.path.join(REPO_ROOT, TANK)) as stream:
+        text = stream.read()
+    assert "  dead_band: 0.0 " in text
+    truth = tmp_path / "banded.yaml"
+    truth.write_text(text.replace("  dead_band: 0.0 ", "  dead_band: 0.007 ", 1))
+    record = ib.simulated_record(str(truth), (45.0, 0.0, 0.0), (0.0, 0.0, 60.0), 20.0, joint_noise_deg=0.05)
+    objective = ib.ServoObjective(ib.load_servo_params(), [record], 500, 500, 10)
+    best = ib.fit_servos(objective)
+    assert best["servo_dead_band"] == pytest.approx(0.007, abs=0.002)
+    assert best["servo_lag_scale"] == pytest.approx(6.185, abs=0.2)
+    low, high = best["within_1_percent"]["servo_dead_band"]
+    assert 0.005 <= low <= high <= 0.009  # the first grid's points next to the truth
+    assert best["objective"] < 0.06  # the feedback's noise, 0.05 deg
+    without = objective([best["servo_speed_scale"]], [best["servo_lag_scale"]], [0.0])[0]
+    assert without > 4.0 * best["objective"]
 
 
 def test_a_bag_without_a_stream_or_an_overlap_is_refused() -> None:
