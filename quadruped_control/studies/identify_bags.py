@@ -42,8 +42,8 @@ servo model (the rate-limited lag of config/simulation.yaml and robot.yaml, scal
 and ``servo_lag_scale``, with the dead band ``servo_dead_band``) is driven by the recorded commands from the
 measured joints at each window start and compared with the measured joints
 (:func:`quadruped_control.sim.replay.replay_servos`); the three are fitted on a grid over their bounds
-(:func:`fit_servos`), beside the paper's ideal servo and the base's values. The two halves meet only in the measured joints: the plant's fit does not depend on the
-servo model, nor the servos' on the plant.
+(:func:`fit_servos`), beside the paper's ideal servo and the base's values. The two halves meet only in
+the measured joints: the plant's fit does not depend on the servo model, nor the servos' on the plant.
 
 ``--simulated TRUTH_YAML`` replaces the bags with runs of the simulated robot on the tank plant of
 TRUTH_YAML (the robot's controller, the ``--gains`` set and rate-limited servos, from ``--initial-rpy`` to
