@@ -97,9 +97,9 @@ Candidate effects of the identification against Table 1, each zero (today's mode
 - ``servo dead band`` (``servo_dead_band``, :func:`~quadruped_control.sim.servo_model.dead_band_command`):
   the servos' position loop ignores an error below a half-width d (rad): a hobby servo's amplifier dead
   band (1-10 us of pulse width, about 0.1-0.9 deg on the IB53BHU) plus its gear train's backlash. A joint
-  stops up to d short of its command and reverses only after the command has crossed 2 d, so small
-  strokes near the setpoint lose more of their amplitude than large ones far from it. In the servos, not
-  in this plant's dynamics; 0 (the default) is today's model exactly.
+  stops up to d short of its command and reverses only after the command has crossed 2 d, so a stroke
+  loses a share of its amplitude that grows as the stroke shrinks. In the servos, not in this plant's
+  dynamics; 0 (the default) is today's model exactly.
 
 Each effect has a switch (:class:`TankParams`); with all of them off the equations reduce to the paper's
 eq. (trans), (rot) (tested). Parameters: ``config/tank.yaml``.
@@ -138,11 +138,11 @@ _MAX_STEP = 0.01
 #: The water's rate without the body wake: the appendage damping sees omega itself.
 _STILL: Vec3 = (0.0, 0.0, 0.0)
 
-
 #: The widest servo dead band tank.yaml accepts (rad, half-width; 0.1 rad = 5.7 deg): an order of magnitude
 #: past a worn hobby servo's, so that a unit slip (degrees, microseconds) is refused rather than simulated
 #: as servos that never move.
 MAX_SERVO_DEAD_BAND = 0.1
+
 
 @dataclass(frozen=True)
 class TankParams:
@@ -287,8 +287,8 @@ def tank_params_from_dict(data: Mapping[str, Any]) -> TankParams:
                        required=("net_weight", "center_of_buoyancy"))
     added = check_keys(data["added_mass"], "added_mass", ("scale", "paw_scale"), required=("scale", "paw_scale"))
     paw_drag = check_keys(_optional_section(data, "paw_drag"), "paw_drag", ("scale",))
-    servos = check_keys(_optional_section(data, "servos"), "servos", ("speed_scale", "lag_scale", "stall_torque",
-                                                                               "dead_band"))
+    servos = check_keys(_optional_section(data, "servos"), "servos",
+                        ("speed_scale", "lag_scale", "stall_torque", "dead_band"))
     appendage = check_keys(_optional_section(data, "appendage_damping"), "appendage_damping",
                            ("linear", "quadratic", "wake_fraction", "wake_time_constant"))
     wake = check_keys(_optional_section(data, "paw_wake"), "paw_wake", ("fraction", "time_constant", "body_share"))
