@@ -166,14 +166,14 @@ class RateLimitedServo(ServoModel):
 
     def _advance(self, q: np.ndarray, command: np.ndarray, dt: float) -> np.ndarray:
         w_max, tau, stall = self.params.max_speed, self.params.time_constant, self.params.stall_torque
-        band = self.params.dead_band
-        targets = [dead_band_command(x, c, band) for x, c in zip(q.ravel().tolist(), command.ravel().tolist())]
+        band, positions = self.params.dead_band, q.ravel().tolist()
+        targets = [dead_band_command(x, c, band) for x, c in zip(positions, command.ravel().tolist())]
         if stall <= 0.0 or self.loads is None:
             return np.array([rate_limited_lag_step(x, c, w_max, tau, dt)
-                             for x, c in zip(q.ravel().tolist(), targets)]).reshape(q.shape)
+                             for x, c in zip(positions, targets)]).reshape(q.shape)
         loads = [value for row in self.loads for value in row]
         return np.array([rate_limited_lag_step(x, c, loaded_speed(w_max, c - x, load, stall), tau, dt)
-                         for x, c, load in zip(q.ravel().tolist(), targets, loads)]).reshape(q.shape)
+                         for x, c, load in zip(positions, targets, loads)]).reshape(q.shape)
 
 
 @jitable
