@@ -95,6 +95,9 @@ def build_parser() -> argparse.ArgumentParser:
                         help="identify: CMA-ES budget of the full fit, parameter sets (default 1000)")
     parser.add_argument("--cv-evaluations", type=int, default=300,
                         help="identify: CMA-ES budget of each cross-validation fold (default 300)")
+    parser.add_argument("--polish-evaluations", type=int, default=0,
+                        help="identify: after each CMA-ES fit (full and folds), a compass search from its best set "
+                             "with this budget, parameter sets (default 0: none, as the runs before it)")
     parser.add_argument("--popsize", type=int, default=16,
                         help="identify: CMA-ES population, also the baseline's grid size (default 16)")
     parser.add_argument("--ensemble", type=int, default=8,
@@ -177,6 +180,8 @@ def main(argv: Optional[Sequence[str]] = None) -> int:
                                          or args.popsize < 2 or args.ensemble < 1):
             parser.error("identify needs --screen, --evaluations, --cv-evaluations and --popsize >= 2 and "
                          "--ensemble >= 1")
+        if args.study == "identify" and args.polish_evaluations < 0:
+            parser.error("--polish-evaluations must be >= 0 (0: no polish), got %d" % args.polish_evaluations)
         if args.study == "identify" and not (math.isfinite(args.band) and args.band >= 1.0):
             parser.error("--band must be a factor >= 1 (1: the whole log-ratio), got %r" % (args.band,))
         if args.study == "identify":

@@ -319,3 +319,63 @@ def test_identify_fits_exactly_the_parameters_given(tmp_path) -> None:
         for name, value in result["values"].items():
             if name not in ("cob_z", "servo_lag_scale"):
                 assert value == fixed[name]
+
+
+def _bowl(names, centre, asked=None):
+    """An evaluator whose objective is the squared distance (in the scaled ranges) from ``centre``."""
+
+    def evaluate(sets, cases, tag):
+        out = []
+        for values in sets:
+            u = [(values[n] - idf.BOUNDS[n][0]) / (idf.BOUNDS[n][1] - idf.BOUNDS[n][0]) for n in names]
+            if asked is not None:
+                asked.append(u)
+            out.append({"values": dict(values), "objective": sum((a - b) ** 2 for a, b in zip(u, centre))})
+        return out
+
+    return evaluate
+
+
+def test_the_polish_walks_to_a_minimum_on_a_bound_and_inside_within_its_smallest_step() -> None:
+    names = ["cob_z", "servo_dead_band"]
+    fixed = idf.nominal_values(TankParams())
+    centre = [0.3, 0.0]  # inside on cob_z, on the lower bound of the dead band
+    asked = []
+    evaluate = _bowl(names, centre, asked)
+    start = evaluate([idf._to_values([0.8, 0.6], names, fixed)], [0], "t")[0]
+    asked.clear()
+    results = idf.polish(evaluate, names, fixed, start, 400, [0], "t", step=0.125, smallest=1.0 / 64.0)
+    best = min(results, key=lambda r: r["objective"])
+    u = [(best["values"][n] - idf.BOUNDS[n][0]) / (idf.BOUNDS[n][1] - idf.BOUNDS[n][0]) for n in names]
+    assert u[1] == 0.0  # the bound itself, reached by clipping
+    assert abs(u[0] - centre[0]) <= 1.0 / 64.0
+    assert all(0.0 <= v <= 1.0 for point in asked for v in point)  # every move clipped to the bounds
+    assert len({tuple(round(v, 9) for v in point) for point in asked} | {(0.8, 0.6)}) == len(asked) + 1  # no repeat
+    for values in (r["values"] for r in results):  # the other parameters stay where they were
+        assert all(values[n] == fixed[n] for n in fixed if n not in names)
+    assert len(results) <= 400
+
+
+def test_the_polish_keeps_to_its_budget_and_never_returns_a_worse_best() -> None:
+    names = ["cob_z", "net_weight", "servo_lag_scale"]
+    fixed = idf.nominal_values(TankParams())
+    evaluate = _bowl(names, [0.1, 0.9, 0.5])
+    start = evaluate([idf._to_values([0.5, 0.5, 0.5], names, fixed)], [0], "t")[0]
+    assert idf.polish(evaluate, names, fixed, start, 5, [0], "t") == []  # one round is six sets: none fits
+    results = idf.polish(evaluate, names, fixed, start, 11, [0], "t")
+    assert len(results) == 11  # a round of six, then five (the set it came from is not asked again)
+    assert min(r["objective"] for r in results) < start["objective"]
+    with pytest.raises(StudyError, match="smallest <= step"):
+        idf.polish(evaluate, names, fixed, start, 13, [0], "t", step=0.01, smallest=0.1)
+
+
+def test_identify_polishes_the_full_fit_and_every_fold(tmp_path) -> None:
+    report = _tiny_identify(str(tmp_path / "pol"), 2, 1, "--parameters", "servo_lag_scale", "cob_z",
+                            "--polish-evaluations", "8")
+    polished = [report["fit"]["polish"]] + [fold["polish"] for fold in report["cross_validation"]]
+    for record in polished:
+        assert 0 < record["evaluations"] <= 8  # whole rounds of at most 2 x 2 moves, within the budget
+        assert record["objective_after"] <= record["objective_before"]
+    assert report["fit"]["best"]["objective"] == report["fit"]["polish"]["objective_after"]
+    with pytest.raises(SystemExit):  # a negative budget is refused
+        simulate.main(["--study", "identify", "--polish-evaluations", "-1", "--out", str(tmp_path / "neg")])
