@@ -513,15 +513,17 @@ def polish(evaluate: Callable, names: Sequence[str], fixed: Dict[str, float], be
            cases: Sequence[int], tag: str, step: float = 0.125, smallest: float = 1.0 / 64.0) -> List[Dict[str, Any]]:
     """A compass search (a coordinate pattern search) from ``best``, the best result of a fit over ``names``:
     each round moves every parameter up and down by ``step`` of its scaled range (clipped to its bounds; a
-    move that the bound cancels, or that lands on a set seen before, is not evaluated), all as one batch. The best move replaces ``best`` if its
-    objective is lower; otherwise the step halves. It stops when the step falls below ``smallest`` or the
-    next round would exceed ``budget`` sets. Returns every set it evaluated (``best`` not among them).
+    move that the bound cancels, or that lands on a set seen before, is not evaluated), all as one batch.
+    The best move replaces ``best`` if its objective is lower; otherwise the step halves. It stops when the
+    step falls below ``smallest`` or the next round would exceed ``budget`` sets. Returns every set it
+    evaluated (``best`` not among them).
 
     Why: the fits' CMA-ES budgets (600 sets in ten dimensions) end long before the search converges, and
     the best set then still improves along single axes (the sixteenth run's seed-1 full fit gained 2.9 when
-    its servo dead band was set to its bound). Written here rather than taken from scipy: scipy's bounded
-    local methods (Powell, Nelder-Mead) ask for one set at a time, and the evaluator runs a batch of sets
-    on all workers at once."""
+    its servo dead band was set to its bound). What it showed (docs/identification.md, seventeenth run):
+    polished folds fit their training groups better and predict the held-out group worse. Written here
+    rather than taken from scipy: scipy's bounded local methods (Powell, Nelder-Mead) ask for one set at a
+    time, and the evaluator runs a batch of sets on all workers at once."""
     if not 0.0 < smallest <= step <= 1.0:
         raise StudyError("identify: the polish needs 0 < smallest <= step <= 1, got %g and %g" % (smallest, step))
     x = [(best["values"][n] - BOUNDS[n][0]) / (BOUNDS[n][1] - BOUNDS[n][0]) for n in names]
