@@ -450,6 +450,11 @@ def _to_values(x: Sequence[float], names: Sequence[str], fixed: Dict[str, float]
     return values
 
 
+def _to_unit(values: Dict[str, float], names: Sequence[str]) -> List[float]:
+    """``values`` of ``names`` scaled to [0, 1] by their bounds: the inverse of :func:`_to_values`."""
+    return [(values[n] - BOUNDS[n][0]) / (BOUNDS[n][1] - BOUNDS[n][0]) for n in names]
+
+
 def morris_sets(problem: Dict[str, Any], trajectories: int, seed: int) -> np.ndarray:
     """The Morris design (SALib, 4 levels) of ``problem``, the same for the same ``seed``.
 
@@ -492,7 +497,7 @@ def fit(evaluate: Callable, names: Sequence[str], fixed: Dict[str, float], start
     others at ``fixed``: every evaluated set, best first. The same ``seed`` (>= 0) gives the same fit."""
     import cma
 
-    x0 = [(start[n] - BOUNDS[n][0]) / (BOUNDS[n][1] - BOUNDS[n][0]) for n in names]
+    x0 = _to_unit(start, names)
     if seed < 0:
         raise StudyError("identify: the fit's seed must be >= 0, got %d" % seed)
     # pycma reads a seed of 0 (or None) as "seed from the clock" (cma.CMAOptions("seed")), and the study's
@@ -526,24 +531,27 @@ def polish(evaluate: Callable, names: Sequence[str], fixed: Dict[str, float], be
     time, and the evaluator runs a batch of sets on all workers at once."""
     if not 0.0 < smallest <= step <= 1.0:
         raise StudyError("identify: the polish needs 0 < smallest <= step <= 1, got %g and %g" % (smallest, step))
-    x = [(best["values"][n] - BOUNDS[n][0]) / (BOUNDS[n][1] - BOUNDS[n][0]) for n in names]
+    x = _to_unit(best["values"], names)
     current = best["objective"]
     evaluated: List[Dict[str, Any]] = []
+    def key(u: List[float]) -> Tuple[float, ...]:  # the same set, whatever the last bits of its steps
+        return tuple(round(v, 12) for v in u)
+
     # x is always the best set seen, so a set seen before (the one x came from, one step back) cannot be better
-    seen = {tuple(round(v, 12) for v in x)}
+    seen = {key(x)}
     while step >= smallest:
         moves = []
         for i in range(len(x)):
             for sign in (1.0, -1.0):
                 moved = x[:i] + [min(1.0, max(0.0, x[i] + sign * step))] + x[i + 1:]
-                if tuple(round(v, 12) for v in moved) not in seen:
+                if key(moved) not in seen:
                     moves.append(moved)
         if len(evaluated) + len(moves) > budget:
             break
         if not moves:
             step /= 2.0
             continue
-        seen.update(tuple(round(v, 12) for v in m) for m in moves)
+        seen.update(key(m) for m in moves)
         results = evaluate([_to_values(m, names, fixed) for m in moves], cases, tag)
         evaluated += results
         i = min(range(len(results)), key=lambda k: results[k]["objective"])

@@ -327,7 +327,7 @@ def _bowl(names, centre, asked=None):
     def evaluate(sets, cases, tag):
         out = []
         for values in sets:
-            u = [(values[n] - idf.BOUNDS[n][0]) / (idf.BOUNDS[n][1] - idf.BOUNDS[n][0]) for n in names]
+            u = idf._to_unit(values, names)
             if asked is not None:
                 asked.append(u)
             out.append({"values": dict(values), "objective": sum((a - b) ** 2 for a, b in zip(u, centre))})
@@ -346,7 +346,7 @@ def test_the_polish_walks_to_a_minimum_on_a_bound_and_inside_within_its_smallest
     asked.clear()
     results = idf.polish(evaluate, names, fixed, start, 400, [0], "t", step=0.125, smallest=1.0 / 64.0)
     best = min(results, key=lambda r: r["objective"])
-    u = [(best["values"][n] - idf.BOUNDS[n][0]) / (idf.BOUNDS[n][1] - idf.BOUNDS[n][0]) for n in names]
+    u = idf._to_unit(best["values"], names)
     assert u[1] == 0.0  # the bound itself, reached by clipping
     assert abs(u[0] - centre[0]) <= 1.0 / 64.0
     assert all(0.0 <= v <= 1.0 for point in asked for v in point)  # every move clipped to the bounds
