@@ -562,6 +562,17 @@ def polish(evaluate: Callable, names: Sequence[str], fixed: Dict[str, float], be
     return evaluated
 
 
+def improvements(objectives: Sequence[float]) -> List[Tuple[int, float]]:
+    """Where a search's best so far fell: ``(n, objective)`` for each set that beat every set before it, ``n``
+    its place (from 1) in the order the search asked for them. A best found in the search's last generation
+    says the search was still improving when its budget ran out (docs/identification.md, eighteenth run)."""
+    out: List[Tuple[int, float]] = []
+    for n, value in enumerate(objectives, 1):
+        if not out or value < out[-1][1]:
+            out.append((n, float(value)))
+    return out
+
+
 def baseline(evaluate: Callable, nominal: Dict[str, float], cases: Sequence[int], points: int,
              tag: str) -> Dict[str, Any]:
     """config/tank.yaml with the paw drag scale, one factor that slows everything, fitted on a grid over
@@ -599,28 +610,38 @@ def main_study(args: argparse.Namespace) -> int:
     polish_budget = int(getattr(args, "polish_evaluations", 0))
 
     def fit_and_polish(fit_start: Dict[str, float], budget: int, seed: int, cases: Sequence[int],
-                       tag: str) -> Tuple[List[Dict[str, Any]], Dict[str, Any]]:
-        """The CMA-ES fit, then the compass search from its best set: every set, best first, and what the
-        polish did (its sets, the objective before and after)."""
-        searched = fit(evaluate, chosen, fixed, fit_start, budget, args.popsize, seed, cases, tag)
-        polished = polish(evaluate, chosen, fixed, searched[0], polish_budget, cases, tag + "-pol") \
+                       tag: str) -> Tuple[List[Dict[str, Any]], Dict[str, Any], Dict[str, Any]]:
+        """The CMA-ES fit, then the compass search from its best set: every set, best first; what the
+        polish did (its sets, the objective before and after); and how the search went (its sets in the
+        order asked, CMA-ES's then the polish's: their number and :func:`improvements`)."""
+        asked: List[float] = []
+
+        def recorded(sets: Sequence[Dict[str, float]], cases: Sequence[int], tag: str) -> List[Dict[str, Any]]:
+            results = evaluate(sets, cases, tag)
+            asked.extend(r["objective"] for r in results)
+            return results
+
+        searched = fit(recorded, chosen, fixed, fit_start, budget, args.popsize, seed, cases, tag)
+        polished = polish(recorded, chosen, fixed, searched[0], polish_budget, cases, tag + "-pol") \
             if polish_budget else []
         results = sorted(searched + polished, key=lambda r: r["objective"])
         return results, {"evaluations": len(polished), "objective_before": searched[0]["objective"],
-                         "objective_after": results[0]["objective"]}
+                         "objective_after": results[0]["objective"]}, \
+            {"sets": len(asked), "improvements": [list(i) for i in improvements(asked)]}
 
-    full, full_polish = fit_and_polish(start, args.evaluations, args.seed, everything, "fit")
+    full, full_polish, full_search = fit_and_polish(start, args.evaluations, args.seed, everything, "fit")
     best = full[0]
     folds = []
     for group in GROUPS:
         train = evaluate.cases([g for g in GROUPS if g != group])
         held = evaluate.cases([group])
         fold_start = best_on(screening["results"], train)["values"]
-        fold_results, fold_polish = fit_and_polish(fold_start, args.cv_evaluations, args.seed + 1, train, "cv-" + group)
+        fold_results, fold_polish, fold_search = fit_and_polish(fold_start, args.cv_evaluations, args.seed + 1,
+                                                                train, "cv-" + group)
         fold_fit = fold_results[0]
         slow = baseline(evaluate, nominal, train, args.popsize, "base-" + group)
         predicted, slow_predicted = evaluate([fold_fit["values"], slow["values"]], held, "held-" + group)
-        folds.append({"held_out": group, "fit": _without_rows(fold_fit), "polish": fold_polish,
+        folds.append({"held_out": group, "fit": _without_rows(fold_fit), "polish": fold_polish, "search": fold_search,
                       "prediction": predicted, "baseline_fit": _without_rows(slow),
                       "baseline_prediction": slow_predicted})
     ensemble, seen = [], set()
@@ -646,7 +667,7 @@ def main_study(args: argparse.Namespace) -> int:
               "slow_recovery_check": bool(evaluate.check_row), "band": evaluate.band,
               "weights": WEIGHTS, "parameters": [list(p) for p in PARAMETERS], "nominal": nominal,
               "screening": {k: v for k, v in screening.items() if k not in ("best", "results")}, "identified": chosen,
-              "fit": {"evaluations": len(full), "polish": full_polish, "best": best,
+              "fit": {"evaluations": len(full), "polish": full_polish, "search": full_search, "best": best,
                       "ensemble": [_without_rows(r) for r in ensemble]},
               "cross_validation": folds, "trials": evaluate.trials, "wall_time": wall, "ensemble_files": paths}
     with open(os.path.join(args.out, "identify.json"), "w") as stream:
@@ -740,6 +761,13 @@ def _report_text(report: Dict[str, Any], best: Dict[str, Any]) -> str:
             "%s %.2f -> %.2f (%d sets)" % (f["held_out"], f["polish"]["objective_before"],
                                            f["polish"]["objective_after"], f["polish"]["evaluations"])
             for f in polished_folds) + "."]
+    searches = [("full fit", report["fit"].get("search"))] + [  # reports before the search record have none
+        ("%s fold" % f["held_out"], f.get("search")) for f in report["cross_validation"]]
+    if all(record for _, record in searches):
+        lines += ["", "Where each search found its best (set number of the sets asked, CMA-ES's then the compass "
+                  "search's; a best in the last generation: still improving): " + ", ".join(
+                      "%s %d of %d" % (name, record["improvements"][-1][0], record["sets"])
+                      for name, record in searches) + "."]
     lines += ["", format_timing_bias(report),
               pe.format_table(best["rows"], "Best parameter set of the full fit: tank plant, experiment gains, "
                               "%s servos" % report["servo_model"])]

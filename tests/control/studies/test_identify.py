@@ -336,6 +336,11 @@ def _bowl(names, centre, asked=None):
     return evaluate
 
 
+def test_improvements_are_where_the_best_so_far_fell() -> None:
+    assert idf.improvements([]) == []
+    assert idf.improvements([5.0, 6.0, 4.0, 4.0, 3.5, 9.0]) == [(1, 5.0), (3, 4.0), (5, 3.5)]  # a tie is no gain
+
+
 def test_the_polish_walks_to_a_minimum_on_a_bound_and_inside_within_its_smallest_step() -> None:
     names = ["cob_z", "servo_dead_band"]
     fixed = idf.nominal_values(TankParams())
@@ -377,5 +382,16 @@ def test_identify_polishes_the_full_fit_and_every_fold(tmp_path) -> None:
         assert 0 < record["evaluations"] <= 8  # whole rounds of at most 2 x 2 moves, within the budget
         assert record["objective_after"] <= record["objective_before"]
     assert report["fit"]["best"]["objective"] == report["fit"]["polish"]["objective_after"]
+    # the search record: every set CMA-ES and the polish asked for, in order, and where the best fell
+    for fit_record, search in [(report["fit"], report["fit"]["search"])] + [
+            (fold, fold["search"]) for fold in report["cross_validation"]]:
+        found = [n for n, _ in search["improvements"]]
+        assert found == sorted(set(found)) and 1 == found[0] and found[-1] <= search["sets"]
+        objectives = [value for _, value in search["improvements"]]
+        assert objectives == sorted(objectives, reverse=True)
+        assert objectives[-1] == (fit_record.get("best") or fit_record["fit"])["objective"]
+    assert report["fit"]["search"]["sets"] == report["fit"]["evaluations"]
+    with open(str(tmp_path / "pol" / "identify.md")) as stream:
+        assert "Where each search found its best" in stream.read()
     with pytest.raises(SystemExit):  # a negative budget is refused
         simulate.main(["--study", "identify", "--polish-evaluations", "-1", "--out", str(tmp_path / "neg")])
