@@ -311,6 +311,26 @@ def test_a_screening_that_chooses_one_parameter_is_refused_by_name(tmp_path, mon
         idf.main_study(args)
 
 
+def test_a_polish_added_to_an_earlier_run_reuses_its_searches_trials(tmp_path) -> None:
+    """Trial labels number the sets per search (Evaluator.count_of): the same command with
+    --polish-evaluations runs only the polishes' trials; the screening's, the CMA-ES fits', the
+    baselines' and the predictions' come from the trial cache."""
+    out = str(tmp_path / "id")
+    first = _tiny_identify(out, 2, 1, "--parameters", "cob_z", "net_weight")
+    trials = os.path.join(out, "trials")
+    before = set(os.listdir(trials))
+    # one round of the compass search: each of the two parameters up and down
+    polished = _tiny_identify(out, 2, 1, "--parameters", "cob_z", "net_weight", "--polish-evaluations", "4")
+    added = set(os.listdir(trials)) - before
+    polishes = {name for name in added if name.startswith(("fit-pol", "cv-roll-pol", "cv-pitch-pol",
+                                                           "cv-roll+pitch-pol"))}
+    # four polishes of four sets each: the full fit's on 15 experiments, each fold's on its training groups
+    assert len(polishes) == 4 * (15 + 9 + 9 + 12)
+    # and the held-out predictions of the folds whose polish found a better set; nothing else ran again
+    assert all(name.startswith("held-") for name in added - polishes), sorted(added - polishes)[:5]
+    assert polished["fit"]["search"]["sets"] == first["fit"]["search"]["sets"] + 4
+
+
 def test_identify_fits_exactly_the_parameters_given(tmp_path) -> None:
     report = _tiny_identify(str(tmp_path / "exact"), 2, 1, "--parameters", "servo_lag_scale", "cob_z")
     assert report["identified"] == ["cob_z", "servo_lag_scale"]  # in the order of PARAMETERS
