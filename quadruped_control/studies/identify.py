@@ -54,6 +54,7 @@ import dataclasses
 import json
 import math
 import os
+import re
 import time
 from typing import Any, Callable, Dict, List, Optional, Sequence, Tuple
 
@@ -127,7 +128,8 @@ class _Place:
 
 #: Every parameter of :data:`PARAMETERS` -> its :class:`_Place`: the one table that :func:`tank_overrides`,
 #: :func:`nominal_values` and :func:`update_tank_yaml` read. A vector field's components that no given
-#: parameter sets are 0.
+#: parameter sets are 0 in :func:`tank_overrides` (the studies give it whole sets) and as the template had
+#: them in :func:`update_tank_yaml`.
 _PLACES: Dict[str, _Place] = {
     "cob_z": _Place("center_of_buoyancy", (2,), "hydrostatics", "center_of_buoyancy"),
     "cob_x": _Place("center_of_buoyancy", (0,), "hydrostatics", "center_of_buoyancy"),
@@ -337,10 +339,23 @@ def format_timing_bias(report: Dict[str, Any]) -> str:
 _EXACT = "%.17g"
 
 
+def _vector_parts(line: str) -> List[str]:
+    """The three components of a tank.yaml vector line (``key: [x, y, z]  # comment``), as written."""
+    match = re.match(r"^\s*[A-Za-z_]+:\s*\[([^\]]*)\]", line)
+    parts = [part.strip() for part in match.group(1).split(",")] if match else []
+    try:
+        if len(parts) == 3 and all(math.isfinite(float(part)) for part in parts):
+            return parts
+    except ValueError:
+        pass
+    raise ValueError("tank.yaml: %r is not a vector of three numbers" % line.strip())
+
+
 def update_tank_yaml(text: str, values: Dict[str, float], note: str) -> str:
     """config/tank.yaml text with the identified values in place (comments of other lines kept); each
-    replaced line is marked ``# [identified] <note>``. A vector's line is written whole: the components
-    that no parameter sets are 0.0, those of parameters not in ``values`` 0 (:data:`_PLACES`)."""
+    replaced line is marked ``# [identified] <note>``. A vector's line is written whole, its components
+    that no parameter in ``values`` sets as ``text`` had them: a fit of some components (``identify_bags
+    --parameters appendage_linear_z``) keeps the others the fit ran with."""
     lines_of: Dict[Tuple[str, str], List[str]] = {}  # (section, key) -> the parameters on that line
     for name, _, _ in PARAMETERS:
         lines_of.setdefault((_PLACES[name].section, _PLACES[name].key), []).append(name)
@@ -357,10 +372,10 @@ def update_tank_yaml(text: str, values: Dict[str, float], note: str) -> str:
         if not given:
             continue
         if _PLACES[given[0]].components:
-            parts = ["0.0"] * 3
-            for name in names:
+            parts = _vector_parts(line)
+            for name in given:
                 for component in _PLACES[name].components:
-                    parts[component] = _EXACT % _field_value(name, values.get(name, 0.0))
+                    parts[component] = _EXACT % _field_value(name, values[name])
             value = "[%s]" % ", ".join(parts)
         else:
             value = _EXACT % _field_value(given[0], values[given[0]])

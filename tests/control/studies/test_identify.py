@@ -158,23 +158,32 @@ def test_every_parameter_reaches_the_tank_plant_and_its_yaml_round_trips(tmp_pat
         idf.update_tank_yaml("hydrostatics:\n  center_of_buoyancy: [0, 0, 0]\n", {"net_weight": 1.0}, "x")
 
 
-def test_a_partial_set_writes_whole_vectors_with_the_missing_components_at_zero() -> None:
+def test_a_partial_set_keeps_the_templates_other_components_in_the_yaml() -> None:
     """One table places every parameter (identify._PLACES): the overrides, the yaml and the nominal values
-    agree for a set that names only some components of a vector."""
+    agree for a set that names only some components of a vector. The overrides (given whole sets by the
+    studies) put the others at 0; the yaml keeps the template's, as written, so that a fit of some
+    components (identify_bags --parameters appendage_linear_z) writes the plant it ran."""
     values = {"cob_x": 0.001, "appendage_linear_z": 0.15, "servo_load_slope": 0.25}
     assert dict(idf.tank_overrides(values)) == {"center_of_buoyancy": (0.001, 0.0, 0.0),
                                                 "appendage_damping_linear": (0.0, 0.0, 0.15),
                                                 "servo_stall_torque": 4.0}
     text = idf.update_tank_yaml("hydrostatics:\n  center_of_buoyancy: [0, 0, 0.002]  # old\nsuspension:\n"
-                                "  hook: [0, 0, 0.07]\nappendage_damping:\n  linear: [0.1, 0.1, 0.1]\n"
+                                "  hook: [0, 0, 0.07]\nappendage_damping:\n  linear: [0.18, 0.1832, 0.1]\n"
                                 "servos:\n  stall_torque: 0\n", values, "n")
-    assert text.splitlines() == ["hydrostatics:", "  center_of_buoyancy: [0.001, 0, 0]  # [identified] n",
+    assert text.splitlines() == ["hydrostatics:", "  center_of_buoyancy: [0.001, 0, 0.002]  # [identified] n",
                                  "suspension:", "  hook: [0, 0, 0.07]", "appendage_damping:",
-                                 "  linear: [0, 0, 0.14999999999999999]  # [identified] n", "servos:",
+                                 "  linear: [0.18, 0.1832, 0.14999999999999999]  # [identified] n", "servos:",
                                  "  stall_torque: 4  # [identified] n"]
     tank = TankParams().with_values(**dict(idf.tank_overrides(values)))
     nominal = idf.nominal_values(tank)
     assert nominal["cob_x"] == 0.001 and nominal["appendage_linear_z"] == 0.15 and nominal["servo_load_slope"] == 0.25
+
+
+def test_a_vector_line_that_is_not_three_numbers_is_refused_by_name() -> None:
+    for line in ("  center_of_buoyancy: 0.002", "  center_of_buoyancy: [0, 0]", "  center_of_buoyancy: [0, a, 0]",
+                 "  center_of_buoyancy: [0, nan, 0]"):
+        with pytest.raises(ValueError, match="center_of_buoyancy.*not a vector of three numbers"):
+            idf.update_tank_yaml("hydrostatics:\n" + line + "\n", {"cob_z": 0.001}, "n")
 
 
 def test_the_screening_design_is_the_same_for_the_same_seed_zero_included() -> None:
