@@ -148,6 +148,8 @@ def build_parser() -> argparse.ArgumentParser:
 def main(argv: Optional[Sequence[str]] = None) -> int:
     parser = build_parser()
     args = parser.parse_args(argv)
+    #: the command as given, for the studies' reports
+    args.command = ["python", "-m", "quadruped_control.simulate"] + list(sys.argv[1:] if argv is None else argv)
     args.duration_given = args.duration is not None
     if args.gains is None:
         args.gains = "experiment" if args.study == "paper-experiments" else "sim"

@@ -65,6 +65,7 @@ from quadruped_control.sim.plants.tank import TankParams, load_tank_params
 from quadruped_control.studies import StudyError
 from quadruped_control.studies import paper_experiments as pe
 from quadruped_control.studies.paper_experiments import experiment_specs
+from quadruped_control.studies.runner import code_fingerprint
 from quadruped_control.studies.trial import TrialSpec, run_batch, run_many
 
 __all__ = ["BOUNDS", "Evaluator", "GROUPS", "PARAMETERS", "WEIGHTS", "best_on", "case_cost", "fit",
@@ -674,7 +675,8 @@ def main_study(args: argparse.Namespace) -> int:
         if len(ensemble) >= args.ensemble:
             break
     wall = time.perf_counter() - start_time
-    note = "simulate --study identify (%d trials)" % evaluate.trials
+    code = code_fingerprint()
+    note = "simulate --study identify (%d trials, code %s)" % (evaluate.trials, code[:12])
     with open(args.tank_yaml or config_path("tank.yaml")) as stream:
         template = stream.read()
     paths = []
@@ -684,7 +686,8 @@ def main_study(args: argparse.Namespace) -> int:
             stream.write(update_tank_yaml(template, result["values"], "%s, ensemble member %d, objective %.2f"
                                           % (note, i, result["objective"])))
         paths.append(path)
-    report = {"study": "identify", "duration": duration, "servo_model": servo, "seed": args.seed,
+    report = {"study": "identify", "command": getattr(args, "command", None), "code": code,
+              "duration": duration, "servo_model": servo, "seed": args.seed,
               "slow_recovery_check": bool(evaluate.check_row), "band": evaluate.band,
               "weights": WEIGHTS, "parameters": [list(p) for p in PARAMETERS], "nominal": nominal,
               "screening": {k: v for k, v in screening.items() if k not in ("best", "results")}, "identified": chosen,
@@ -738,10 +741,12 @@ def plot_report(report: Dict[str, Any], path: str) -> None:
 
 def _report_text(report: Dict[str, Any], best: Dict[str, Any]) -> str:
     screening = report["screening"]
-    lines = ["## Identification: %d trials, %.0f s wall" % (report["trials"], report["wall_time"]), "",
-             "Screening (Morris, %d sets): mu* (sigma) of each parameter; identified: %s." % (
-                 screening["sets"], ", ".join(report["identified"])), "",
-             "| parameter | low | high | mu* | sigma | best (full fit) |", "|---|---|---|---|---|---|"]
+    lines = ["## Identification: %d trials, %.0f s wall" % (report["trials"], report["wall_time"]), ""]
+    if report.get("command"):  # reports before the command and code were recorded have neither
+        lines += ["    " + " ".join(report["command"]), "", "Code %s." % report["code"], ""]
+    lines += ["Screening (Morris, %d sets): mu* (sigma) of each parameter; identified: %s." % (
+        screening["sets"], ", ".join(report["identified"])), "",
+        "| parameter | low | high | mu* | sigma | best (full fit) |", "|---|---|---|---|---|---|"]
     for name, mu, sigma in zip(screening["names"], screening["mu_star"], screening["sigma"]):
         low, high = BOUNDS[name]
         lines.append("| %s | %g | %g | %.2f | %s | %.4g |" % (name, low, high, mu, "--" if sigma is None else

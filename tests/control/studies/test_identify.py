@@ -13,6 +13,7 @@ from quadruped_control import simulate
 from quadruped_control.sim.plants import TankParams, load_tank_params
 from quadruped_control.studies import StudyError
 from quadruped_control.studies import identify as idf
+from quadruped_control.studies.runner import code_fingerprint
 
 
 def _row(paper_ts=50.0, sim_ts=50.0, yaw=True):
@@ -249,8 +250,15 @@ def test_identify_cli_tiny_run(tmp_path) -> None:
     for fold, cases in zip(report["cross_validation"], (6, 6, 3)):
         assert fold["prediction"]["targets"]["cases"] == cases == fold["baseline_prediction"]["targets"]["cases"]
     assert len(report["ensemble_files"]) == 2
+    # what produced the report: the command as given and the code's fingerprint, in the report and each set
+    assert report["command"][:4] == ["python", "-m", "quadruped_control.simulate", "--study"]
+    assert "--include" in report["command"] and report["code"] == code_fingerprint()
+    with open(os.path.join(out, "identify.md")) as stream:
+        assert "Code %s." % report["code"] in stream.read()
     for path in report["ensemble_files"]:
         load_tank_params(path)  # a valid tank.yaml
+        with open(path) as stream:
+            assert "code %s)" % report["code"][:12] in stream.read()
     assert report["weights"] == idf.WEIGHTS
     with pytest.raises(SystemExit):  # a parameter the study does not know is refused by name
         simulate.main(["--study", "identify", "--include", "wake_speed", "--out", out])
