@@ -22,7 +22,6 @@ from typing import Any, Dict, List, Optional, Sequence, Tuple
 
 import numpy as np
 
-from quadruped_common.config import config_path
 from quadruped_control.studies.cases import paper_sim_cases, random_cases, table1_cases
 from quadruped_control.studies.runner import code_fingerprint
 from quadruped_control.studies.trial import TrialSpec, run_many
@@ -207,12 +206,12 @@ def main_study(args: Any) -> int:
     rows = sorted((trial_row(s) for s in summaries), key=lambda r: (r["case"], r["start"], r["gains"], r["servo"],
                                                                 r["scheme"]))
     result = compare(rows)
-    # what produced it: the command, the code's fingerprint and, on the tank plant, which tank.yaml
+    # what produced it: the command, the code's fingerprint and, on the tank plant, which tank.yaml (as
+    # given, so that a result kept in the repository names no path of the machine that ran it)
     result.update(study="schemes", command=getattr(args, "command", None), code=code_fingerprint(),
                   wall_time=wall, trials=len(rows), perturbed_starts=args.perturbed,
                   perturbation_deg=PERTURBATION_DEG, plant=plant,
-                  tank_yaml=(os.path.abspath(args.tank_yaml or config_path("tank.yaml")) if plant == "tank" else None),
-                  rows=rows)
+                  tank_yaml=(args.tank_yaml or "config/tank.yaml") if plant == "tank" else None, rows=rows)
     with open(os.path.join(out, "schemes.json"), "w") as stream:
         json.dump(result, stream, indent=1, allow_nan=False)
     text = _markdown(result, rows)
