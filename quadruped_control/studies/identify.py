@@ -412,11 +412,9 @@ class Evaluator:
         self.args, self.duration, self.servo = args, duration, servo
         #: the objective's band (:func:`case_cost`; 1: the plain log-ratios)
         self.band = float(getattr(args, "band", 1.0))
-        #: parameter sets run so far, in all and per tag: a trial's label numbers its set within its tag's
-        #: search, so that a search's trials keep their labels, and come from the trial cache, whatever
-        #: ran before it (a polish added to an earlier run's command shifted every later search's labels
-        #: while one counter numbered them all)
-        self.count = 0
+        #: parameter sets run so far per tag: a trial's label numbers its set within its own search, so a
+        #: search's labels do not depend on what ran before it, and an earlier run's trials come from the
+        #: trial cache when the same command adds a search (a polish) between them
         self.count_of: Dict[str, int] = {}
         self.trials = 0
         # the 15 specs once (their initial attitudes take a search); each set replaces label and overrides
@@ -433,7 +431,6 @@ class Evaluator:
     def __call__(self, sets: Sequence[Dict[str, float]], cases: Sequence[int], tag: str) -> List[Dict[str, Any]]:
         specs: List[TrialSpec] = []
         for values in sets:
-            self.count += 1
             self.count_of[tag] = number = self.count_of.get(tag, 0) + 1
             overrides = tank_overrides(values)
             specs += [dataclasses.replace(self.base[k], label="%s%05d %s" % (tag, number, self.base[k].label),
