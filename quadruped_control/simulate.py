@@ -45,6 +45,7 @@ from quadruped_control.model.params import load_robot_params
 from quadruped_control.sim.plants import PLANTS
 from quadruped_control.sim.simulation import SimulationError, load_simulation_settings
 from quadruped_control.studies import StudyError, identify, paper_experiments, paper_sim, robustness, schemes
+from quadruped_control.studies.runner import command_line
 from quadruped_control.studies.trial import AUTO_BATCH_MIN, GAIN_ALIASES, TrialSpec, format_metrics_table, run_trial
 
 #: --study NAME -> its module (each has ``main_study(args) -> exit status``)
@@ -149,7 +150,7 @@ def main(argv: Optional[Sequence[str]] = None) -> int:
     parser = build_parser()
     args = parser.parse_args(argv)
     #: the command as given, for the studies' reports
-    args.command = ["python", "-m", "quadruped_control.simulate"] + list(sys.argv[1:] if argv is None else argv)
+    args.command = command_line("quadruped_control.simulate", argv)
     args.duration_given = args.duration is not None
     if args.gains is None:
         args.gains = "experiment" if args.study == "paper-experiments" else "sim"

@@ -81,7 +81,7 @@ from quadruped_control.sim.servo_model import ServoParams, load_servo_params
 from quadruped_control.studies import StudyError
 from quadruped_control.studies.identify import (BOUNDS, PARAMETERS, fit, nominal_values, tank_overrides,
                                                 update_tank_yaml)
-from quadruped_control.studies.runner import code_fingerprint
+from quadruped_control.studies.runner import code_fingerprint, command_line
 
 __all__ = ["PLANT_PARAMETERS", "SERVO_FITTED", "SERVO_GRID", "SERVO_PARAMETERS", "ReplayObjective", "ServoObjective",
            "fit_servos", "main", "read_run", "record_from_bag", "simulated_record", "smoothed"]
@@ -647,8 +647,8 @@ def main(argv: Optional[Sequence[str]] = None) -> int:
         return 1
     os.makedirs(args.out, exist_ok=True)
     report: Dict[str, Any] = {
-        "study": "identify_bags", "command": ["python", "-m", "quadruped_control.studies.identify_bags"]
-        + list(argv if argv is not None else sys.argv[1:]), "code": code_fingerprint(),
+        "study": "identify_bags", "command": command_line("quadruped_control.studies.identify_bags", argv),
+        "code": code_fingerprint(),
         "tank_yaml": os.path.abspath(args.tank_yaml or config_path("tank.yaml")), "parameters": names,
         "window": args.window, "stride": args.stride, "lead_in": args.lead_in, "every": args.every, "seed": args.seed,
         "joint_filter_hz": args.joint_filter_hz,

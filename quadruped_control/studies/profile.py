@@ -46,7 +46,7 @@ from quadruped_common.config import ParameterError
 from quadruped_control.sim.plants.tank import load_tank_params
 from quadruped_control.studies import StudyError
 from quadruped_control.studies.identify import BOUNDS, GROUPS, Evaluator, fit, nominal_values
-from quadruped_control.studies.runner import code_fingerprint
+from quadruped_control.studies.runner import code_fingerprint, command_line
 
 __all__ = ["COUNTS", "check_base", "check_values", "load_report", "main", "plot_profile", "profile", "profile_point",
            "summed_targets"]
@@ -237,8 +237,7 @@ def main(argv: Optional[Sequence[str]] = None) -> int:
         return 1
     with open(args.report, "rb") as stream:
         report_sha = hashlib.sha256(stream.read()).hexdigest()
-    result = {"study": "profile", "command": ["python", "-m", "quadruped_control.studies.profile"]
-              + list(argv if argv is not None else sys.argv[1:]),
+    result = {"study": "profile", "command": command_line("quadruped_control.studies.profile", argv),
               "report": os.path.abspath(args.report), "report_sha256": report_sha, "code": code_fingerprint(),
               "parameter": args.parameter, "identified": list(report["identified"]), "evaluations": args.evaluations,
               "cv_evaluations": args.cv_evaluations, "sigma": args.sigma, "popsize": args.popsize,

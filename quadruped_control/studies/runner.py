@@ -40,8 +40,8 @@ from typing import Any, Callable, Dict, Iterator, List, Optional, Sequence, Tupl
 
 import numpy as np
 
-__all__ = ["CODE_ROOTS", "StudyError", "code_fingerprint", "config_fingerprint", "run_trial_batches", "run_trials",
-           "spec_key", "trial_path"]
+__all__ = ["CODE_ROOTS", "StudyError", "code_fingerprint", "command_line", "config_fingerprint", "run_trial_batches",
+           "run_trials", "spec_key", "trial_path"]
 
 TrialFn = Callable[[Any], Dict[str, Any]]
 #: ``fn(specs) -> [result, ...]``: many trials at once (the batched simulator), one result per spec, in order.
@@ -85,6 +85,12 @@ def _hash_files(paths: Sequence[str], root: str) -> str:
             digest.update(("unreadable: %s" % exc).encode("utf-8"))
         digest.update(b"\0")
     return digest.hexdigest()
+
+
+def command_line(module: str, argv: Optional[Sequence[str]] = None) -> List[str]:
+    """The command that ran a study, as given (``argv``, or the process's arguments): with
+    :func:`code_fingerprint`, what a study's report records of what produced it."""
+    return ["python", "-m", module] + list(sys.argv[1:] if argv is None else argv)
 
 
 @functools.lru_cache(maxsize=8)
