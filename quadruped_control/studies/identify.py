@@ -101,6 +101,7 @@ PARAMETERS: Tuple[Tuple[str, float, float], ...] = (
     ("block_tie_stiffness", 0.0, 20.0),    # N/m: a slack tie (0) to ten times the rope's pendulum T / L
     ("paw_buoyancy_offset", -0.05, 0.13),  # N per paw beyond robot.yaml's -0.029: a 40 g paw to a floating one
     ("servo_dead_band", 0.0, 0.02),        # rad, half-width: none to a 10 us amplifier band plus 0.7 deg backlash
+    ("hook_friction_arm", 0.0, 0.004),     # m: mu r of the rope's tie on the hook's eye, none to mu 0.5 on 4 mm, x2
 )
 
 #: Each parameter's (low, high): :data:`PARAMETERS` by name.
@@ -159,6 +160,7 @@ _PLACES: Dict[str, _Place] = {
     "block_tie_stiffness": _Place("block_tie_stiffness", (), "suspension", "block_tie_stiffness"),
     "paw_buoyancy_offset": _Place("paw_buoyancy_offset", (), "hydrostatics", "paw_buoyancy_offset"),
     "servo_dead_band": _Place("servo_dead_band", (), "servos", "dead_band"),
+    "hook_friction_arm": _Place("hook_friction_arm", (), "suspension", "friction_arm"),
 }
 
 

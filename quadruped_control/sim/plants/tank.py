@@ -100,6 +100,25 @@ Candidate effects of the identification against Table 1, each zero (today's mode
   stops up to d short of its command and reverses only after the command has crossed 2 d, so a stroke
   loses a share of its amplitude that grows as the stroke shrinks. In the servos, not in this plant's
   dynamics; 0 (the default) is today's model exactly.
+- ``hook friction`` (``hook_friction_arm``, ``hook_friction_angle``, :func:`~.tank_dynamics.hook_friction_update`):
+  the rope is tied to an eye on top of the enclosure (the paper, section "Experimental Setup"), and the body
+  tilts under it. The rope's loop turning on the eye's wire (a pin of radius r under the tension T: a torque
+  mu r T) and the braid bending at the knot (inter-fibre slip: the hysteretic bending of stranded cables,
+  Papailiou, "On the bending stiffness of transmission line conductors", IEEE Trans. Power Delivery 12
+  (1997)) resist the body's rotation relative to the rope with a dry friction, not a viscous one: the
+  same torque tau_c = mu r T_0 (T_0 the rope's static tension, :meth:`TankModel.static_rope_tension`;
+  ``hook_friction_arm`` = mu r in m) however slowly the body turns. Dahl's model of it: a spring of
+  stiffness tau_c / theta_p for reversals smaller than the presliding angle theta_p
+  (``hook_friction_angle``), sliding friction beyond. A dry friction eats the strokes' few mN m near the
+  setpoint while the controller's integral winds up, and lets go once it is overcome: the stick-slip
+  of a PI loop against friction (e.g. Armstrong-Helouvry, Dupont and Canudas de Wit, "A survey of models,
+  analysis tools and compensation methods for the control of machines with friction", Automatica 30
+  (1994)), slow near the setpoint and then past it, where far from it the strokes' larger torque hardly
+  notices. Across the rope only (roll and pitch for a vertical rope); the twist is the rope torsion's.
+  Advanced once per step with the body state of the step's start, like the wakes (exact for the held
+  rate, so the torque never exceeds tau_c), and held through the step's RK4 stages. The light rope's
+  reaction, a couple of tau_f / L on its ends, is left out (mN against the rope's newtons). arm = 0 (the
+  default) is today's model exactly.
 
 Each effect has a switch (:class:`TankParams`); with all of them off the equations reduce to the paper's
 eq. (trans), (rot) (tested). Parameters: ``config/tank.yaml``.
@@ -123,9 +142,9 @@ from quadruped_control.sim.plants.paper import FloatingBaseModel
 from quadruped_control.sim.plants.rigid_body import (Mat3, RigidBodyState, StepContext, as_mat3, chart_step_end,
                                                      check_dt, diverged, joint_array)
 from quadruped_control.sim.plants.tank_dynamics import (TankConstants, appendage_damping_torque, body_wake_update,
-                                                        floating_block_update, leg_sums, mass_solver, paw_joint_loads,
-                                                        paw_wake_update, rope_force, rope_torsion_torque, rope_twist,
-                                                        tank_forces, tank_rk4)
+                                                        floating_block_update, hook_friction_update, leg_sums,
+                                                        mass_solver, paw_joint_loads, paw_wake_update, rope_force,
+                                                        rope_torsion_torque, rope_twist, tank_forces, tank_rk4)
 
 __all__ = ["TankModel", "TankParams", "appendage_damping_torque", "hydrostatic_wrench", "load_tank_params",
            "rope_force", "rope_torsion_torque", "rope_twist", "torso_ellipsoid"]
@@ -142,6 +161,15 @@ _STILL: Vec3 = (0.0, 0.0, 0.0)
 #: past a worn hobby servo's, so that a unit slip (degrees, microseconds) is refused rather than simulated
 #: as servos that never move.
 MAX_SERVO_DEAD_BAND = 0.1
+
+#: The largest hook friction arm mu r tank.yaml accepts (m): mu = 1 on a 5 cm eye, ten times the bound the
+#: identification gives it; a larger one is a unit slip (mm for m), not a tie.
+MAX_HOOK_FRICTION_ARM = 0.05
+
+#: The smallest presliding angle (rad): the friction's spring, tau_c / theta_p, is integrated explicitly with
+#: the 10 ms step; at 1 mrad and the largest arm's few hundredths of a N m it stays well below the body's
+#: roll inertia / dt^2 (docs/tank_model.md).
+MIN_HOOK_FRICTION_ANGLE = 0.001
 
 
 @dataclass(frozen=True)
@@ -198,6 +226,10 @@ class TankParams:
     block_mass: float = 0.0
     block_drag: float = 2.0
     block_tie_stiffness: float = 0.0
+    #: hook friction: mu r (m), the Coulomb torque over the rope's static tension (0: off), and the presliding
+    #: angle theta_p (rad) over which it builds up (:func:`~.tank_dynamics.hook_friction_update`)
+    hook_friction_arm: float = 0.0
+    hook_friction_angle: float = 0.005
 
     def __post_init__(self) -> None:
         for name in ("rope_length", "rope_stiffness"):
@@ -243,6 +275,12 @@ class TankParams:
             # floating_block_update keeps the rope's elastic pull explicit: stable while dt^2 (k + k_g) / m_b < 4
             raise ParameterError("tank block_mass must exceed (rope stiffness + block_tie_stiffness) * %g s^2 / 4 "
                                  "(stable with a %g s step), got %r" % (_MAX_STEP ** 2, _MAX_STEP, self.block_mass))
+        if not (math.isfinite(self.hook_friction_arm) and 0.0 <= self.hook_friction_arm <= MAX_HOOK_FRICTION_ARM):
+            raise ParameterError("tank hook_friction_arm must be in [0, %g] m (mu times the eye's radius; 0: off), "
+                                 "got %r" % (MAX_HOOK_FRICTION_ARM, self.hook_friction_arm))
+        if not (math.isfinite(self.hook_friction_angle) and MIN_HOOK_FRICTION_ANGLE <= self.hook_friction_angle <= 0.5):
+            raise ParameterError("tank hook_friction_angle must be in [%g, 0.5] rad, got %r"
+                                 % (MIN_HOOK_FRICTION_ANGLE, self.hook_friction_angle))
         if not math.isfinite(self.net_weight):
             raise ParameterError("tank net_weight must be finite, got %r" % (self.net_weight,))
         if not (math.isfinite(self.paw_buoyancy_offset) and abs(self.paw_buoyancy_offset) <= 1.0):
@@ -280,7 +318,7 @@ def tank_params_from_dict(data: Mapping[str, Any]) -> TankParams:
                          ("suspension", "hydrostatics", "torso_added_mass", "paw_added_mass", "drag"))
     rope = check_keys(data["suspension"], "suspension",
                       ("hook", "length", "stiffness", "damping", "torsion_stiffness", "torsion_damping",
-                       "block_mass", "block_drag", "block_tie_stiffness"),
+                       "block_mass", "block_drag", "block_tie_stiffness", "friction_arm", "friction_angle"),
                       required=("hook", "length", "stiffness", "damping"))
     hydro = check_keys(data["hydrostatics"], "hydrostatics",
                        ("net_weight", "center_of_buoyancy", "paw_buoyancy_offset"),
@@ -328,6 +366,9 @@ def tank_params_from_dict(data: Mapping[str, Any]) -> TankParams:
         block_drag=number(rope.get("block_drag", 2.0), "suspension.block_drag", 0.0, 1e4),
         block_tie_stiffness=number(rope.get("block_tie_stiffness", 0.0), "suspension.block_tie_stiffness", 0.0,
                                    1000.0),
+        hook_friction_arm=number(rope.get("friction_arm", 0.0), "suspension.friction_arm", 0.0, MAX_HOOK_FRICTION_ARM),
+        hook_friction_angle=number(rope.get("friction_angle", 0.005), "suspension.friction_angle",
+                                   MIN_HOOK_FRICTION_ANGLE, 0.5),
         paw_wake_fraction=number(wake.get("fraction", 0.0), "paw_wake.fraction", 0.0, 0.95),
         paw_wake_time_constant=number(wake.get("time_constant", 0.3), "paw_wake.time_constant", 0.02, 100.0),
         paw_wake_body_share=number(wake.get("body_share", 1.0), "paw_wake.body_share", 0.0, 1.0),
@@ -425,6 +466,9 @@ class TankModel(FloatingBaseModel):
         #: The rate of the water turning with the body (world axes, rad/s; :func:`~.tank_dynamics.body_wake_update`):
         #: plant state, zero at :meth:`attach`.
         self.body_wake = np.zeros(3)
+        #: The friction torque the hook's tie exerts on the rope (body axes, N m; the body feels its opposite;
+        #: :func:`~.tank_dynamics.hook_friction_update`): plant state, zero at :meth:`attach`.
+        self.hook_friction = np.zeros(3)
         self._drag_feet = np.zeros((4, 6))
         #: The torque each joint felt from its paw's drag at the last step's start (4 x 3, N m;
         #: :func:`~.tank_dynamics.paw_joint_loads`) when the loaded-servo effect is on, else None; the
@@ -438,6 +482,9 @@ class TankModel(FloatingBaseModel):
             raise ValueError("the torso's translational mass block must be diagonal and uncoupled (mass matrix "
                              "about the centre of mass of a symmetric ellipsoid)")
         self._constants = self._build_constants()
+        # tau_c of the hook friction (N m; 0: off) and the hook as the friction update takes it
+        self._friction_limit = self.hook_friction_limit()
+        self._hook = tuple(float(x) for x in tank.hook)
 
     # ---- set-up ------------------------------------------------------------------------------
 
@@ -445,6 +492,13 @@ class TankModel(FloatingBaseModel):
         """Rope tension at rest, hanging: torso net weight plus the paws' net weight (N)."""
         weight = self.tank.net_weight if self.tank.hydrostatics else 0.0
         return max(0.0, weight - 4.0 * self.net_paw_buoyancy)
+
+    def hook_friction_limit(self) -> float:
+        """The hook friction's Coulomb torque tau_c = mu r T_0 (N m): ``hook_friction_arm`` times the rope's
+        static tension; 0 without the suspension or the effect."""
+        if not self.tank.suspension:
+            return 0.0
+        return self.tank.hook_friction_arm * self.static_rope_tension()
 
     def attach(self, state: RigidBodyState) -> None:
         """Place the anchor straight above the hook of ``state``, the rope stretched by its static load."""
@@ -459,6 +513,7 @@ class TankModel(FloatingBaseModel):
         self._untwisted = tuple(self.untwisted.ravel().tolist())
         self.wake[:] = 0.0  # still water
         self.body_wake[:] = 0.0
+        self.hook_friction[:] = 0.0  # the tie unloaded
         self._constants = self._build_constants()
 
     @property
@@ -507,7 +562,8 @@ class TankModel(FloatingBaseModel):
         W = self.body_wake  # the water's rate in body axes, R^T W
         water = (R[0] * W[0] + R[3] * W[1] + R[6] * W[2], R[1] * W[0] + R[4] * W[1] + R[7] * W[2],
                  R[2] * W[0] + R[5] * W[1] + R[8] * W[2])
-        return tank_forces(self._constants, context.feet, self._wake_rows(context), water, context.lift,
+        held = (-float(self.hook_friction[0]), -float(self.hook_friction[1]), -float(self.hook_friction[2]))
+        return tank_forces(self._constants, context.feet, self._wake_rows(context), water, held, context.lift,
                            context.up_torque, context.leg_sums, p[0], p[1], p[2], v[0], v[1], v[2], R, w[0], w[1], w[2])
 
     def _wake_rows(self, context: "_TankContext") -> Sequence[Sequence[float]]:
@@ -566,7 +622,12 @@ class TankModel(FloatingBaseModel):
             if self.tank.body_wake_fraction > 0.0:
                 water = body_wake_update(self.body_wake, self.tank.body_wake_fraction,
                                          self.tank.body_wake_time_constant, R0, y0[9], y0[10], y0[11], dt)
-            y = tank_rk4(self._constants, context.feet, drag_feet, water, context.lift, context.up_torque,
+            held = _STILL
+            if self._friction_limit > 0.0:
+                held = hook_friction_update(self.hook_friction, self._friction_limit, self.tank.hook_friction_angle,
+                                            y0[0:3], y0[3:6], R0, y0[9:12], self._hook, self._anchor,
+                                            self.tank.rope_length, dt)
+            y = tank_rk4(self._constants, context.feet, drag_feet, water, held, context.lift, context.up_torque,
                          context.leg_sums, context.mass_solver, R0, y0, dt)
         except (ValueError, OverflowError) as exc:  # math.sin(inf) etc. once the state has blown up
             raise diverged(dt, state, str(exc)) from None

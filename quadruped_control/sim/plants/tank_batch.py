@@ -24,8 +24,9 @@ from quadruped_control.model.params import RobotParams
 from quadruped_control.sim.plants.paper_batch import held_step_inputs, leg_geometry, store_step_end
 from quadruped_control.sim.plants.rigid_body import RigidBodyState
 from quadruped_control.sim.plants.tank import TankModel, TankParams
-from quadruped_control.sim.plants.tank_dynamics import (body_wake_update, floating_block_update, leg_sums, mass_solver,
-                                                        paw_joint_loads, paw_wake_update, tank_rk4)
+from quadruped_control.sim.plants.tank_dynamics import (body_wake_update, floating_block_update, hook_friction_update,
+                                                        leg_sums, mass_solver, paw_joint_loads, paw_wake_update,
+                                                        tank_rk4)
 
 __all__ = ["TankPlantBatch", "tank_batch_step", "tank_trial_step"]
 
@@ -34,10 +35,12 @@ __all__ = ["TankPlantBatch", "tank_batch_step", "tank_trial_step"]
 def tank_trial_step(i, frames, five_bar, net_paw_buoyancy, drag_constant, drag, extra_lift, suspension, hook, anchor,
                     rope, torsion, untwisted, linear, quadratic, body_m, paw_added_mass, wake_fraction,
                     wake_time_constant, wake_body_share, body_wake_fraction, body_wake_time_constant, restoring, wake,
-                    water, p, v, R, w, q, q_dot, dt, feet, drag_feet, stall_torque, loads, block, block_rest) -> bool:
+                    water, p, v, R, w, q, q_dot, dt, feet, drag_feet, stall_torque, loads, block, block_rest, friction,
+                    hook_friction) -> bool:
     """One held-input RK4 step of eq. (tank) for trial ``i`` in place (its paws' ``wake[i]``, the water
-    turning with its body, ``water[i]``, and its floating block, ``anchor[i]``, too, with the body's state
-    at the step's start, as :class:`~quadruped_control.sim.plants.tank.TankModel`); False if it failed."""
+    turning with its body, ``water[i]``, its floating block, ``anchor[i]``, and its hook's friction,
+    ``friction[i]``, too, with the body's state at the step's start, as
+    :class:`~quadruped_control.sim.plants.tank.TankModel`); False if it failed."""
     ok, lift, up, R0 = held_step_inputs(q, q_dot, i, frames, five_bar, net_paw_buoyancy[i], restoring, R, feet)
     if not ok:
         return False
@@ -66,7 +69,12 @@ def tank_trial_step(i, frames, five_bar, net_paw_buoyancy, drag_constant, drag, 
         turning = body_wake_update(water[i], body_wake_fraction[i], body_wake_time_constant[i], R0, w[i, 0], w[i, 1],
                                    w[i, 2], dt)
     y0 = (p[i, 0], p[i, 1], p[i, 2], v[i, 0], v[i, 1], v[i, 2], 0.0, 0.0, 0.0, w[i, 0], w[i, 1], w[i, 2])
-    y = tank_rk4(constants, feet, rows, turning, lift, up, sums, solver, R0, y0, dt)
+    held = (0.0, 0.0, 0.0)
+    if hook_friction[i, 0] > 0.0:
+        held = hook_friction_update(friction[i], hook_friction[i, 0], hook_friction[i, 1], (y0[0], y0[1], y0[2]),
+                                    (y0[3], y0[4], y0[5]), R0, (y0[9], y0[10], y0[11]), hook[i], anchor[i], rope[i, 0],
+                                    dt)
+    y = tank_rk4(constants, feet, rows, turning, held, lift, up, sums, solver, R0, y0, dt)
     return store_step_end(y, R0, i, p, v, R, w)
 
 
@@ -74,14 +82,16 @@ def tank_trial_step(i, frames, five_bar, net_paw_buoyancy, drag_constant, drag, 
 def tank_batch_step(frames, five_bar, net_paw_buoyancy, drag_constant, drag, extra_lift, suspension, hook, anchor,
                     rope, torsion, untwisted, linear, quadratic, body_m, paw_added_mass, wake_fraction,
                     wake_time_constant, wake_body_share, body_wake_fraction, body_wake_time_constant, restoring, wake,
-                    water, p, v, R, w, q, q_dot, dt, failed, stall_torque, loads, block, block_rest):
+                    water, p, v, R, w, q, q_dot, dt, failed, stall_torque, loads, block, block_rest, friction,
+                    hook_friction):
     """One held-input RK4 step of eq. (tank) for every trial not yet ``failed``, in place on p, v, w
     (N, 3), R (N, 3, 3), the paws' ``wake`` (N, 4, 3), the water turning with each body, ``water``
     (N, 3), and each rope's upper end, ``anchor`` (N, 6). The constants are the fields of
     :data:`~.tank_dynamics.TankConstants`, one row (or value) per trial, ``restoring`` (N, 3, 3) each
     trial's torso buoyancy moment matrix, ``net_paw_buoyancy`` (N,) each trial's paws' buoyancy, ``block``
-    (N, 3) each floating block's mass, drag and tie stiffness (mass 0: a fixed anchor) and ``block_rest``
-    (N, 3) where it rests."""
+    (N, 3) each floating block's mass, drag and tie stiffness (mass 0: a fixed anchor), ``block_rest``
+    (N, 3) where it rests, ``friction`` (N, 3) each hook's friction torque (advanced in place) and
+    ``hook_friction`` (N, 2) its Coulomb torque tau_c (0: off) and presliding angle."""
     feet = np.empty((4, 6))
     drag_feet = np.empty((4, 6))
     for i in range(p.shape[0]):
@@ -91,7 +101,7 @@ def tank_batch_step(frames, five_bar, net_paw_buoyancy, drag_constant, drag, ext
                                                  wake_time_constant, wake_body_share, body_wake_fraction,
                                                  body_wake_time_constant, restoring, wake, water, p, v, R, w, q,
                                                  q_dot, dt, feet, drag_feet, stall_torque, loads, block,
-                                                 block_rest):
+                                                 block_rest, friction, hook_friction):
             failed[i] = True
 
 
@@ -124,6 +134,11 @@ class TankPlantBatch:
         self.block = np.array([[tank.block_mass, tank.block_drag, tank.block_tie_stiffness] for tank in tanks],
                               dtype=float).reshape(self.n, 3)
         self.block_rest = np.zeros((self.n, 3))
+        #: Each trial's hook friction (N, 2): tau_c (TankModel.hook_friction_limit; 0: off) and the presliding
+        #: angle; its torque (N, 3, body axes): TankModel.hook_friction for N trials.
+        self.hook_friction = np.array([[m.hook_friction_limit(), tank.hook_friction_angle]
+                                       for m, tank in zip(self.models, tanks)], dtype=float).reshape(self.n, 2)
+        self.friction = np.zeros((self.n, 3))
         self._load_constants()
 
     def _load_constants(self) -> None:
@@ -142,6 +157,7 @@ class TankPlantBatch:
                                         np.array(rotation[i], dtype=float), np.zeros(3)))
         self.wake[:] = 0.0
         self.water[:] = 0.0
+        self.friction[:] = 0.0
         self.loads[:] = 0.0
         self._load_constants()
         self.block_rest = np.array([m.block_rest for m in self.models], dtype=float).reshape(self.n, 3)
@@ -157,5 +173,5 @@ class TankPlantBatch:
                         c["wake_fraction"], c["wake_time_constant"], c["wake_body_share"], c["body_wake_fraction"],
                         c["body_wake_time_constant"], self.restoring, self.wake, self.water, p, v, R, w,
                         np.ascontiguousarray(q), np.ascontiguousarray(q_dot), float(dt), self.failed, self.stall_torque,
-                        self.loads, self.block, self.block_rest)
+                        self.loads, self.block, self.block_rest, self.friction, self.hook_friction)
         return p, v, R, w

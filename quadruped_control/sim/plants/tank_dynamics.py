@@ -4,9 +4,10 @@ per-trial plant (:class:`~quadruped_control.sim.plants.tank.TankModel`, plain Py
 when it is installed, :mod:`quadruped_common.jit`).
 
 - :func:`rope_force`, :func:`rope_twist`, :func:`rope_torsion_torque`, :func:`appendage_damping_torque`,
-  :func:`paw_wake_update`, :func:`body_wake_update`, :func:`floating_block_update`: the tank's own force
-  laws, the paws' wake, the water the body's appendages set turning and the floating block the rope hangs
-  from (physics and sources in :mod:`.tank`'s docstring);
+  :func:`paw_wake_update`, :func:`body_wake_update`, :func:`floating_block_update`,
+  :func:`hook_friction_update`: the tank's own force laws, the paws' wake, the water the body's appendages
+  set turning, the floating block the rope hangs from and the friction where the rope is tied to the hook
+  (physics and sources in :mod:`.tank`'s docstring);
 - :func:`leg_sums`, :func:`mass_solver`, :func:`solve_mass`: the mass matrix
   M = M_RB + M_A + sum_i M_paw(r_i) of a held step and its solution by the Schur complement;
 - :func:`tank_forces`: the right-hand side of eq. (tank), the paper's forces
@@ -31,7 +32,8 @@ from quadruped_control.model.kinematics import leg_jacobian_row
 from quadruped_control.sim.plants.paper import body_wrench_f
 from quadruped_control.sim.plants.rigid_body import Mat3, chart_point
 
-__all__ = ["TankConstants", "appendage_damping_torque", "body_wake_update", "floating_block_update", "leg_sums",
+__all__ = ["TankConstants", "appendage_damping_torque", "body_wake_update", "floating_block_update",
+           "hook_friction_update", "leg_sums",
            "mass_solver", "paw_joint_loads", "paw_wake_update", "rope_force", "rope_torsion_torque", "rope_twist",
            "solve_mass", "tank_chart_derivative", "tank_forces", "tank_rk4"]
 
@@ -216,6 +218,59 @@ def floating_block_update(anchor: Any, rest: Sequence[float], p: Sequence[float]
 
 
 @jitable
+def hook_friction_update(friction: Any, limit: float, angle: float, p: Sequence[float], v: Sequence[float],
+                         R: Sequence[float], w: Sequence[float], hook: Sequence[float], anchor: Sequence[float],
+                         length: float, dt: float) -> Vec3:
+    """Advance the friction torque where the rope is tied to the hook over a held step, in place on
+    ``friction`` (3, body axes, N m: the torque the tie exerts on the rope; the body feels its opposite),
+    and return the body-axes torque held over the step (:mod:`.tank`, "hook friction").
+
+    Dahl's friction model (P. R. Dahl, "Solid friction damping of mechanical vibrations", AIAA J. 14
+    (1976); the presliding part of the LuGre model, Canudas de Wit et al., IEEE TAC 40 (1995)) in vector
+    form on the rotation of the body relative to the rope's lower end, about the axes across the rope:
+    d tau_f/dt = (tau_c s - |s| tau_f) / theta_p, with s the relative rate across the rope, tau_c the
+    Coulomb torque (``limit``) and theta_p the presliding angle (``angle``; Dahl's stiffness is
+    tau_c / theta_p): a spring of that stiffness for small reversals, sliding friction tau_c s / |s| after
+    a relative turn of a few theta_p. The relative rate is s = omega - R^T Omega less its component along
+    the rope, Omega = -(u x q_dot) / d the rope's own swing rate (u the unit vector from the hook q to the
+    anchor at distance d, q_dot the hook's velocity relative to the anchor); the twist along the rope is the
+    rope torsion's (:func:`rope_torsion_torque`). Solved exactly with s held over the step,
+    tau_f <- tau_c s^ + (tau_f - tau_c s^) exp(-|s| dt / theta_p), so |tau_f| never exceeds tau_c; a slack
+    rope (d <= L_0) carries no load and its tie no friction. The body's state (p, v world, R row-major,
+    omega body) is the step's start; ``anchor`` (6 floats) the rope's upper end and its velocity."""
+    qx, qy, qz, qvx, qvy, qvz = _hook_motion(p[0], p[1], p[2], v[0], v[1], v[2], R, w[0], w[1], w[2], hook)
+    dx, dy, dz = anchor[0] - qx, anchor[1] - qy, anchor[2] - qz
+    distance = math.sqrt(dx * dx + dy * dy + dz * dz)
+    if distance <= length:
+        friction[0] = friction[1] = friction[2] = 0.0
+        return (0.0, 0.0, 0.0)
+    ux, uy, uz = dx / distance, dy / distance, dz / distance
+    # the rope's swing rate Omega = -(u x q_dot_rel) / d, world axes, then in body axes
+    ox, oy, oz = _cross(ux, uy, uz, qvx - anchor[3], qvy - anchor[4], qvz - anchor[5])
+    ox, oy, oz = -ox / distance, -oy / distance, -oz / distance
+    r0, r1, r2, r3, r4, r5, r6, r7, r8 = R[0], R[1], R[2], R[3], R[4], R[5], R[6], R[7], R[8]
+    sx = w[0] - (r0 * ox + r3 * oy + r6 * oz)
+    sy = w[1] - (r1 * ox + r4 * oy + r7 * oz)
+    sz = w[2] - (r2 * ox + r5 * oy + r8 * oz)
+    bx, by, bz = r0 * ux + r3 * uy + r6 * uz, r1 * ux + r4 * uy + r7 * uz, r2 * ux + r5 * uy + r8 * uz  # u, body
+    along = sx * bx + sy * by + sz * bz
+    sx, sy, sz = sx - along * bx, sy - along * by, sz - along * bz
+    rate = math.sqrt(sx * sx + sy * sy + sz * sz)
+    if rate > 0.0:
+        decay = math.exp(-rate * dt / angle)
+        tx, ty, tz = limit * sx / rate, limit * sy / rate, limit * sz / rate
+        friction[0] = tx + (friction[0] - tx) * decay
+        friction[1] = ty + (friction[1] - ty) * decay
+        friction[2] = tz + (friction[2] - tz) * decay
+    # the tie turns with the body; the rope's direction in it moves: keep the part across the rope
+    along = friction[0] * bx + friction[1] * by + friction[2] * bz
+    friction[0] -= along * bx
+    friction[1] -= along * by
+    friction[2] -= along * bz
+    return (-friction[0], -friction[1], -friction[2])
+
+
+@jitable
 def paw_joint_loads(q: Any, frames: Any, five_bar: Sequence[float], drag_rows: Any, drag_constant: float, bx: float,
                     by: float, bz: float, wx: float, wy: float, wz: float, loads: Any) -> bool:
     """The torque each joint feels from its paw's drag, tau_j = J_P,i^B[:, j] . F_i (N m, along the joint
@@ -340,15 +395,16 @@ def solve_mass(solver: Tuple[Any, ...], g0: float, g1: float, g2: float, g3: flo
 
 @jitable
 def tank_forces(k: TankConstants, feet: Sequence[Sequence[float]], drag_feet: Sequence[Sequence[float]],
-                water: Sequence[float], lift: float, up_torque: Sequence[float], sums: Tuple[Any, ...], px: float,
-                py: float, pz: float, vx: float, vy: float, vz: float, R: Mat3, wx: float, wy: float,
-                wz: float) -> Tuple[float, ...]:
+                water: Sequence[float], held_torque: Sequence[float], lift: float, up_torque: Sequence[float],
+                sums: Tuple[Any, ...], px: float, py: float, pz: float, vx: float, vy: float, vz: float, R: Mat3,
+                wx: float, wy: float, wz: float) -> Tuple[float, ...]:
     """Right-hand side of eq. (tank): the 6 body-axes generalised forces minus C(nu) nu and f_paw, for
     the constants ``k`` (:data:`TankConstants`), the step's legs (``feet`` rows, paw buoyancy ``lift`` and
     torque matrix ``up_torque`` with the torso's buoyancy moment, :func:`leg_sums` ``sums``; ``drag_feet``
     the rows the paw drag sees: ``feet`` itself, or with each paw's wake taken off, :func:`paw_wake_update`;
     ``water`` the body-axes rate of the water the appendages set turning, :func:`body_wake_update`, zeros
-    without it) and the state p, v (world), R (row-major), omega (body)."""
+    without it; ``held_torque`` a body-axes torque held over the step, the hook's friction,
+    :func:`hook_friction_update`, zeros without it) and the state p, v (world), R (row-major), omega (body)."""
     (drag_constant, drag, extra_lift, suspension, hook, anchor, rope, torsion, untwisted, linear, quadratic,
      body_m, ma, _wake_fraction, _wake_time_constant, _wake_body_share, _body_wake_fraction,
      _body_wake_time_constant) = k
@@ -369,6 +425,8 @@ def tank_forces(k: TankConstants, feet: Sequence[Sequence[float]], drag_feet: Se
         if torsion[0] > 0.0 or torsion[1] > 0.0:
             mx, my, mz = rope_torsion_torque(R, untwisted, (wx, wy, wz), torsion[0], torsion[1])
             tx, ty, tz = tx + mx, ty + my, tz + mz
+        # the hook's friction (exactly today's torque without it: x + 0.0 == x)
+        tx, ty, tz = tx + held_torque[0], ty + held_torque[1], tz + held_torque[2]
     if linear[0] > 0.0 or linear[1] > 0.0 or linear[2] > 0.0 or quadratic[0] > 0.0 or quadratic[1] > 0.0 \
             or quadratic[2] > 0.0:
         # against the water the appendages set turning (exactly omega without it: x - 0.0 == x)
@@ -415,13 +473,14 @@ def tank_forces(k: TankConstants, feet: Sequence[Sequence[float]], drag_feet: Se
 
 @jitable
 def tank_chart_derivative(k: TankConstants, feet: Sequence[Sequence[float]], drag_feet: Sequence[Sequence[float]],
-                          water: Sequence[float], lift: float, up_torque: Sequence[float], sums: Tuple[Any, ...],
-                          solver: Tuple[Any, ...], R0: Mat3, y: Sequence[float]) -> Tuple[float, ...]:
+                          water: Sequence[float], held_torque: Sequence[float], lift: float, up_torque: Sequence[float],
+                          sums: Tuple[Any, ...], solver: Tuple[Any, ...], R0: Mat3,
+                          y: Sequence[float]) -> Tuple[float, ...]:
     """d/dt of the chart state y = (p, v, xi, omega) (12 floats) under eq. (tank), R = R0 exp(hat(xi))."""
     px, py, pz, vx, vy, vz, x, y_, z, wx, wy, wz = y
     R, (rx, ry, rz) = chart_point(R0, x, y_, z, wx, wy, wz)
-    g0, g1, g2, g3, g4, g5 = tank_forces(k, feet, drag_feet, water, lift, up_torque, sums, px, py, pz, vx, vy, vz,
-                                         R, wx, wy, wz)
+    g0, g1, g2, g3, g4, g5 = tank_forces(k, feet, drag_feet, water, held_torque, lift, up_torque, sums, px, py, pz,
+                                         vx, vy, vz, R, wx, wy, wz)
     n0, n1, n2, n3, n4, n5 = solve_mass(solver, g0, g1, g2, g3, g4, g5)
     r0, r1, r2, r3, r4, r5, r6, r7, r8 = R
     bx, by, bz = r0 * vx + r3 * vy + r6 * vz, r1 * vx + r4 * vy + r7 * vz, r2 * vx + r5 * vy + r8 * vz
@@ -441,17 +500,21 @@ def _axpy12(y: Sequence[float], a: float, k: Sequence[float]) -> Tuple[float, ..
 
 @jitable
 def tank_rk4(k: TankConstants, feet: Sequence[Sequence[float]], drag_feet: Sequence[Sequence[float]],
-             water: Sequence[float], lift: float, up_torque: Sequence[float], sums: Tuple[Any, ...],
-             solver: Tuple[Any, ...], R0: Mat3, y0: Sequence[float], dt: float) -> Tuple[float, ...]:
+             water: Sequence[float], held_torque: Sequence[float], lift: float, up_torque: Sequence[float],
+             sums: Tuple[Any, ...], solver: Tuple[Any, ...], R0: Mat3, y0: Sequence[float],
+             dt: float) -> Tuple[float, ...]:
     """One classic RK4 step of :func:`tank_chart_derivative` in the chart around R0 from the chart state
-    y0 = (p, v, 0, omega), the legs (the paws' wake, ``drag_feet``, and the water turning with the body,
-    ``water``) held over it: the chart state at its end (12 floats; the caller maps it back with
-    :func:`~.rigid_body.chart_step_end`)."""
+    y0 = (p, v, 0, omega), the legs (the paws' wake, ``drag_feet``, the water turning with the body,
+    ``water``, and the hook's friction, ``held_torque``) held over it: the chart state at its end (12 floats;
+    the caller maps it back with :func:`~.rigid_body.chart_step_end`)."""
     h = 0.5 * dt
-    k1 = tank_chart_derivative(k, feet, drag_feet, water, lift, up_torque, sums, solver, R0, y0)
-    k2 = tank_chart_derivative(k, feet, drag_feet, water, lift, up_torque, sums, solver, R0, _axpy12(y0, h, k1))
-    k3 = tank_chart_derivative(k, feet, drag_feet, water, lift, up_torque, sums, solver, R0, _axpy12(y0, h, k2))
-    k4 = tank_chart_derivative(k, feet, drag_feet, water, lift, up_torque, sums, solver, R0, _axpy12(y0, dt, k3))
+    k1 = tank_chart_derivative(k, feet, drag_feet, water, held_torque, lift, up_torque, sums, solver, R0, y0)
+    k2 = tank_chart_derivative(k, feet, drag_feet, water, held_torque, lift, up_torque, sums, solver, R0,
+                               _axpy12(y0, h, k1))
+    k3 = tank_chart_derivative(k, feet, drag_feet, water, held_torque, lift, up_torque, sums, solver, R0,
+                               _axpy12(y0, h, k2))
+    k4 = tank_chart_derivative(k, feet, drag_feet, water, held_torque, lift, up_torque, sums, solver, R0,
+                               _axpy12(y0, dt, k3))
     s = dt / 6.0
     return (y0[0] + s * (k1[0] + 2.0 * (k2[0] + k3[0]) + k4[0]), y0[1] + s * (k1[1] + 2.0 * (k2[1] + k3[1]) + k4[1]),
             y0[2] + s * (k1[2] + 2.0 * (k2[2] + k3[2]) + k4[2]), y0[3] + s * (k1[3] + 2.0 * (k2[3] + k3[3]) + k4[3]),
