@@ -358,6 +358,7 @@ def test_candidate_effects_are_off_unless_configured() -> None:
         assert params.rope_torsion_stiffness == params.rope_torsion_damping == 0.0
         assert params.paw_wake_fraction == params.body_wake_fraction == 0.0
         assert params.block_mass == 0.0  # the anchor is fixed
+        assert params.hook_friction_arm == 0.0
 
 
 @pytest.mark.parametrize("linear, quadratic", [(0.02, 0.0), (0.0, 0.05), (0.0, 0.0)])
@@ -767,3 +768,117 @@ def test_a_servo_dead_band_is_read_from_tank_yaml_and_a_unit_slip_is_refused(tmp
     np.testing.assert_array_equal(plain.rpy, before.rpy)
     lag = np.abs(banded.joint_targets - banded.joint_positions)
     assert lag.max() > 0.01 and not np.array_equal(plain.rpy, banded.rpy)
+
+
+# ---- hook friction ---------------------------------------------------------------------------------
+
+def _hook_friction_step(friction, rate, limit=0.004, angle=0.005, velocity=(0.0, 0.0, 0.0), slack=False, dt=DT):
+    """One hook_friction_update of a level body at the origin whose rope (length 0.5 m) runs straight up from
+    the hook at (0, 0, 0.077) to an anchor 0.51 m above it (0.49 m: slack)."""
+    from quadruped_control.sim.plants.tank_dynamics import hook_friction_update
+    anchor = (0.0, 0.0, 0.077 + (0.49 if slack else 0.51), 0.0, 0.0, 0.0)
+    return np.array(hook_friction_update(friction, limit, angle, (0.0, 0.0, 0.0), tuple(velocity),
+                                         np.eye(3).ravel().tolist(), tuple(rate), (0.0, 0.0, 0.077), anchor, 0.5,
+                                         dt))
+
+
+def test_hook_friction_follows_dahls_law_across_the_rope() -> None:
+    """d tau_f/dt = (tau_c s - |s| tau_f) / theta_p on the rate s across the rope, exact for a held rate: one
+    step builds tau_c s^ (1 - exp(-|s| dt / theta_p)); a long turn slides at tau_c; the body feels -tau_f; the
+    twist about the (vertical) rope is left to the rope torsion; a reversal unloads the tie and then slides the
+    other way; a still body keeps what the tie holds; a slack rope holds nothing."""
+    limit, angle = 0.004, 0.005
+    friction = np.zeros(3)
+    felt = _hook_friction_step(friction, (0.2, 0.0, 0.3), limit, angle)
+    # turning about x swings the hook (0.077 m above the centre) sideways, and the rope (0.51 m) the other way
+    rate = 0.2 * (1.0 + 0.077 / 0.51)
+    expected = limit * (1.0 - math.exp(-rate * DT / angle))
+    np.testing.assert_allclose(friction, [expected, 0.0, 0.0], rtol=1e-14, atol=1e-18)
+    np.testing.assert_allclose(felt, -friction, rtol=0, atol=0)
+    for _ in range(50):  # 0.1 rad of relative turn: 20 presliding angles
+        _hook_friction_step(friction, (0.2, 0.0, 0.3), limit, angle)
+    np.testing.assert_allclose(friction, [limit, 0.0, 0.0], rtol=1e-8)
+    history = []
+    for _ in range(50):  # reversed: through zero to the other side, never past tau_c
+        _hook_friction_step(friction, (-0.2, 0.0, 0.0), limit, angle)
+        history.append(np.linalg.norm(friction))
+    assert max(history) <= limit
+    np.testing.assert_allclose(friction, [-limit, 0.0, 0.0], rtol=1e-8)
+    held = friction.copy()
+    _hook_friction_step(friction, (0.0, 0.0, 0.5), limit, angle)  # a twist along the rope moves nothing
+    np.testing.assert_array_equal(friction, held)
+    assert not _hook_friction_step(friction, (0.2, 0.0, 0.0), limit, angle, slack=True).any()
+    assert not friction.any()
+
+
+def test_hook_friction_sees_the_body_turn_relative_to_the_swinging_rope() -> None:
+    """A body that does not turn while its hook moves sideways turns relative to the rope, whose swing rate
+    is Omega = -(u x q_dot) / d (d = 0.51 m): the hook moving along +x at 0.05 m/s turns the rope about -y,
+    so the body turns about +y relative to it; turning with the rope (omega_y = -v / (d + h), the hook then
+    moving at v + omega_y h), it does not slide at all."""
+    limit, angle, d = 0.004, 0.005, 0.51
+    friction = np.zeros(3)
+    _hook_friction_step(friction, (0.0, 0.0, 0.0), limit, angle, velocity=(0.05, 0.0, 0.0))
+    np.testing.assert_allclose(friction, [0.0, limit * (1.0 - math.exp(-0.05 / d * DT / angle)), 0.0], rtol=1e-12)
+    friction[:] = 0.0
+    _hook_friction_step(friction, (0.0, -0.05 / (d + 0.077), 0.0), limit, angle, velocity=(0.05, 0.0, 0.0))
+    np.testing.assert_allclose(friction, 0.0, atol=1e-18)
+
+
+def _released_roll(tank: TankParams, tilt_deg: float, seconds: float) -> tuple:
+    """Roll angles (deg) of the hanging robot released at rest from ``tilt_deg`` of roll, legs still, and its
+    rate at the end."""
+    model = TankModel(ROBOT, tank)
+    state = RigidBodyState(rotation=rpy_to_rot(math.radians(tilt_deg), 0.0, 0.0))
+    model.attach(state)
+    states = _spin(model, state, seconds)[1:]
+    return (np.degrees([math.atan2(s.rotation[2, 1], s.rotation[2, 2]) for s in states]),
+            float(np.abs(states[-1].omega).max()))
+
+
+def test_hook_friction_holds_what_it_can_and_stops_the_swing_in_its_dead_zone() -> None:
+    """The robot released at 3 deg of roll under a restoring torque r: without friction it swings through
+    level and is still swinging after 20 s; a tie that holds 2 r keeps it on its side of level, where it
+    stops; one that holds r / 2 lets it swing back and stops it within the dead zone tau_c / k = 1.5 deg of
+    level (k = r / 3 deg the restoring stiffness)."""
+    base = TankParams(center_of_buoyancy=(0.0, 0.0, 0.0))
+    model = TankModel(ROBOT, base)
+    restoring = abs(model.restoring_torque(rpy_to_rot(math.radians(3.0), 0.0, 0.0), nominal_joint_angles(ROBOT))[0])
+    assert restoring > 1e-3
+    free, free_rate = _released_roll(base, 3.0, 20.0)
+    assert free.min() < -1.5 and free_rate > 1e-2
+    arm = 2.0 * restoring / model.static_rope_tension()
+    held, held_rate = _released_roll(base.with_values(hook_friction_arm=arm), 3.0, 20.0)
+    assert held.min() > 1.5 and held_rate < 2e-3
+    slipping, slipping_rate = _released_roll(base.with_values(hook_friction_arm=arm / 4.0), 3.0, 20.0)
+    assert slipping.min() < 0.0 and abs(slipping[-1]) <= 1.5 and slipping_rate < 1e-3
+
+
+def test_hook_friction_tends_to_todays_model_as_it_vanishes() -> None:
+    """The limiting case: arm 0 is today's model exactly (whatever the presliding angle), and a vanishing arm
+    tends to it (1e-9 m: states within 1e-9 after 5 s of a released swing)."""
+    base = TankParams(center_of_buoyancy=(0.0, 0.0, 0.001))
+    today, _ = _released_roll(base, 3.0, 5.0)
+    off, _ = _released_roll(base.with_values(hook_friction_angle=0.02), 3.0, 5.0)
+    np.testing.assert_array_equal(off, today)
+    tiny, _ = _released_roll(base.with_values(hook_friction_arm=1e-9), 3.0, 5.0)
+    assert 0.0 < np.abs(tiny - today).max() < 1e-9 * 180.0 / math.pi * 1e3
+
+
+@pytest.mark.parametrize("key, value", [("friction_arm", -0.001), ("friction_arm", 0.06), ("friction_arm", "x"),
+                                        ("friction_angle", 0.0), ("friction_angle", 0.6)])
+def test_hook_friction_keys_are_checked(tmp_path, key: str, value) -> None:
+    import yaml
+    with open(config_path("tank.yaml")) as stream:
+        tree = yaml.safe_load(stream)
+    tree["suspension"][key] = value
+    path = tmp_path / "tank.yaml"
+    path.write_text(yaml.safe_dump(tree))
+    with pytest.raises(ParameterError, match="suspension.%s" % key):
+        load_tank_params(str(path))
+    tree["suspension"][key] = 0.003
+    path.write_text(yaml.safe_dump(tree))
+    params = load_tank_params(str(path))
+    assert (params.hook_friction_arm if key == "friction_arm" else params.hook_friction_angle) == 0.003
+    with pytest.raises(ParameterError, match="hook_friction_angle"):
+        TankParams(hook_friction_angle=float("nan"))
