@@ -35,5 +35,7 @@ fi
 echo "python38: $("$VENV/bin/python" --version) from $py38, $(basename "$REQUIREMENTS")"
 cd "$ROOT" || exit 1
 # The ROS environment is left out on purpose: this is what the pure core needs and nothing more.
+# Twice the main run's per-test timeout: without numba (not in the Jetson's requirements) the studies' tests
+# run their batches as plain Python, several times slower, and a loaded machine slows them again.
 env -u PYTHONPATH -u ROS_PACKAGE_PATH -u CMAKE_PREFIX_PATH PATH="$VENV/bin:/usr/bin:/bin" \
-  "$VENV/bin/python" -m pytest -q -p no:cacheprovider tests "$@"
+  "$VENV/bin/python" -m pytest -q -p no:cacheprovider --timeout 1200 tests "$@"

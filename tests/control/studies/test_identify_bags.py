@@ -10,6 +10,7 @@ import os
 import numpy as np
 import pytest
 
+from quadruped_common import jit
 from quadruped_common.robot import JOINT_NAMES
 from quadruped_common.so3 import geodesic_angles, rot_to_quat, rot_z
 from quadruped_control.analysis.bag_report import BagData
@@ -24,6 +25,12 @@ from tests.repo import REPO_ROOT
 TANK = "config/tank_identified.yaml"
 COMMAND_TYPE = "underwater_quadruped/msg/ServoCommand"
 ROBOT = load_robot_params(None)
+
+#: The fits below run thousands of replays; uncompiled (the Jetson's Python 3.8 venv has no numba: the robot
+#: never runs a study) each takes over the 600 s test timeout on a loaded 2-core machine. The main run
+#: compiles them, and tests/control/sim/test_batch.py checks the compiled loops against their plain Python.
+needs_compiled_loops = pytest.mark.skipif(not jit.AVAILABLE, reason="numba is not installed: the replay fits "
+                                                                     "run uncompiled, past the test timeout")
 
 
 def _stance() -> np.ndarray:
@@ -94,6 +101,7 @@ def test_commands_are_held_to_the_next_and_missing_where_stale() -> None:
     assert np.isnan(commands[stale]).all() and np.isfinite(commands[(t >= 1.5) & (t < 1.9)]).all()
 
 
+@needs_compiled_loops
 def test_the_servo_fit_recovers_the_lag_and_says_what_it_cannot_pin_down() -> None:
     """The sixth set's servos (lag 6.185 x 30 ms, no dead band) in a 20 s run: the lag comes back to a step
     of its grid and the dead band to 0; the rate limit hardly binds at that lag (a stroke's error stays
@@ -111,6 +119,7 @@ def test_the_servo_fit_recovers_the_lag_and_says_what_it_cannot_pin_down() -> No
     assert best["objective"] < 0.01 < objective.ideal_deg()
 
 
+@needs_compiled_loops
 def test_the_servo_fit_measures_a_dead_band_from_the_commands_and_the_feedback(tmp_path) -> None:
     """The same run with the servos' dead band at 0.007 rad (0.4 deg), the feedback's noise at 0.05 deg:
     the dead band comes back to a step of its 0.002 rad grid and the lag to a step of its own, the fit's
@@ -222,6 +231,7 @@ def test_a_bag_reads_back_as_the_run_it_recorded(run) -> None:
     np.testing.assert_array_equal(read.commands[:-1], record.commands[:-1])
 
 
+@needs_compiled_loops
 def test_the_fit_recovers_what_a_simulated_run_was_made_with(tmp_path) -> None:
     """The base is the truth with the centre of buoyancy and the roll/pitch damping moved away; a 25 s run
     with the IMU's and the feedback's noise pins both down again."""
