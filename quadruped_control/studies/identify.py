@@ -102,6 +102,8 @@ PARAMETERS: Tuple[Tuple[str, float, float], ...] = (
     ("paw_buoyancy_offset", -0.05, 0.13),  # N per paw beyond robot.yaml's -0.029: a 40 g paw to a floating one
     ("servo_dead_band", 0.0, 0.02),        # rad, half-width: none to a 10 us amplifier band plus 0.7 deg backlash
     ("hook_friction_arm", 0.0, 0.004),     # m: mu r of the rope's tie on the hook's eye, none to mu 0.5 on 4 mm, x2
+    ("hook_friction_static_ratio", 1.0, 2.0),  # the tie's static over sliding friction: none to dry fibre's 2
+    ("hook_friction_stribeck_rate", 0.01, 0.3),  # rad/s: 30 um/s to 1 mm/s of slip on a 3 mm wire
 )
 
 #: Each parameter's (low, high): :data:`PARAMETERS` by name.
@@ -161,6 +163,8 @@ _PLACES: Dict[str, _Place] = {
     "paw_buoyancy_offset": _Place("paw_buoyancy_offset", (), "hydrostatics", "paw_buoyancy_offset"),
     "servo_dead_band": _Place("servo_dead_band", (), "servos", "dead_band"),
     "hook_friction_arm": _Place("hook_friction_arm", (), "suspension", "friction_arm"),
+    "hook_friction_static_ratio": _Place("hook_friction_static_ratio", (), "suspension", "friction_static_ratio"),
+    "hook_friction_stribeck_rate": _Place("hook_friction_stribeck_rate", (), "suspension", "friction_stribeck_rate"),
 }
 
 

@@ -117,8 +117,13 @@ Candidate effects of the identification against Table 1, each zero (today's mode
   notices. Across the rope only (roll and pitch for a vertical rope); the twist is the rope torsion's.
   Advanced once per step with the body state of the step's start, like the wakes (exact for the held
   rate, so the torque never exceeds tau_c), and held through the step's RK4 stages. The light rope's
-  reaction, a couple of tau_f / L on its ends, is left out (mN against the rope's newtons). arm = 0 (the
-  default) is today's model exactly.
+  reaction, a couple of tau_f / L on its ends, is left out (mN against the rope's newtons). A tie that has
+  stuck may hold more than it slides with (``hook_friction_static_ratio`` tau_s / tau_c, 1-2 for dry fibre
+  on metal; 1, the default, is Dahl's model exactly): below the Stribeck rate s_s
+  (``hook_friction_stribeck_rate``, the body's turn relative to the rope; 0.02 rad/s is 60 um/s of slip on a
+  3 mm wire) the limit rises towards tau_s, LuGre's Stribeck curve at Dahl's stiffness. The integral then
+  winds further before the tie breaks away, and the torque it built carries the body on once the friction
+  drops to tau_c. arm = 0 (the default) is today's model exactly.
 
 Each effect has a switch (:class:`TankParams`); with all of them off the equations reduce to the paper's
 eq. (trans), (rot) (tested). Parameters: ``config/tank.yaml``.
@@ -171,6 +176,10 @@ MAX_HOOK_FRICTION_ARM = 0.05
 #: roll inertia (0.058 kg m^2 without added mass) it rings at 51 rad/s, 0.5 rad per step, well inside what a
 #: held step resolves.
 MIN_HOOK_FRICTION_ANGLE = 0.001
+
+#: The largest static over sliding friction ratio tank.yaml accepts: 3, past the 1.1-2 of dry fibre on metal,
+#: so that a ratio of torques (N m for mN m) is refused.
+MAX_HOOK_FRICTION_STATIC_RATIO = 3.0
 
 
 @dataclass(frozen=True)
@@ -231,6 +240,10 @@ class TankParams:
     #: angle theta_p (rad) over which it builds up (:func:`~.tank_dynamics.hook_friction_update`)
     hook_friction_arm: float = 0.0
     hook_friction_angle: float = 0.005
+    #: its static friction over the sliding one, tau_s / tau_c (1: none above it), and the Stribeck rate s_s
+    #: (rad/s) of the body relative to the rope below which the static friction holds
+    hook_friction_static_ratio: float = 1.0
+    hook_friction_stribeck_rate: float = 0.02
 
     def __post_init__(self) -> None:
         for name in ("rope_length", "rope_stiffness"):
@@ -282,6 +295,14 @@ class TankParams:
         if not (math.isfinite(self.hook_friction_angle) and MIN_HOOK_FRICTION_ANGLE <= self.hook_friction_angle <= 0.5):
             raise ParameterError("tank hook_friction_angle must be in [%g, 0.5] rad, got %r"
                                  % (MIN_HOOK_FRICTION_ANGLE, self.hook_friction_angle))
+        if not (math.isfinite(self.hook_friction_static_ratio)
+                and 1.0 <= self.hook_friction_static_ratio <= MAX_HOOK_FRICTION_STATIC_RATIO):
+            raise ParameterError("tank hook_friction_static_ratio must be in [1, %g] (static over sliding "
+                                 "friction), got %r" % (MAX_HOOK_FRICTION_STATIC_RATIO,
+                                                        self.hook_friction_static_ratio))
+        if not (math.isfinite(self.hook_friction_stribeck_rate) and 1e-4 <= self.hook_friction_stribeck_rate <= 1.0):
+            raise ParameterError("tank hook_friction_stribeck_rate must be in [1e-4, 1] rad/s, got %r"
+                                 % (self.hook_friction_stribeck_rate,))
         if not math.isfinite(self.net_weight):
             raise ParameterError("tank net_weight must be finite, got %r" % (self.net_weight,))
         if not (math.isfinite(self.paw_buoyancy_offset) and abs(self.paw_buoyancy_offset) <= 1.0):
@@ -319,7 +340,8 @@ def tank_params_from_dict(data: Mapping[str, Any]) -> TankParams:
                          ("suspension", "hydrostatics", "torso_added_mass", "paw_added_mass", "drag"))
     rope = check_keys(data["suspension"], "suspension",
                       ("hook", "length", "stiffness", "damping", "torsion_stiffness", "torsion_damping",
-                       "block_mass", "block_drag", "block_tie_stiffness", "friction_arm", "friction_angle"),
+                       "block_mass", "block_drag", "block_tie_stiffness", "friction_arm", "friction_angle",
+                       "friction_static_ratio", "friction_stribeck_rate"),
                       required=("hook", "length", "stiffness", "damping"))
     hydro = check_keys(data["hydrostatics"], "hydrostatics",
                        ("net_weight", "center_of_buoyancy", "paw_buoyancy_offset"),
@@ -370,6 +392,10 @@ def tank_params_from_dict(data: Mapping[str, Any]) -> TankParams:
         hook_friction_arm=number(rope.get("friction_arm", 0.0), "suspension.friction_arm", 0.0, MAX_HOOK_FRICTION_ARM),
         hook_friction_angle=number(rope.get("friction_angle", 0.005), "suspension.friction_angle",
                                    MIN_HOOK_FRICTION_ANGLE, 0.5),
+        hook_friction_static_ratio=number(rope.get("friction_static_ratio", 1.0), "suspension.friction_static_ratio",
+                                          1.0, MAX_HOOK_FRICTION_STATIC_RATIO),
+        hook_friction_stribeck_rate=number(rope.get("friction_stribeck_rate", 0.02),
+                                           "suspension.friction_stribeck_rate", 1e-4, 1.0),
         paw_wake_fraction=number(wake.get("fraction", 0.0), "paw_wake.fraction", 0.0, 0.95),
         paw_wake_time_constant=number(wake.get("time_constant", 0.3), "paw_wake.time_constant", 0.02, 100.0),
         paw_wake_body_share=number(wake.get("body_share", 1.0), "paw_wake.body_share", 0.0, 1.0),
@@ -626,7 +652,8 @@ class TankModel(FloatingBaseModel):
             held = _STILL
             if self._friction_limit > 0.0:
                 held = hook_friction_update(self.hook_friction, self._friction_limit, self.tank.hook_friction_angle,
-                                            y0[0:3], y0[3:6], R0, y0[9:12], self._hook, self._anchor,
+                                            self.tank.hook_friction_static_ratio,
+                                            self.tank.hook_friction_stribeck_rate, y0[0:3], y0[3:6], R0, y0[9:12], self._hook, self._anchor,
                                             self.tank.rope_length, dt)
             y = tank_rk4(self._constants, context.feet, drag_feet, water, held, context.lift, context.up_torque,
                          context.leg_sums, context.mass_solver, R0, y0, dt)

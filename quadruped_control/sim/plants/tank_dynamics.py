@@ -218,9 +218,9 @@ def floating_block_update(anchor: Any, rest: Sequence[float], p: Sequence[float]
 
 
 @jitable
-def hook_friction_update(friction: Any, limit: float, angle: float, p: Sequence[float], v: Sequence[float],
-                         R: Sequence[float], w: Sequence[float], hook: Sequence[float], anchor: Sequence[float],
-                         length: float, dt: float) -> Vec3:
+def hook_friction_update(friction: Any, limit: float, angle: float, static_ratio: float, stribeck_rate: float,
+                         p: Sequence[float], v: Sequence[float], R: Sequence[float], w: Sequence[float],
+                         hook: Sequence[float], anchor: Sequence[float], length: float, dt: float) -> Vec3:
     """Advance the friction torque where the rope is tied to the hook over a held step, in place on
     ``friction`` (3, body axes, N m: the torque the tie exerts on the rope; the body feels its opposite),
     and return the body-axes torque held over the step (:mod:`.tank`, "hook friction").
@@ -236,7 +236,15 @@ def hook_friction_update(friction: Any, limit: float, angle: float, p: Sequence[
     anchor at distance d, q_dot the hook's velocity relative to the anchor); the twist along the rope is the
     rope torsion's (:func:`rope_torsion_torque`). Solved exactly with s held over the step,
     tau_f <- tau_c s^ + (tau_f - tau_c s^) exp(-|s| dt / theta_p), so |tau_f| never exceeds tau_c; a slack
-    rope (d <= L_0) carries no load and its tie no friction. The body's state (p, v world, R row-major,
+    rope (d <= L_0) carries no load and its tie no friction.
+
+    Static friction above the sliding one (``static_ratio`` = tau_s / tau_c > 1; 1 is Dahl's model exactly):
+    the LuGre model's Stribeck curve, g(|s|) = tau_c (1 + (tau_s / tau_c - 1) exp(-(|s| / s_s)^2)), with s_s
+    the Stribeck rate (``stribeck_rate``, rad/s), and its bristle law at Dahl's stiffness sigma_0 = tau_c /
+    theta_p: d tau_f/dt = sigma_0 (s - |s| tau_f / g(|s|)). Held over the step, tau_f <- g s^ + (tau_f -
+    g s^) exp(-sigma_0 |s| dt / g): a tie that has stuck holds up to tau_s, and once the body turns faster
+    than s_s relative to the rope it lets go to tau_c (Canudas de Wit et al. 1995, eq. (2)-(4); the stick-
+    slip of Armstrong-Helouvry et al., Automatica 30 (1994)). The body's state (p, v world, R row-major,
     omega body) is the step's start; ``anchor`` (6 floats) the rope's upper end and its velocity."""
     qx, qy, qz, qvx, qvy, qvz = _hook_motion(p[0], p[1], p[2], v[0], v[1], v[2], R, w[0], w[1], w[2], hook)
     dx, dy, dz = anchor[0] - qx, anchor[1] - qy, anchor[2] - qz
@@ -257,8 +265,13 @@ def hook_friction_update(friction: Any, limit: float, angle: float, p: Sequence[
     sx, sy, sz = sx - along * bx, sy - along * by, sz - along * bz
     rate = math.sqrt(sx * sx + sy * sy + sz * sz)
     if rate > 0.0:
-        decay = math.exp(-rate * dt / angle)
-        tx, ty, tz = limit * sx / rate, limit * sy / rate, limit * sz / rate
+        level = limit
+        if static_ratio > 1.0:  # the Stribeck curve g(|s|)
+            level = limit * (1.0 + (static_ratio - 1.0) * math.exp(-(rate / stribeck_rate) ** 2))
+            decay = math.exp(-rate * dt * limit / (angle * level))
+        else:
+            decay = math.exp(-rate * dt / angle)
+        tx, ty, tz = level * sx / rate, level * sy / rate, level * sz / rate
         friction[0] = tx + (friction[0] - tx) * decay
         friction[1] = ty + (friction[1] - ty) * decay
         friction[2] = tz + (friction[2] - tz) * decay

@@ -772,14 +772,15 @@ def test_a_servo_dead_band_is_read_from_tank_yaml_and_a_unit_slip_is_refused(tmp
 
 # ---- hook friction ---------------------------------------------------------------------------------
 
-def _hook_friction_step(friction, rate, limit=0.004, angle=0.005, velocity=(0.0, 0.0, 0.0), slack=False, dt=DT):
+def _hook_friction_step(friction, rate, limit=0.004, angle=0.005, velocity=(0.0, 0.0, 0.0), slack=False, dt=DT,
+                        static_ratio=1.0, stribeck_rate=0.02):
     """One hook_friction_update of a level body at the origin whose rope (length 0.5 m) runs straight up from
     the hook at (0, 0, 0.077) to an anchor 0.51 m above it (0.49 m: slack)."""
     from quadruped_control.sim.plants.tank_dynamics import hook_friction_update
     anchor = (0.0, 0.0, 0.077 + (0.49 if slack else 0.51), 0.0, 0.0, 0.0)
-    return np.array(hook_friction_update(friction, limit, angle, (0.0, 0.0, 0.0), tuple(velocity),
-                                         np.eye(3).ravel().tolist(), tuple(rate), (0.0, 0.0, 0.077), anchor, 0.5,
-                                         dt))
+    return np.array(hook_friction_update(friction, limit, angle, static_ratio, stribeck_rate, (0.0, 0.0, 0.0),
+                                         tuple(velocity), np.eye(3).ravel().tolist(), tuple(rate),
+                                         (0.0, 0.0, 0.077), anchor, 0.5, dt))
 
 
 def test_hook_friction_follows_dahls_law_across_the_rope() -> None:
