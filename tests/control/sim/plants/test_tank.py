@@ -812,6 +812,62 @@ def test_hook_friction_follows_dahls_law_across_the_rope() -> None:
     assert not friction.any()
 
 
+def test_hook_friction_holds_its_static_level_when_slow_and_slides_at_tau_c_when_fast() -> None:
+    """The Stribeck curve g(|s|) = tau_c (1 + (r - 1) exp(-(|s| / s_s)^2)) at Dahl's stiffness sigma_0 =
+    tau_c / theta_p: one held step builds g s^ (1 - exp(-sigma_0 |s| dt / g)); a long slow turn (|s| << s_s)
+    settles at r tau_c, a fast one (|s| >> s_s) at tau_c, and a tie that has stuck at r tau_c drops to tau_c
+    once the body breaks away, never passing g on the way; ratio 1 is Dahl's law bit for bit, whatever s_s."""
+    limit, angle, ratio, stribeck = 0.004, 0.005, 1.8, 0.02
+    slow = 0.002 / (1.0 + 0.077 / 0.51)  # the relative rate across the rope is 0.002 rad/s (s_s / 10)
+    friction = np.zeros(3)
+    _hook_friction_step(friction, (slow, 0.0, 0.0), limit, angle, static_ratio=ratio, stribeck_rate=stribeck)
+    level = limit * (1.0 + (ratio - 1.0) * math.exp(-(0.002 / stribeck) ** 2))
+    expected = level * (1.0 - math.exp(-limit / angle * 0.002 * DT / level))
+    np.testing.assert_allclose(friction, [expected, 0.0, 0.0], rtol=1e-12, atol=1e-18)
+    for _ in range(8000):  # 0.16 rad of relative turn: 18 static presliding angles r theta_p
+        _hook_friction_step(friction, (slow, 0.0, 0.0), limit, angle, static_ratio=ratio, stribeck_rate=stribeck)
+    np.testing.assert_allclose(friction, [level, 0.0, 0.0], rtol=1e-6)
+    assert level > 1.7 * limit
+    history = []
+    for _ in range(100):  # breaks away at 0.2 rad/s (10 s_s): down to tau_c
+        _hook_friction_step(friction, (0.2, 0.0, 0.0), limit, angle, static_ratio=ratio, stribeck_rate=stribeck)
+        history.append(friction[0])
+    np.testing.assert_allclose(friction, [limit, 0.0, 0.0], rtol=1e-8)
+    assert max(history) <= level and all(b <= a for a, b in zip(history, history[1:]))
+    dahl, stribeck_off = np.zeros(3), np.zeros(3)
+    for rate in ((0.2, 0.0, 0.0), (0.01, 0.0, 0.0), (-0.3, 0.1, 0.0)):
+        _hook_friction_step(dahl, rate, limit, angle)
+        _hook_friction_step(stribeck_off, rate, limit, angle, static_ratio=1.0, stribeck_rate=0.3)
+        np.testing.assert_array_equal(stribeck_off, dahl)
+
+
+def test_the_stribeck_rate_moves_a_released_robot_between_its_sliding_and_its_static_tie() -> None:
+    """Released at rest at 3 deg of roll under a restoring torque r, with tau_c = 0.75 r and tau_s = 1.5 tau_c
+    (the robot and its rope swing together as a pendulum, which a tie does not resist, so even a tie that
+    holds moves the roll). The two limits of the Stribeck rate s_s: far above every rate of the swing (1
+    rad/s), the tie is Dahl's with tau_s and the presliding angle 1.5 theta_p (its limit is tau_s at Dahl's
+    stiffness tau_c / theta_p); far below (1e-4 rad/s), Dahl's with tau_c. Between them (0.02 rad/s) the tie
+    holds the robot further from level than tau_c alone and less far than tau_s."""
+    base = TankParams(center_of_buoyancy=(0.0, 0.0, 0.0))
+    model = TankModel(ROBOT, base)
+    restoring = abs(model.restoring_torque(rpy_to_rot(math.radians(3.0), 0.0, 0.0), nominal_joint_angles(ROBOT))[0])
+    arm, angle = 0.75 * restoring / model.static_rope_tension(), 0.005
+
+    def final_roll(**values: float) -> float:
+        return float(_released_roll(base.with_values(hook_friction_arm=arm, hook_friction_angle=angle,
+                                                     **values), 3.0, 10.0)[0][-1])
+
+    sliding = final_roll()
+    static = float(_released_roll(base.with_values(hook_friction_arm=1.5 * arm, hook_friction_angle=1.5 * angle),
+                                  3.0, 10.0)[0][-1])
+    assert sliding < 1.0 and sliding + 0.4 < static
+    assert final_roll(hook_friction_static_ratio=1.5, hook_friction_stribeck_rate=1.0) == pytest.approx(static,
+                                                                                                          abs=0.01)
+    assert final_roll(hook_friction_static_ratio=1.5, hook_friction_stribeck_rate=1e-4) == pytest.approx(sliding,
+                                                                                                           abs=0.01)
+    assert sliding + 0.1 < final_roll(hook_friction_static_ratio=1.5, hook_friction_stribeck_rate=0.02) < static - 0.1
+
+
 def test_hook_friction_sees_the_body_turn_relative_to_the_swinging_rope() -> None:
     """A body that does not turn while its hook moves sideways turns relative to the rope, whose swing rate
     is Omega = -(u x q_dot) / d (d = 0.51 m): the hook moving along +x at 0.05 m/s turns the rope about -y,
@@ -883,3 +939,27 @@ def test_hook_friction_keys_are_checked(tmp_path, key: str, value) -> None:
     assert (params.hook_friction_arm if key == "friction_arm" else params.hook_friction_angle) == 0.003
     with pytest.raises(ParameterError, match="hook_friction_angle"):
         TankParams(hook_friction_angle=float("nan"))
+
+
+@pytest.mark.parametrize("key, value, good", [("friction_static_ratio", 0.9, 1.6), ("friction_static_ratio", 3.5, 1.6),
+                                              ("friction_static_ratio", "x", 1.6),
+                                              ("friction_stribeck_rate", 0.0, 0.05),
+                                              ("friction_stribeck_rate", 2.0, 0.05)])
+def test_hook_static_friction_keys_are_checked(tmp_path, key: str, value, good: float) -> None:
+    import yaml
+    with open(config_path("tank.yaml")) as stream:
+        tree = yaml.safe_load(stream)
+    assert tree["suspension"]["friction_static_ratio"] == 1.0  # off by default
+    tree["suspension"][key] = value
+    path = tmp_path / "tank.yaml"
+    path.write_text(yaml.safe_dump(tree))
+    with pytest.raises(ParameterError, match="suspension.%s" % key):
+        load_tank_params(str(path))
+    tree["suspension"][key] = good
+    path.write_text(yaml.safe_dump(tree))
+    params = load_tank_params(str(path))
+    assert getattr(params, "hook_" + key) == good
+    with pytest.raises(ParameterError, match="hook_friction_static_ratio"):
+        TankParams(hook_friction_static_ratio=float("nan"))
+    with pytest.raises(ParameterError, match="hook_friction_stribeck_rate"):
+        TankParams(hook_friction_stribeck_rate=0.0)
