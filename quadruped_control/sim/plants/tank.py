@@ -651,10 +651,11 @@ class TankModel(FloatingBaseModel):
                                          self.tank.body_wake_time_constant, R0, y0[9], y0[10], y0[11], dt)
             held = _STILL
             if self._friction_limit > 0.0:
-                held = hook_friction_update(self.hook_friction, self._friction_limit, self.tank.hook_friction_angle,
-                                            self.tank.hook_friction_static_ratio,
-                                            self.tank.hook_friction_stribeck_rate, y0[0:3], y0[3:6], R0, y0[9:12], self._hook, self._anchor,
-                                            self.tank.rope_length, dt)
+                tank = self.tank
+                held = hook_friction_update(self.hook_friction, self._friction_limit, tank.hook_friction_angle,
+                                            tank.hook_friction_static_ratio, tank.hook_friction_stribeck_rate,
+                                            y0[0:3], y0[3:6], R0, y0[9:12], self._hook, self._anchor,
+                                            tank.rope_length, dt)
             y = tank_rk4(self._constants, context.feet, drag_feet, water, held, context.lift, context.up_torque,
                          context.leg_sums, context.mass_solver, R0, y0, dt)
         except (ValueError, OverflowError) as exc:  # math.sin(inf) etc. once the state has blown up

@@ -72,9 +72,8 @@ def tank_trial_step(i, frames, five_bar, net_paw_buoyancy, drag_constant, drag, 
     held = (0.0, 0.0, 0.0)
     if hook_friction[i, 0] > 0.0:
         held = hook_friction_update(friction[i], hook_friction[i, 0], hook_friction[i, 1], hook_friction[i, 2],
-                                    hook_friction[i, 3], (y0[0], y0[1], y0[2]),
-                                    (y0[3], y0[4], y0[5]), R0, (y0[9], y0[10], y0[11]), hook[i], anchor[i], rope[i, 0],
-                                    dt)
+                                    hook_friction[i, 3], (y0[0], y0[1], y0[2]), (y0[3], y0[4], y0[5]), R0,
+                                    (y0[9], y0[10], y0[11]), hook[i], anchor[i], rope[i, 0], dt)
     y = tank_rk4(constants, feet, rows, turning, held, lift, up, sums, solver, R0, y0, dt)
     return store_step_end(y, R0, i, p, v, R, w)
 
