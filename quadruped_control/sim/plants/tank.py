@@ -181,6 +181,10 @@ MIN_HOOK_FRICTION_ANGLE = 0.001
 #: so that a ratio of torques (N m for mN m) is refused.
 MAX_HOOK_FRICTION_STATIC_RATIO = 3.0
 
+#: The Stribeck rates tank.yaml accepts (rad/s): 0.3 um/s to 3 mm/s of slip on a 3 mm wire, past both ends
+#: of the identification's bounds; a value outside them is a unit slip (deg/s or mrad/s for rad/s).
+HOOK_FRICTION_STRIBECK_RATE_RANGE = (1e-4, 1.0)
+
 
 @dataclass(frozen=True)
 class TankParams:
@@ -300,9 +304,10 @@ class TankParams:
             raise ParameterError("tank hook_friction_static_ratio must be in [1, %g] (static over sliding "
                                  "friction), got %r" % (MAX_HOOK_FRICTION_STATIC_RATIO,
                                                         self.hook_friction_static_ratio))
-        if not (math.isfinite(self.hook_friction_stribeck_rate) and 1e-4 <= self.hook_friction_stribeck_rate <= 1.0):
-            raise ParameterError("tank hook_friction_stribeck_rate must be in [1e-4, 1] rad/s, got %r"
-                                 % (self.hook_friction_stribeck_rate,))
+        low, high = HOOK_FRICTION_STRIBECK_RATE_RANGE
+        if not (math.isfinite(self.hook_friction_stribeck_rate) and low <= self.hook_friction_stribeck_rate <= high):
+            raise ParameterError("tank hook_friction_stribeck_rate must be in [%g, %g] rad/s, got %r"
+                                 % (low, high, self.hook_friction_stribeck_rate))
         if not math.isfinite(self.net_weight):
             raise ParameterError("tank net_weight must be finite, got %r" % (self.net_weight,))
         if not (math.isfinite(self.paw_buoyancy_offset) and abs(self.paw_buoyancy_offset) <= 1.0):
@@ -395,7 +400,7 @@ def tank_params_from_dict(data: Mapping[str, Any]) -> TankParams:
         hook_friction_static_ratio=number(rope.get("friction_static_ratio", 1.0), "suspension.friction_static_ratio",
                                           1.0, MAX_HOOK_FRICTION_STATIC_RATIO),
         hook_friction_stribeck_rate=number(rope.get("friction_stribeck_rate", 0.02),
-                                           "suspension.friction_stribeck_rate", 1e-4, 1.0),
+                                           "suspension.friction_stribeck_rate", *HOOK_FRICTION_STRIBECK_RATE_RANGE),
         paw_wake_fraction=number(wake.get("fraction", 0.0), "paw_wake.fraction", 0.0, 0.95),
         paw_wake_time_constant=number(wake.get("time_constant", 0.3), "paw_wake.time_constant", 0.02, 100.0),
         paw_wake_body_share=number(wake.get("body_share", 1.0), "paw_wake.body_share", 0.0, 1.0),

@@ -269,7 +269,7 @@ def hook_friction_update(friction: Any, limit: float, angle: float, static_ratio
         if static_ratio > 1.0:  # the Stribeck curve g(|s|)
             level = limit * (1.0 + (static_ratio - 1.0) * math.exp(-(rate / stribeck_rate) ** 2))
             decay = math.exp(-rate * dt * limit / (angle * level))
-        else:
+        else:  # Dahl's own arithmetic, so that ratio 1 is the model without static friction bit for bit
             decay = math.exp(-rate * dt / angle)
         tx, ty, tz = level * sx / rate, level * sy / rate, level * sz / rate
         friction[0] = tx + (friction[0] - tx) * decay
