@@ -104,6 +104,7 @@ PARAMETERS: Tuple[Tuple[str, float, float], ...] = (
     ("hook_friction_arm", 0.0, 0.004),     # m: mu r of the rope's tie on the hook's eye, none to mu 0.5 on 4 mm, x2
     ("hook_friction_static_ratio", 1.0, 2.0),  # the tie's static over sliding friction: none to dry fibre's 2
     ("hook_friction_stribeck_rate", 0.01, 0.3),  # rad/s: 30 um/s to 1 mm/s of slip on a 3 mm wire
+    ("hook_friction_roll_ratio", 0.25, 4.0),  # the tie's roll over pitch friction: a screw eye's R_e / r_w, either way
 )
 
 #: Each parameter's (low, high): :data:`PARAMETERS` by name.
@@ -165,6 +166,7 @@ _PLACES: Dict[str, _Place] = {
     "hook_friction_arm": _Place("hook_friction_arm", (), "suspension", "friction_arm"),
     "hook_friction_static_ratio": _Place("hook_friction_static_ratio", (), "suspension", "friction_static_ratio"),
     "hook_friction_stribeck_rate": _Place("hook_friction_stribeck_rate", (), "suspension", "friction_stribeck_rate"),
+    "hook_friction_roll_ratio": _Place("hook_friction_roll_ratio", (), "suspension", "friction_roll_ratio"),
 }
 
 

@@ -123,7 +123,13 @@ Candidate effects of the identification against Table 1, each zero (today's mode
   (``hook_friction_stribeck_rate``, the body's turn relative to the rope; 0.02 rad/s is 60 um/s of slip on a
   3 mm wire) the limit rises towards tau_s, LuGre's Stribeck curve at Dahl's stiffness. The integral then
   winds further before the tie breaks away, and the torque it built carries the body on once the friction
-  drops to tau_c. arm = 0 (the default) is today's model exactly.
+  drops to tau_c. The eye is a ring in one plane, so the tie need not hold alike about every axis
+  (``hook_friction_roll_ratio``, the Coulomb torque about the body's x axis over the one about the others;
+  1, the default, is the isotropic tie exactly): a turn in the ring's plane slides the rope's loop along
+  the wire around the ring (arm mu R_e), a turn about the wire rolls it round the wire's section (arm mu
+  r_w), and a screw eye's R_e / r_w is 2-5. The paper does not say which way the eye faces, so the ratio
+  may be either side of 1. It is the one candidate that acts on roll and not on pitch. arm = 0 (the
+  default) is today's model exactly.
 
 Each effect has a switch (:class:`TankParams`); with all of them off the equations reduce to the paper's
 eq. (trans), (rot) (tested). Parameters: ``config/tank.yaml``.
@@ -184,6 +190,10 @@ MAX_HOOK_FRICTION_STATIC_RATIO = 3.0
 #: The Stribeck rates tank.yaml accepts (rad/s): 0.3 um/s to 3 mm/s of slip on a 3 mm wire, past both ends
 #: of the identification's bounds; a value outside them is a unit slip (deg/s or mrad/s for rad/s).
 HOOK_FRICTION_STRIBECK_RATE_RANGE = (1e-4, 1.0)
+
+#: The tie's roll over pitch friction ratios tank.yaml accepts: 0.1 to 10, past a screw eye's ring radius over
+#: its wire's radius (2-5) either way round; a larger one is a tie that holds about one axis only.
+HOOK_FRICTION_ROLL_RATIO_RANGE = (0.1, 10.0)
 
 
 @dataclass(frozen=True)
@@ -248,6 +258,8 @@ class TankParams:
     #: (rad/s) of the body relative to the rope below which the static friction holds
     hook_friction_static_ratio: float = 1.0
     hook_friction_stribeck_rate: float = 0.02
+    #: its Coulomb torque about the body's x (roll) axis over the one about the other axes (1: the same)
+    hook_friction_roll_ratio: float = 1.0
 
     def __post_init__(self) -> None:
         for name in ("rope_length", "rope_stiffness"):
@@ -308,6 +320,10 @@ class TankParams:
         if not (math.isfinite(self.hook_friction_stribeck_rate) and low <= self.hook_friction_stribeck_rate <= high):
             raise ParameterError("tank hook_friction_stribeck_rate must be in [%g, %g] rad/s, got %r"
                                  % (low, high, self.hook_friction_stribeck_rate))
+        low, high = HOOK_FRICTION_ROLL_RATIO_RANGE
+        if not (math.isfinite(self.hook_friction_roll_ratio) and low <= self.hook_friction_roll_ratio <= high):
+            raise ParameterError("tank hook_friction_roll_ratio must be in [%g, %g] (the tie's friction about "
+                                 "roll over pitch), got %r" % (low, high, self.hook_friction_roll_ratio))
         if not math.isfinite(self.net_weight):
             raise ParameterError("tank net_weight must be finite, got %r" % (self.net_weight,))
         if not (math.isfinite(self.paw_buoyancy_offset) and abs(self.paw_buoyancy_offset) <= 1.0):
@@ -346,7 +362,7 @@ def tank_params_from_dict(data: Mapping[str, Any]) -> TankParams:
     rope = check_keys(data["suspension"], "suspension",
                       ("hook", "length", "stiffness", "damping", "torsion_stiffness", "torsion_damping",
                        "block_mass", "block_drag", "block_tie_stiffness", "friction_arm", "friction_angle",
-                       "friction_static_ratio", "friction_stribeck_rate"),
+                       "friction_static_ratio", "friction_stribeck_rate", "friction_roll_ratio"),
                       required=("hook", "length", "stiffness", "damping"))
     hydro = check_keys(data["hydrostatics"], "hydrostatics",
                        ("net_weight", "center_of_buoyancy", "paw_buoyancy_offset"),
@@ -401,6 +417,8 @@ def tank_params_from_dict(data: Mapping[str, Any]) -> TankParams:
                                           1.0, MAX_HOOK_FRICTION_STATIC_RATIO),
         hook_friction_stribeck_rate=number(rope.get("friction_stribeck_rate", 0.02),
                                            "suspension.friction_stribeck_rate", *HOOK_FRICTION_STRIBECK_RATE_RANGE),
+        hook_friction_roll_ratio=number(rope.get("friction_roll_ratio", 1.0), "suspension.friction_roll_ratio",
+                                        *HOOK_FRICTION_ROLL_RATIO_RANGE),
         paw_wake_fraction=number(wake.get("fraction", 0.0), "paw_wake.fraction", 0.0, 0.95),
         paw_wake_time_constant=number(wake.get("time_constant", 0.3), "paw_wake.time_constant", 0.02, 100.0),
         paw_wake_body_share=number(wake.get("body_share", 1.0), "paw_wake.body_share", 0.0, 1.0),
@@ -659,8 +677,8 @@ class TankModel(FloatingBaseModel):
                 tank = self.tank
                 held = hook_friction_update(self.hook_friction, self._friction_limit, tank.hook_friction_angle,
                                             tank.hook_friction_static_ratio, tank.hook_friction_stribeck_rate,
-                                            y0[0:3], y0[3:6], R0, y0[9:12], self._hook, self._anchor,
-                                            tank.rope_length, dt)
+                                            tank.hook_friction_roll_ratio, y0[0:3], y0[3:6], R0, y0[9:12],
+                                            self._hook, self._anchor, tank.rope_length, dt)
             y = tank_rk4(self._constants, context.feet, drag_feet, water, held, context.lift, context.up_torque,
                          context.leg_sums, context.mass_solver, R0, y0, dt)
         except (ValueError, OverflowError) as exc:  # math.sin(inf) etc. once the state has blown up

@@ -72,8 +72,9 @@ def tank_trial_step(i, frames, five_bar, net_paw_buoyancy, drag_constant, drag, 
     held = (0.0, 0.0, 0.0)
     if hook_friction[i, 0] > 0.0:
         held = hook_friction_update(friction[i], hook_friction[i, 0], hook_friction[i, 1], hook_friction[i, 2],
-                                    hook_friction[i, 3], (y0[0], y0[1], y0[2]), (y0[3], y0[4], y0[5]), R0,
-                                    (y0[9], y0[10], y0[11]), hook[i], anchor[i], rope[i, 0], dt)
+                                    hook_friction[i, 3], hook_friction[i, 4], (y0[0], y0[1], y0[2]),
+                                    (y0[3], y0[4], y0[5]), R0, (y0[9], y0[10], y0[11]), hook[i], anchor[i], rope[i, 0],
+                                    dt)
     y = tank_rk4(constants, feet, rows, turning, held, lift, up, sums, solver, R0, y0, dt)
     return store_step_end(y, R0, i, p, v, R, w)
 
@@ -91,8 +92,8 @@ def tank_batch_step(frames, five_bar, net_paw_buoyancy, drag_constant, drag, ext
     trial's torso buoyancy moment matrix, ``net_paw_buoyancy`` (N,) each trial's paws' buoyancy, ``block``
     (N, 3) each floating block's mass, drag and tie stiffness (mass 0: a fixed anchor), ``block_rest``
     (N, 3) where it rests, ``friction`` (N, 3) each hook's friction torque (advanced in place) and
-    ``hook_friction`` (N, 4) its Coulomb torque tau_c (0: off), presliding angle, static over sliding
-    friction and Stribeck rate."""
+    ``hook_friction`` (N, 5) its Coulomb torque tau_c (0: off), presliding angle, static over sliding
+    friction, Stribeck rate and roll over pitch friction."""
     feet = np.empty((4, 6))
     drag_feet = np.empty((4, 6))
     for i in range(p.shape[0]):
@@ -135,12 +136,14 @@ class TankPlantBatch:
         self.block = np.array([[tank.block_mass, tank.block_drag, tank.block_tie_stiffness] for tank in tanks],
                               dtype=float).reshape(self.n, 3)
         self.block_rest = np.zeros((self.n, 3))
-        #: Each trial's hook friction (N, 4): tau_c (TankModel.hook_friction_limit; 0: off), the presliding
-        #: angle, the static over sliding friction and the Stribeck rate; its torque (N, 3, body axes):
+        #: Each trial's hook friction (N, 5): tau_c (TankModel.hook_friction_limit; 0: off), the presliding
+        #: angle, the static over sliding friction, the Stribeck rate and the roll over pitch friction; its
+        #: torque (N, 3, body axes):
         #: TankModel.hook_friction for N trials.
         self.hook_friction = np.array([[m.hook_friction_limit(), tank.hook_friction_angle,
-                                        tank.hook_friction_static_ratio, tank.hook_friction_stribeck_rate]
-                                       for m, tank in zip(self.models, tanks)], dtype=float).reshape(self.n, 4)
+                                        tank.hook_friction_static_ratio, tank.hook_friction_stribeck_rate,
+                                        tank.hook_friction_roll_ratio]
+                                       for m, tank in zip(self.models, tanks)], dtype=float).reshape(self.n, 5)
         self.friction = np.zeros((self.n, 3))
         self._load_constants()
 

@@ -219,7 +219,7 @@ def floating_block_update(anchor: Any, rest: Sequence[float], p: Sequence[float]
 
 @jitable
 def hook_friction_update(friction: Any, limit: float, angle: float, static_ratio: float, stribeck_rate: float,
-                         p: Sequence[float], v: Sequence[float], R: Sequence[float], w: Sequence[float],
+                         roll_ratio: float, p: Sequence[float], v: Sequence[float], R: Sequence[float], w: Sequence[float],
                          hook: Sequence[float], anchor: Sequence[float], length: float, dt: float) -> Vec3:
     """Advance the friction torque where the rope is tied to the hook over a held step, in place on
     ``friction`` (3, body axes, N m: the torque the tie exerts on the rope; the body feels its opposite),
@@ -244,8 +244,17 @@ def hook_friction_update(friction: Any, limit: float, angle: float, static_ratio
     theta_p: d tau_f/dt = sigma_0 (s - |s| tau_f / g(|s|)). Held over the step, tau_f <- g s^ + (tau_f -
     g s^) exp(-sigma_0 |s| dt / g): a tie that has stuck holds up to tau_s, and once the body turns faster
     than s_s relative to the rope it lets go to tau_c (Canudas de Wit et al. 1995, eq. (2)-(4); the stick-
-    slip of Armstrong-Helouvry et al., Automatica 30 (1994)). The body's state (p, v world, R row-major,
-    omega body) is the step's start; ``anchor`` (6 floats) the rope's upper end and its velocity."""
+    slip of Armstrong-Helouvry et al., Automatica 30 (1994)).
+
+    A tie whose friction depends on the axis (``roll_ratio`` = tau_c,x / tau_c,y; 1 is the isotropic tie
+    exactly): the eye is a ring in one plane. A turn in the ring's plane slides the rope's loop along the
+    wire around the ring (arm mu R_e, R_e the ring's radius), a turn about the wire rolls the loop round
+    the wire's section (arm mu r_w), so the tie's Coulomb torque about the body's x (roll) axis is
+    ``roll_ratio`` times the one about the other axes: the limit is the ellipse tau_c (m_x s_x, s_y,
+    s_z) / |s|, m_x = roll_ratio, and Dahl's stiffness scales with it (theta_p stays the wire's). Sliding
+    still dissipates, tau_f . s = g |s|^-1 (m_x s_x^2 + s_y^2 + s_z^2) >= 0. The body's state (p, v world,
+    R row-major, omega body) is the step's start; ``anchor`` (6 floats) the rope's upper end and its
+    velocity."""
     qx, qy, qz, qvx, qvy, qvz = _hook_motion(p[0], p[1], p[2], v[0], v[1], v[2], R, w[0], w[1], w[2], hook)
     dx, dy, dz = anchor[0] - qx, anchor[1] - qy, anchor[2] - qz
     distance = math.sqrt(dx * dx + dy * dy + dz * dz)
@@ -271,7 +280,7 @@ def hook_friction_update(friction: Any, limit: float, angle: float, static_ratio
             decay = math.exp(-rate * dt * limit / (angle * level))
         else:  # Dahl's own arithmetic, so that ratio 1 is the model without static friction bit for bit
             decay = math.exp(-rate * dt / angle)
-        tx, ty, tz = level * sx / rate, level * sy / rate, level * sz / rate
+        tx, ty, tz = roll_ratio * level * sx / rate, level * sy / rate, level * sz / rate
         friction[0] = tx + (friction[0] - tx) * decay
         friction[1] = ty + (friction[1] - ty) * decay
         friction[2] = tz + (friction[2] - tz) * decay
