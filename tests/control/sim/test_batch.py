@@ -165,7 +165,7 @@ def test_tank_batch_agrees_with_the_per_trial_tank_plant_bit_for_bit_over_10_s(r
              base.with_values(appendage_damping_linear=(0.02, 0.03, 0.01), appendage_damping_quadratic=(0.05, 0.05, 0.1),
                               body_wake_fraction=0.6, body_wake_time_constant=2.0, block_mass=0.3, block_drag=2.0,
                               hook_friction_arm=0.003, hook_friction_angle=0.002, hook_friction_static_ratio=1.8,
-                              hook_friction_stribeck_rate=0.05),
+                              hook_friction_stribeck_rate=0.05, hook_friction_roll_ratio=2.2),
              base.with_values(rope_torsion_stiffness=0.05, rope_torsion_damping=0.02, paw_drag_scale=0.6,
                               paw_wake_fraction=0.5, paw_wake_time_constant=0.2, paw_wake_body_share=0.3,
                               servo_stall_torque=3.9, paw_buoyancy_offset=0.06, hook_friction_arm=0.002),
@@ -209,7 +209,8 @@ def test_compiled_loops_compute_what_their_plain_python_computes(robot, plant, p
     config = load_controller_config(None, "experiment")
     # the tank with its loaded servos on (the plant computes the joint loads, the servo step reads them)
     tank = load_tank_params().with_values(servo_stall_torque=2.0, servo_dead_band=0.005, hook_friction_arm=0.002,
-                                          hook_friction_static_ratio=1.5) if plant == "tank" else None
+                                          hook_friction_static_ratio=1.5, hook_friction_roll_ratio=0.6) \
+        if plant == "tank" else None
     servo_params = dataclasses.replace(load_servo_params(), stall_torque=2.0 if plant == "tank" else 0.0,
                                        dead_band=0.005 if plant == "tank" else 0.0)
     trials = [BatchTrial(config=config, setpoint=rpy_to_rot(*np.radians(rpy)), tank=tank, servo_model=servo,

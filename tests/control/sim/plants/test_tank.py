@@ -773,13 +773,13 @@ def test_a_servo_dead_band_is_read_from_tank_yaml_and_a_unit_slip_is_refused(tmp
 # ---- hook friction ---------------------------------------------------------------------------------
 
 def _hook_friction_step(friction, rate, limit=0.004, angle=0.005, velocity=(0.0, 0.0, 0.0), slack=False, dt=DT,
-                        static_ratio=1.0, stribeck_rate=0.02):
+                        static_ratio=1.0, stribeck_rate=0.02, roll_ratio=1.0):
     """One hook_friction_update of a level body at the origin whose rope (length 0.5 m) runs straight up from
     the hook at (0, 0, 0.077) to an anchor 0.51 m above it (0.49 m: slack)."""
     from quadruped_control.sim.plants.tank_dynamics import hook_friction_update
     anchor = (0.0, 0.0, 0.077 + (0.49 if slack else 0.51), 0.0, 0.0, 0.0)
-    return np.array(hook_friction_update(friction, limit, angle, static_ratio, stribeck_rate, (0.0, 0.0, 0.0),
-                                         tuple(velocity), np.eye(3).ravel().tolist(), tuple(rate),
+    return np.array(hook_friction_update(friction, limit, angle, static_ratio, stribeck_rate, roll_ratio,
+                                         (0.0, 0.0, 0.0), tuple(velocity), np.eye(3).ravel().tolist(), tuple(rate),
                                          (0.0, 0.0, 0.077), anchor, 0.5, dt))
 
 
@@ -841,6 +841,34 @@ def test_hook_friction_holds_its_static_level_when_slow_and_slides_at_tau_c_when
         np.testing.assert_array_equal(stribeck_off, dahl)
 
 
+def test_hook_friction_holds_more_about_roll_than_pitch_by_its_roll_ratio() -> None:
+    """The tie's Coulomb torque about the body's x axis is roll_ratio m times the one about y: a long turn about
+    x slides at m tau_c, one about y at tau_c, a diagonal one on the ellipse tau_c (m s_x, s_y) / |s|, which
+    still dissipates (tau_f . s > 0); the first step builds m times the isotropic one about x and the
+    presliding angle is the same; m = 1 is the isotropic tie bit for bit, whatever the turn."""
+    limit, angle, m = 0.004, 0.005, 2.5
+    factor = 1.0 + 0.077 / 0.51  # the rope swings the other way: the relative rate across it
+    for rate, expected in (((0.2, 0.0, 0.0), (m * limit, 0.0, 0.0)), ((0.0, 0.2, 0.0), (0.0, limit, 0.0)),
+                           ((0.2, 0.2, 0.0), (m * limit / math.sqrt(2.0), limit / math.sqrt(2.0), 0.0))):
+        friction = np.zeros(3)
+        for _ in range(100):  # 0.23-0.33 rad of relative turn: 46-66 presliding angles
+            _hook_friction_step(friction, rate, limit, angle, roll_ratio=m)
+        np.testing.assert_allclose(friction, expected, rtol=1e-8, atol=1e-15)
+        assert float(np.dot(friction, rate)) > 0.0  # the tie holds against the turn: it takes energy out
+    isotropic, rolled = np.zeros(3), np.zeros(3)
+    _hook_friction_step(isotropic, (0.2, 0.0, 0.0), limit, angle)
+    _hook_friction_step(rolled, (0.2, 0.0, 0.0), limit, angle, roll_ratio=m)
+    np.testing.assert_allclose(rolled, m * isotropic, rtol=1e-14)
+    assert rolled[0] == pytest.approx(m * limit * (1.0 - math.exp(-0.2 * factor * DT / angle)), rel=1e-14)
+    for rate in ((0.2, -0.1, 0.05), (-0.03, 0.4, 0.0), (0.0, 0.0, 0.5)):
+        plain, unit = np.zeros(3), np.zeros(3)
+        for _ in range(20):
+            felt_plain = _hook_friction_step(plain, rate, limit, angle, static_ratio=1.5)
+            felt_unit = _hook_friction_step(unit, rate, limit, angle, static_ratio=1.5, roll_ratio=1.0)
+        np.testing.assert_array_equal(unit, plain)
+        np.testing.assert_array_equal(felt_unit, felt_plain)
+
+
 def test_the_stribeck_rate_moves_a_released_robot_between_its_sliding_and_its_static_tie() -> None:
     """Released at rest at 3 deg of roll under a restoring torque r, with tau_c = 0.75 r and tau_s = 1.5 tau_c
     (the robot and its rope swing together as a pendulum, which a tie does not resist, so even a tie that
@@ -882,15 +910,19 @@ def test_hook_friction_sees_the_body_turn_relative_to_the_swinging_rope() -> Non
     np.testing.assert_allclose(friction, 0.0, atol=1e-18)
 
 
-def _released_roll(tank: TankParams, tilt_deg: float, seconds: float) -> tuple:
-    """Roll angles (deg) of the hanging robot released at rest from ``tilt_deg`` of roll, legs still, and its
-    rate at the end."""
+def _released_roll(tank: TankParams, tilt_deg: float, seconds: float, pitch: bool = False) -> tuple:
+    """Roll angles (deg) of the hanging robot released at rest from ``tilt_deg`` of roll (or pitch angles from
+    ``tilt_deg`` of pitch), legs still, and its rate at the end."""
     model = TankModel(ROBOT, tank)
-    state = RigidBodyState(rotation=rpy_to_rot(math.radians(tilt_deg), 0.0, 0.0))
+    tilt = math.radians(tilt_deg)
+    state = RigidBodyState(rotation=rpy_to_rot(0.0, tilt, 0.0) if pitch else rpy_to_rot(tilt, 0.0, 0.0))
     model.attach(state)
     states = _spin(model, state, seconds)[1:]
-    return (np.degrees([math.atan2(s.rotation[2, 1], s.rotation[2, 2]) for s in states]),
-            float(np.abs(states[-1].omega).max()))
+    if pitch:
+        angles = [math.asin(-s.rotation[2, 0]) for s in states]
+    else:
+        angles = [math.atan2(s.rotation[2, 1], s.rotation[2, 2]) for s in states]
+    return np.degrees(angles), float(np.abs(states[-1].omega).max())
 
 
 def test_hook_friction_holds_what_it_can_and_stops_the_swing_in_its_dead_zone() -> None:
@@ -911,6 +943,26 @@ def test_hook_friction_holds_what_it_can_and_stops_the_swing_in_its_dead_zone() 
     assert slipping.min() < 0.0 and abs(slipping[-1]) <= 1.5 and slipping_rate < 1e-3
 
 
+def test_a_tie_that_holds_more_about_roll_keeps_a_rolled_robot_and_lets_a_pitched_one_swing() -> None:
+    """The roll ratio on the plant: a tie that slips in both axes at half the restoring torque (tau_c = r / 2)
+    holds a rolled robot on its side of level when it holds four times as much about roll (m = 4), and leaves
+    the pitched robot's swing as it was, to the bit (a pure pitch swing turns the body about y alone)."""
+    base = TankParams(center_of_buoyancy=(0.0, 0.0, 0.0))
+    model = TankModel(ROBOT, base)
+    restoring = abs(model.restoring_torque(rpy_to_rot(math.radians(3.0), 0.0, 0.0), nominal_joint_angles(ROBOT))[0])
+    arm = 0.5 * restoring / model.static_rope_tension()
+    slipping, _ = _released_roll(base.with_values(hook_friction_arm=arm), 3.0, 20.0)
+    assert slipping.min() < 0.0
+    held, held_rate = _released_roll(base.with_values(hook_friction_arm=arm, hook_friction_roll_ratio=4.0), 3.0, 20.0)
+    assert held.min() > 1.5 and held_rate < 2e-3
+    pitched, pitched_rate = _released_roll(base.with_values(hook_friction_arm=arm), 3.0, 10.0, pitch=True)
+    assert pitched.min() < 0.0
+    rolled_tie, rolled_tie_rate = _released_roll(base.with_values(hook_friction_arm=arm, hook_friction_roll_ratio=4.0),
+                                                 3.0, 10.0, pitch=True)
+    np.testing.assert_array_equal(rolled_tie, pitched)
+    assert rolled_tie_rate == pitched_rate
+
+
 def test_hook_friction_tends_to_todays_model_as_it_vanishes() -> None:
     """The limiting case: arm 0 is today's model exactly (whatever the presliding angle), and a vanishing arm
     tends to it (1e-9 m: states within 1e-9 after 5 s of a released swing)."""
@@ -927,14 +979,16 @@ def test_hook_friction_tends_to_todays_model_as_it_vanishes() -> None:
                                               ("friction_angle", 0.6, 0.003), ("friction_static_ratio", 0.9, 1.6),
                                               ("friction_static_ratio", 3.5, 1.6), ("friction_static_ratio", "x", 1.6),
                                               ("friction_stribeck_rate", 0.0, 0.05),
-                                              ("friction_stribeck_rate", 2.0, 0.05)])
+                                              ("friction_stribeck_rate", 2.0, 0.05),
+                                              ("friction_roll_ratio", 0.05, 3.0), ("friction_roll_ratio", 12.0, 0.3)])
 def test_hook_friction_keys_are_checked(tmp_path, key: str, value, good: float) -> None:
     """Each of tank.yaml's suspension.friction_* keys: a value out of its bounds is refused by name, one inside
-    reaches TankParams.hook_friction_*; the static friction is off by default."""
+    reaches TankParams.hook_friction_*; the static friction and the roll ratio are off by default."""
     import yaml
     with open(config_path("tank.yaml")) as stream:
         tree = yaml.safe_load(stream)
     assert tree["suspension"]["friction_static_ratio"] == 1.0  # off by default
+    assert tree["suspension"]["friction_roll_ratio"] == 1.0
     tree["suspension"][key] = value
     path = tmp_path / "tank.yaml"
     path.write_text(yaml.safe_dump(tree))
@@ -950,3 +1004,5 @@ def test_hook_friction_keys_are_checked(tmp_path, key: str, value, good: float) 
         TankParams(hook_friction_static_ratio=float("nan"))
     with pytest.raises(ParameterError, match="hook_friction_stribeck_rate"):
         TankParams(hook_friction_stribeck_rate=0.0)
+    with pytest.raises(ParameterError, match="hook_friction_roll_ratio"):
+        TankParams(hook_friction_roll_ratio=float("inf"))
