@@ -219,8 +219,9 @@ def floating_block_update(anchor: Any, rest: Sequence[float], p: Sequence[float]
 
 @jitable
 def hook_friction_update(friction: Any, limit: float, angle: float, static_ratio: float, stribeck_rate: float,
-                         roll_ratio: float, p: Sequence[float], v: Sequence[float], R: Sequence[float], w: Sequence[float],
-                         hook: Sequence[float], anchor: Sequence[float], length: float, dt: float) -> Vec3:
+                         roll_ratio: float, p: Sequence[float], v: Sequence[float], R: Sequence[float],
+                         w: Sequence[float], hook: Sequence[float], anchor: Sequence[float], length: float,
+                         dt: float) -> Vec3:
     """Advance the friction torque where the rope is tied to the hook over a held step, in place on
     ``friction`` (3, body axes, N m: the torque the tie exerts on the rope; the body feels its opposite),
     and return the body-axes torque held over the step (:mod:`.tank`, "hook friction").
