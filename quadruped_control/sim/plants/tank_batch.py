@@ -138,8 +138,7 @@ class TankPlantBatch:
         self.block_rest = np.zeros((self.n, 3))
         #: Each trial's hook friction (N, 5): tau_c (TankModel.hook_friction_limit; 0: off), the presliding
         #: angle, the static over sliding friction, the Stribeck rate and the roll over pitch friction; its
-        #: torque (N, 3, body axes):
-        #: TankModel.hook_friction for N trials.
+        #: torque (N, 3, body axes): TankModel.hook_friction for N trials.
         self.hook_friction = np.array([[m.hook_friction_limit(), tank.hook_friction_angle,
                                         tank.hook_friction_static_ratio, tank.hook_friction_stribeck_rate,
                                         tank.hook_friction_roll_ratio]
