@@ -845,7 +845,7 @@ def test_hook_friction_holds_more_about_roll_than_pitch_by_its_roll_ratio() -> N
     """The tie's Coulomb torque about the body's x axis is roll_ratio m times the one about y: a long turn about
     x slides at m tau_c, one about y at tau_c, a diagonal one on the ellipse tau_c (m s_x, s_y) / |s|, which
     still dissipates (tau_f . s > 0); the first step builds m times the isotropic one about x and the
-    presliding angle is the same; m = 1 is the isotropic tie bit for bit, whatever the turn."""
+    presliding angle is the same; m = 1 is the isotropic tie, the static friction's included."""
     limit, angle, m = 0.004, 0.005, 2.5
     factor = 1.0 + 0.077 / 0.51  # the rope swings the other way: the relative rate across it
     for rate, expected in (((0.2, 0.0, 0.0), (m * limit, 0.0, 0.0)), ((0.0, 0.2, 0.0), (0.0, limit, 0.0)),
@@ -860,13 +860,19 @@ def test_hook_friction_holds_more_about_roll_than_pitch_by_its_roll_ratio() -> N
     _hook_friction_step(rolled, (0.2, 0.0, 0.0), limit, angle, roll_ratio=m)
     np.testing.assert_allclose(rolled, m * isotropic, rtol=1e-14)
     assert rolled[0] == pytest.approx(m * limit * (1.0 - math.exp(-0.2 * factor * DT / angle)), rel=1e-14)
-    for rate in ((0.2, -0.1, 0.05), (-0.03, 0.4, 0.0), (0.0, 0.0, 0.5)):
-        plain, unit = np.zeros(3), np.zeros(3)
-        for _ in range(20):
-            felt_plain = _hook_friction_step(plain, rate, limit, angle, static_ratio=1.5)
-            felt_unit = _hook_friction_step(unit, rate, limit, angle, static_ratio=1.5, roll_ratio=1.0)
-        np.testing.assert_array_equal(unit, plain)
-        np.testing.assert_array_equal(felt_unit, felt_plain)
+    # m = 1 is the isotropic tie: one step of a diagonal turn, static friction on, against its closed form
+    # g s^ (1 - exp(-sigma_0 |s| dt / g)) (the twist along the vertical rope left out)
+    ratio, stribeck = 1.5, 0.02
+    for rate in ((0.2, -0.1, 0.05), (-0.003, 0.004, 0.0)):
+        relative = factor * np.array([rate[0], rate[1], 0.0])
+        speed = float(np.linalg.norm(relative))
+        level = limit * (1.0 + (ratio - 1.0) * math.exp(-(speed / stribeck) ** 2))
+        expected = level * relative / speed * (1.0 - math.exp(-limit / angle * speed * DT / level))
+        friction = np.zeros(3)
+        felt = _hook_friction_step(friction, rate, limit, angle, static_ratio=ratio, stribeck_rate=stribeck,
+                                   roll_ratio=1.0)
+        np.testing.assert_allclose(friction, expected, rtol=1e-12, atol=1e-18)
+        np.testing.assert_array_equal(felt, -friction)
 
 
 def test_the_stribeck_rate_moves_a_released_robot_between_its_sliding_and_its_static_tie() -> None:
@@ -882,11 +888,11 @@ def test_the_stribeck_rate_moves_a_released_robot_between_its_sliding_and_its_st
     arm, angle = 0.75 * restoring / model.static_rope_tension(), 0.005
 
     def final_roll(**values: float) -> float:
-        return float(_released_roll(base.with_values(hook_friction_arm=arm, hook_friction_angle=angle,
+        return float(_released_tilt(base.with_values(hook_friction_arm=arm, hook_friction_angle=angle,
                                                      **values), 3.0, 10.0)[0][-1])
 
     sliding = final_roll()
-    static = float(_released_roll(base.with_values(hook_friction_arm=1.5 * arm, hook_friction_angle=1.5 * angle),
+    static = float(_released_tilt(base.with_values(hook_friction_arm=1.5 * arm, hook_friction_angle=1.5 * angle),
                                   3.0, 10.0)[0][-1])
     assert sliding < 1.0 and sliding + 0.4 < static
     assert final_roll(hook_friction_static_ratio=1.5, hook_friction_stribeck_rate=1.0) == pytest.approx(static,
@@ -910,7 +916,7 @@ def test_hook_friction_sees_the_body_turn_relative_to_the_swinging_rope() -> Non
     np.testing.assert_allclose(friction, 0.0, atol=1e-18)
 
 
-def _released_roll(tank: TankParams, tilt_deg: float, seconds: float, pitch: bool = False) -> tuple:
+def _released_tilt(tank: TankParams, tilt_deg: float, seconds: float, pitch: bool = False) -> tuple:
     """Roll angles (deg) of the hanging robot released at rest from ``tilt_deg`` of roll (or pitch angles from
     ``tilt_deg`` of pitch), legs still, and its rate at the end."""
     model = TankModel(ROBOT, tank)
@@ -934,12 +940,12 @@ def test_hook_friction_holds_what_it_can_and_stops_the_swing_in_its_dead_zone() 
     model = TankModel(ROBOT, base)
     restoring = abs(model.restoring_torque(rpy_to_rot(math.radians(3.0), 0.0, 0.0), nominal_joint_angles(ROBOT))[0])
     assert restoring > 1e-3
-    free, free_rate = _released_roll(base, 3.0, 20.0)
+    free, free_rate = _released_tilt(base, 3.0, 20.0)
     assert free.min() < -1.5 and free_rate > 1e-2
     arm = 2.0 * restoring / model.static_rope_tension()
-    held, held_rate = _released_roll(base.with_values(hook_friction_arm=arm), 3.0, 20.0)
+    held, held_rate = _released_tilt(base.with_values(hook_friction_arm=arm), 3.0, 20.0)
     assert held.min() > 1.5 and held_rate < 2e-3
-    slipping, slipping_rate = _released_roll(base.with_values(hook_friction_arm=arm / 4.0), 3.0, 20.0)
+    slipping, slipping_rate = _released_tilt(base.with_values(hook_friction_arm=arm / 4.0), 3.0, 20.0)
     assert slipping.min() < 0.0 and abs(slipping[-1]) <= 1.5 and slipping_rate < 1e-3
 
 
@@ -951,13 +957,13 @@ def test_a_tie_that_holds_more_about_roll_keeps_a_rolled_robot_and_lets_a_pitche
     model = TankModel(ROBOT, base)
     restoring = abs(model.restoring_torque(rpy_to_rot(math.radians(3.0), 0.0, 0.0), nominal_joint_angles(ROBOT))[0])
     arm = 0.5 * restoring / model.static_rope_tension()
-    slipping, _ = _released_roll(base.with_values(hook_friction_arm=arm), 3.0, 20.0)
+    slipping, _ = _released_tilt(base.with_values(hook_friction_arm=arm), 3.0, 20.0)
     assert slipping.min() < 0.0
-    held, held_rate = _released_roll(base.with_values(hook_friction_arm=arm, hook_friction_roll_ratio=4.0), 3.0, 20.0)
+    held, held_rate = _released_tilt(base.with_values(hook_friction_arm=arm, hook_friction_roll_ratio=4.0), 3.0, 20.0)
     assert held.min() > 1.5 and held_rate < 2e-3
-    pitched, pitched_rate = _released_roll(base.with_values(hook_friction_arm=arm), 3.0, 10.0, pitch=True)
+    pitched, pitched_rate = _released_tilt(base.with_values(hook_friction_arm=arm), 3.0, 10.0, pitch=True)
     assert pitched.min() < 0.0
-    rolled_tie, rolled_tie_rate = _released_roll(base.with_values(hook_friction_arm=arm, hook_friction_roll_ratio=4.0),
+    rolled_tie, rolled_tie_rate = _released_tilt(base.with_values(hook_friction_arm=arm, hook_friction_roll_ratio=4.0),
                                                  3.0, 10.0, pitch=True)
     np.testing.assert_array_equal(rolled_tie, pitched)
     assert rolled_tie_rate == pitched_rate
@@ -967,10 +973,10 @@ def test_hook_friction_tends_to_todays_model_as_it_vanishes() -> None:
     """The limiting case: arm 0 is today's model exactly (whatever the presliding angle), and a vanishing arm
     tends to it (1e-9 m: states within 1e-9 after 5 s of a released swing)."""
     base = TankParams(center_of_buoyancy=(0.0, 0.0, 0.001))
-    today, _ = _released_roll(base, 3.0, 5.0)
-    off, _ = _released_roll(base.with_values(hook_friction_angle=0.02), 3.0, 5.0)
+    today, _ = _released_tilt(base, 3.0, 5.0)
+    off, _ = _released_tilt(base.with_values(hook_friction_angle=0.02), 3.0, 5.0)
     np.testing.assert_array_equal(off, today)
-    tiny, _ = _released_roll(base.with_values(hook_friction_arm=1e-9), 3.0, 5.0)
+    tiny, _ = _released_tilt(base.with_values(hook_friction_arm=1e-9), 3.0, 5.0)
     assert 0.0 < np.abs(tiny - today).max() < 1e-9 * 180.0 / math.pi * 1e3
 
 
