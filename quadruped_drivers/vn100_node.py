@@ -81,6 +81,8 @@ class Vn100Node:
         self.reader_errors = 0
         self.last_reader_error = ""
         self.last_stamp: Optional[rospy.Time] = None
+        self.logged_connects = 0
+        self.logged_disconnects = 0
         self.diagnostics = Updater()
         # The hardware ID is the sensor's serial number (register 3), set once the sensor has answered
         # (diagnostic_updater's convention: "wait until the device is open before calling setHardwareID").
@@ -111,6 +113,7 @@ class Vn100Node:
 
     def _read_once(self) -> None:
         samples = self.driver.read_samples()
+        self._log_link_changes()
         if not samples:
             if not self.driver.connected:
                 time.sleep(0.01)  # the driver reconnects on its own schedule; do not spin
@@ -121,6 +124,16 @@ class Vn100Node:
             self._publish(reading, arrival - rospy.Duration.from_sec(age))
         if self.gate.dropped != dropped:
             rospy.logwarn_throttle(1.0, "vn100_node: sample dropped: %s" % self.gate.last_drop)
+
+    def _log_link_changes(self) -> None:
+        """One log line per connection and per loss of the link (the diagnostics count them)."""
+        connects, disconnects = self.driver.connects, self.driver.disconnects
+        if connects != self.logged_connects:
+            rospy.loginfo("vn100_node: sensor configured on %s (connection %d)", self.port, connects)
+        if disconnects != self.logged_disconnects:
+            rospy.logwarn("vn100_node: link lost (%s); reconnecting every %.3g s",
+                          self.driver.last_error, self.driver.reconnect_interval)
+        self.logged_connects, self.logged_disconnects = connects, disconnects
 
     def _publish(self, reading, stamp: rospy.Time) -> None:
         # Dating a burst back can land before the previous sample when the transport delay varied:

@@ -172,7 +172,7 @@ class Vn100Driver:
             raise
         self.connects += 1
         self.last_error = ""
-        self.last_sample_time = self._link_clock()
+        self.last_sample_time = self._link_time()
 
     def _configure(self) -> None:
         port = self._port
@@ -289,13 +289,22 @@ class Vn100Driver:
         except (OSError, ValueError) as exc:  # pyserial: SerialException is an OSError
             self._disconnect("serial error: %s" % (exc,))
             return samples
-        now = self._link_clock()
-        if samples:
+        now = self._link_time()
+        if samples or self.last_sample_time is None:
             self.last_sample_time = now
-        elif (self.stale_timeout is not None and self.last_sample_time is not None
+        elif (self.stale_timeout is not None and now is not None
               and now - self.last_sample_time > self.stale_timeout):
             self._disconnect("no valid packet for %.3g s" % (now - self.last_sample_time))
         return samples
+
+    def _link_time(self) -> Optional[float]:
+        """``link_clock`` now, or None while it has no time yet: ROS time reads 0 under /use_sim_time
+        until the first /clock. Silence is counted from the first reading that has a time; counting
+        it from 0 made a link set up before the simulation's first /clock look silent for t_0 s the
+        moment that clock arrived, and the driver dropped a link that had just been configured (in
+        lock-step, while the simulation had started sending: its first samples were lost)."""
+        now = self._link_clock()
+        return now if now > 0 else None
 
     def _note_line(self, line: bytes) -> None:
         """Lines while streaming are unexpected; a ``$VNERR`` is kept for diagnostics."""

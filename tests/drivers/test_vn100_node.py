@@ -21,10 +21,14 @@ class Driver:
     """Reads scripted results: a list of samples, or an exception to raise."""
 
     connected = True
+    reconnect_interval = 1.0
 
     def __init__(self, script):
         self.script = list(script)
         self.closed = False
+        self.connects = 1
+        self.disconnects = 0
+        self.last_error = ""
 
     def read_samples(self):
         item = self.script.pop(0)
@@ -57,6 +61,7 @@ def test_reader_survives_exceptions_and_absurd_packets(monkeypatch):
     node.reader_errors = 0
     node.last_reader_error = ""
     node.last_stamp = None
+    node.logged_connects, node.logged_disconnects = 1, 0
     node.frame_id = "imu_link"
     node.covariances = {key: [0.0] * 9 for key in ("orientation", "angular_velocity", "linear_acceleration")}
     calls = {"n": 0}
@@ -73,3 +78,21 @@ def test_reader_survives_exceptions_and_absurd_packets(monkeypatch):
     stamps = [m.header.stamp for m in node.publisher.messages]
     assert all(a < b for a, b in zip(stamps, stamps[1:]))
     assert node.driver.closed
+
+
+def test_each_connection_and_each_loss_of_the_link_is_logged_once(monkeypatch):
+    """The diagnostics count disconnects; the log says when and why, once per change."""
+    lines = []
+    monkeypatch.setattr(vn100_node.rospy, "loginfo", lambda fmt, *args: lines.append(("info", fmt % args)))
+    monkeypatch.setattr(vn100_node.rospy, "logwarn", lambda fmt, *args: lines.append(("warn", fmt % args)))
+    node = vn100_node.Vn100Node.__new__(vn100_node.Vn100Node)
+    node.driver = Driver([])
+    node.port = "/dev/vn100"
+    node.logged_connects, node.logged_disconnects = 0, 0
+    node._log_link_changes()
+    node._log_link_changes()
+    assert lines == [("info", "vn100_node: sensor configured on /dev/vn100 (connection 1)")]
+    node.driver.disconnects, node.driver.last_error = 1, "no valid packet for 0.12 s"
+    node._log_link_changes()
+    node._log_link_changes()
+    assert lines[1:] == [("warn", "vn100_node: link lost (no valid packet for 0.12 s); reconnecting every 1 s")]

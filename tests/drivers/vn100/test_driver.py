@@ -343,6 +343,33 @@ def test_link_silence_is_judged_on_the_link_clock_only():
     assert rig.driver.disconnects == 1 and "no valid packet" in rig.driver.last_error
 
 
+def test_a_link_set_up_before_the_link_clock_has_a_time_is_not_silent_when_it_gets_one():
+    """Lock-step start: the node configures the sensor while ROS time still reads 0 (no /clock yet);
+    the simulation's first /clock then says t_0 = 1 s. That jump is no silence: the link stays up and
+    the packets that follow are read. Counting silence from 0 dropped the link at that moment and the
+    first samples of the run were lost (the lock-step determinism check failed now and then)."""
+    simulated = ManualClock(0.0)
+    rig = Rig(link_clock=simulated)
+    rig.driver.stale_timeout = 0.1
+    rig.device.async_paused = True  # no output until the simulation starts (its clock holds at t_0)
+    rig.driver.connect()
+    rig.device.async_paused = True
+    rig.driver.read_samples()
+    simulated.sleep(1.0)  # the first /clock: t_0
+    for _ in range(5):
+        rig.clock.sleep(0.01)
+        assert rig.driver.read_samples() == []
+    assert rig.driver.disconnects == 0 and rig.driver.connected
+    rig.device.async_paused = False
+    samples = rig.run(0.05)
+    assert samples and rig.driver.disconnects == 0
+    # Silence is judged from then on, as before.
+    rig.device.power_cycle()
+    simulated.sleep(0.11)
+    rig.driver.read_samples()
+    assert rig.driver.disconnects == 1 and "no valid packet" in rig.driver.last_error
+
+
 def test_without_a_link_clock_the_link_is_judged_on_the_clock():
     rig = Rig()
     rig.driver.stale_timeout = 0.1
