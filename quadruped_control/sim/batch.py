@@ -41,6 +41,7 @@ from quadruped_control.analysis.metrics import compute_metrics
 from quadruped_control.control.batch import BatchController, ControllerObjects
 from quadruped_control.control.controller_config import ControllerConfig
 from quadruped_control.model.params import RobotParams
+from quadruped_control.sim.magnetic_heading import reported_rotation
 from quadruped_control.sim.plants.paper_batch import PaperPlantBatch
 from quadruped_control.sim.plants.tank import TankParams
 from quadruped_control.sim.plants.tank_batch import TankPlantBatch
@@ -76,7 +77,8 @@ class BatchTrial:
 
 @dataclass
 class BatchResult:
-    """Recorded batch: ``t`` (T,), ``rpy`` (N, T, 3) rad, ``geodesic`` (N, T) rad, ``setpoint_rpy``
+    """Recorded batch: ``t`` (T,), ``rpy`` (N, T, 3) rad and ``geodesic`` (N, T) rad of the attitude the IMU
+    reports (the true one unless a tank trial's IMU turns the heading), ``setpoint_rpy``
     (N, 3) rad; ``failed`` (N,) trials whose plant step failed (kinematics or a non-finite state) and
     ``refused`` (N,) trials whose measurement the robot's controller would have refused (it would hold),
     both untrustworthy from then on; ``states``: the first steps' (p, v, R, omega, joint positions, and the
@@ -148,6 +150,10 @@ class BatchSimulation:
                 if not (math.isfinite(value) and value >= 0.0):
                     raise ValueError("%s must be a finite non-negative std, got %r" % (name, value))
         self.noisy = [i for i, t in enumerate(trials) if t.attitude_noise > 0.0 or t.gyro_noise > 0.0]
+        # the trials whose IMU turns the heading (a residual field at the IMU), and their fields
+        self.heading_turned = [i for i, t in enumerate(trials) if t.tank is not None and t.tank.heading_disturbed]
+        self._field_residual = np.array([trials[i].tank.imu_field_residual for i in self.heading_turned],
+                                        dtype=float).reshape(-1, 3)
         self.rngs = {i: np.random.default_rng(int(trials[i].seed)) for i in self.noisy}
         self.dt = self.controller.dt
         tank = [trial.tank is not None for trial in trials]
@@ -188,14 +194,26 @@ class BatchSimulation:
         if isinstance(self.plant, TankPlantBatch):
             self.plant.attach(self.position, self.rotation)
 
+    def _reported(self) -> np.ndarray:
+        """The attitude each trial's IMU reports, noise apart: the true one, or with the heading turned
+        where the trial's tank has a residual field at the IMU
+        (:func:`~quadruped_control.sim.magnetic_heading.reported_rotation`)."""
+        if not self.heading_turned:
+            return self.rotation
+        R = self.rotation.copy()
+        R[self.heading_turned] = reported_rotation(self.rotation[self.heading_turned], self._field_residual)
+        return R
+
     def _measure(self):
-        """What each trial's IMU reports: the true state, with noise where the trial has some."""
+        """What each trial's IMU reports: the reported attitude and the true rate, with noise where the
+        trial has some."""
+        seen = self._reported()
         if not self.noisy:
-            return self.rotation, self.omega
-        R, omega = self.rotation.copy(), self.omega.copy()
+            return seen, self.omega
+        R, omega = seen.copy(), self.omega.copy()
         for i in self.noisy:
             trial = self.trials[i]
-            R[i], omega[i] = imu_measurement(self.rngs[i], self.rotation[i], self.omega[i], trial.attitude_noise,
+            R[i], omega[i] = imu_measurement(self.rngs[i], seen[i], self.omega[i], trial.attitude_noise,
                                              trial.gyro_noise)
         return R, omega
 
@@ -256,7 +274,7 @@ class BatchSimulation:
         setpoint_rows = np.ascontiguousarray(setpoints.reshape(-1, 9))
         for i in range(samples):
             times[i] = self.k * self.dt
-            record_attitude(self.rotation, setpoint_rows, i, rpy, geodesic)
+            record_attitude(self._reported(), setpoint_rows, i, rpy, geodesic)  # as the IMU reports it
             if i < kept:
                 for key, value in (("position", self.position), ("velocity", self.velocity),
                                    ("rotation", self.rotation), ("omega", self.omega), ("joints", self.q)):

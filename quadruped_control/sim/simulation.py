@@ -39,6 +39,7 @@ from quadruped_control.control.controller import AttitudeController, ControllerO
 from quadruped_control.control.controller_config import ControllerConfig
 from quadruped_control.model.kinematics import UnreachableError, joint_angles
 from quadruped_control.model.params import RobotParams
+from quadruped_control.sim.magnetic_heading import reported_rotation
 from quadruped_control.sim.plants.paper import FloatingBaseModel, RigidBodyState
 from quadruped_control.sim.servo_model import (IdealServo, RateLimitedServo, ServoModel, ServoParams, make_servo_model,
                                               servo_params_from_dict)
@@ -305,9 +306,13 @@ class PlantSimulator:
 class SimulationResult:
     """Recorded closed-loop trial; row k is the instant t_k at which the controller measured and acted.
 
-    ``rotation`` (N, 3, 3) true R_B^W; ``quaternion`` (N, 4) (x, y, z, w); ``rpy`` (N, 3) rad;
+    ``rotation`` (N, 3, 3) true R_B^W; ``quaternion`` (N, 4) (x, y, z, w) of it; ``reported_rotation``
+    (N, 3, 3) the attitude the IMU reported, noise apart, when the plant's IMU turns the heading (a residual
+    field, :mod:`~quadruped_control.sim.magnetic_heading`; None: the true one); ``rpy`` (N, 3) rad and
+    ``geodesic`` (N,) the geodesic error (rad) of the reported attitude, from which the metrics are taken as
+    Table 1's were from the robot's IMU (the true attitude unless the heading is turned);
     ``omega`` (N, 3) rad/s (true, body); ``tau_cmd``, ``tau_sat`` (N, 3) N m; ``saturated`` (N,) bool;
-    ``geodesic`` (N,) true geodesic error, rad; ``pair_phase`` (N, P) str; ``holding`` (N,) bool;
+    ``pair_phase`` (N, P) str; ``holding`` (N,) bool;
     ``joint_targets`` (N, 12) commanded, ``joint_positions`` (N, 12) servo angles, rad;
     ``setpoint`` R_d; ``info``: the trial's settings (JSON-ready).
     """
@@ -327,14 +332,16 @@ class SimulationResult:
     wall_time: float = 0.0
     #: (N, 3) centre-of-mass position in the world frame, m (zeros if not recorded).
     position: Optional[np.ndarray] = None
+    reported_rotation: Optional[np.ndarray] = None
 
     def __post_init__(self) -> None:
         if self.position is None:
             self.position = np.zeros((self.t.size, 3))
         self.quaternion = rotations_to_quaternions(self.rotation)
-        self.rpy = rotations_to_rpy(self.rotation)
+        seen = self.rotation if self.reported_rotation is None else self.reported_rotation
+        self.rpy = rotations_to_rpy(seen)
         self.setpoint_rpy = rotations_to_rpy(self.setpoint[None, :, :])[0]
-        self.geodesic = geodesic_angles(self.setpoint, self.rotation)
+        self.geodesic = geodesic_angles(self.setpoint, seen)
 
     @property
     def duration(self) -> float:
@@ -440,8 +447,15 @@ class ClosedLoopSimulation:
         """Time of the next control step, s (k dt, not accumulated: no drift)."""
         return self.k * self.dt
 
+    def _reported(self, rotation: np.ndarray) -> np.ndarray:
+        """The attitude the IMU reports, noise apart: the true one, or with the heading a residual field at
+        the IMU turns (the plant's ``imu_field_residual``, :mod:`~quadruped_control.sim.magnetic_heading`)."""
+        residual = self.plant.model.imu_field_residual
+        return rotation if residual is None else reported_rotation(rotation, residual)
+
     def _measure(self, state: RigidBodyState) -> Tuple[np.ndarray, np.ndarray]:
-        return imu_measurement(self._rng, state.rotation, state.omega, self.attitude_noise, self.gyro_noise)
+        return imu_measurement(self._rng, self._reported(state.rotation), state.omega, self.attitude_noise,
+                               self.gyro_noise)
 
     def step(self) -> Tuple[RigidBodyState, ControllerOutput]:
         """One control period: measure at t_k, control, hold the joint targets until t_k+1.
@@ -519,6 +533,7 @@ class ClosedLoopSimulation:
             progress(times[-1], duration)
         t_rec = np.array(times)
         rotation = np.array([s.rotation for s in states])
+        reported = self._reported(rotation)
         omega = np.array([s.omega for s in states])
         position = np.array([s.position for s in states])
         tau_cmd = np.array([r.tau_cmd for r in records], dtype=float).reshape(n, 3)
@@ -552,4 +567,4 @@ class ClosedLoopSimulation:
                                 saturated=saturated, pair_phase=np.array(phases, dtype=str), holding=holding,
                                 joint_targets=target_array, joint_positions=position_array,
                                 setpoint=self.setpoint_R.copy(),
-                                info=info, wall_time=wall)
+                                info=info, wall_time=wall, reported_rotation=None if reported is rotation else reported)

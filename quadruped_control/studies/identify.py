@@ -105,6 +105,9 @@ PARAMETERS: Tuple[Tuple[str, float, float], ...] = (
     ("hook_friction_static_ratio", 1.0, 2.0),  # the tie's static over sliding friction: none to dry fibre's 2
     ("hook_friction_stribeck_rate", 0.01, 0.3),  # rad/s: 30 um/s to 1 mm/s of slip on a 3 mm wire
     ("hook_friction_roll_ratio", 0.25, 4.0),  # the tie's roll over pitch friction: a screw eye's R_e / r_w, either way
+    ("imu_field_x", -0.8, 0.8),            # residual field at the IMU / the earth's horizontal field: 16 uT, a
+    ("imu_field_y", -0.8, 0.8),            #    servo's motor magnet at 10-12 cm; a level calibration leaves z
+    ("imu_field_z", -0.8, 0.8),
 )
 
 #: Each parameter's (low, high): :data:`PARAMETERS` by name.
@@ -167,6 +170,9 @@ _PLACES: Dict[str, _Place] = {
     "hook_friction_static_ratio": _Place("hook_friction_static_ratio", (), "suspension", "friction_static_ratio"),
     "hook_friction_stribeck_rate": _Place("hook_friction_stribeck_rate", (), "suspension", "friction_stribeck_rate"),
     "hook_friction_roll_ratio": _Place("hook_friction_roll_ratio", (), "suspension", "friction_roll_ratio"),
+    "imu_field_x": _Place("imu_field_residual", (0,), "imu", "field_residual"),
+    "imu_field_y": _Place("imu_field_residual", (1,), "imu", "field_residual"),
+    "imu_field_z": _Place("imu_field_residual", (2,), "imu", "field_residual"),
 }
 
 

@@ -273,6 +273,10 @@ class FloatingBaseModel:
 
     #: Plant name (:mod:`quadruped_control.sim.plants`).
     name = "paper"
+    #: The residual magnetic field at the IMU (body axes, in units of the earth's horizontal field) when the
+    #: IMU reports a heading other than the true one (:mod:`quadruped_control.sim.magnetic_heading`); None:
+    #: the true attitude (the paper's plant; the tank's unless its parameters set one).
+    imu_field_residual: Optional[np.ndarray] = None
 
     def __init__(self, params: RobotParams, restoring_offset: Optional[ArrayLike] = None,
                  restoring_force: Optional[float] = None) -> None:

@@ -131,6 +131,13 @@ Candidate effects of the identification against Table 1, each zero (today's mode
   may be either side of 1. It is the one candidate that acts on roll and not on pitch. arm = 0 (the
   default) is today's model exactly.
 
+- **The heading the IMU reports** (not a force: what the robot's VN-100 told its controller and the
+  paper's Table 1). A magnetic field that rides with the body and is not calibrated out (motor magnets
+  and currents; a level hard-iron calibration cannot see its vertical part) turns the magnetometer's
+  heading by an angle that depends on the attitude (``imu_field_residual``, body axes, in units of the
+  earth's horizontal field; :mod:`quadruped_control.sim.magnetic_heading`). Both engines give the
+  controller that attitude and take the metrics from it. 0, the default, is the true attitude exactly.
+
 Each effect has a switch (:class:`TankParams`); with all of them off the equations reduce to the paper's
 eq. (trans), (rot) (tested). Parameters: ``config/tank.yaml``.
 Integration: the model's generic RK4 on SO(3) (``_rk4`` with this class's ``_chart_derivative``, the
@@ -194,6 +201,9 @@ HOOK_FRICTION_STRIBECK_RATE_RANGE = (1e-4, 1.0)
 #: The tie's roll over pitch friction ratios tank.yaml accepts: 0.1 to 10, past a screw eye's ring radius over
 #: its wire's radius (2-5) either way round; a larger one is a tie that holds about one axis only.
 HOOK_FRICTION_ROLL_RATIO_RANGE = (0.1, 10.0)
+#: Largest residual field component at the IMU, in units of the earth's horizontal field: beyond it the
+#: levelled field's horizontal part can vanish and the reported heading is undefined.
+MAX_IMU_FIELD_RESIDUAL = 0.95
 
 
 @dataclass(frozen=True)
@@ -260,6 +270,9 @@ class TankParams:
     hook_friction_stribeck_rate: float = 0.02
     #: its Coulomb torque about the body's x (roll) axis over the one about the other axes (1: the same)
     hook_friction_roll_ratio: float = 1.0
+    #: the residual magnetic field at the VN-100 in body axes (FLU), in units of the earth's horizontal field:
+    #: the heading the IMU reports (:mod:`quadruped_control.sim.magnetic_heading`); 0 the true heading
+    imu_field_residual: Vec3 = (0.0, 0.0, 0.0)
 
     def __post_init__(self) -> None:
         for name in ("rope_length", "rope_stiffness"):
@@ -337,6 +350,16 @@ class TankParams:
             value = getattr(self, name)
             if len(value) != 3 or not all(math.isfinite(float(v)) and float(v) >= 0.0 for v in value):
                 raise ParameterError("tank %s must be 3 finite numbers >= 0 (body axes), got %r" % (name, value))
+        value = self.imu_field_residual
+        if len(value) != 3 or not all(math.isfinite(float(v)) and abs(float(v)) <= MAX_IMU_FIELD_RESIDUAL
+                                      for v in value):
+            raise ParameterError("tank imu_field_residual must be 3 finite numbers within +-%g (the earth's "
+                                 "horizontal field), got %r" % (MAX_IMU_FIELD_RESIDUAL, value))
+
+    @property
+    def heading_disturbed(self) -> bool:
+        """Does the IMU report a heading other than the true one (a residual field at the IMU)?"""
+        return any(float(v) != 0.0 for v in self.imu_field_residual)
 
     def with_values(self, **values: Any) -> "TankParams":
         """A copy with some fields replaced (identification, tests)."""
@@ -355,7 +378,7 @@ def tank_params_from_dict(data: Mapping[str, Any]) -> TankParams:
     wider than the identification's plausible bounds) into :class:`TankParams`; ParameterError naming
     the key otherwise."""
     check_keys(data, "", ("effects", "suspension", "hydrostatics", "added_mass", "paw_drag", "servos",
-                          "appendage_damping", "paw_wake"),
+                          "appendage_damping", "paw_wake", "imu"),
                required=("suspension", "hydrostatics", "added_mass"))
     effects = check_keys(_optional_section(data, "effects"), "effects",
                          ("suspension", "hydrostatics", "torso_added_mass", "paw_added_mass", "drag"))
@@ -374,6 +397,7 @@ def tank_params_from_dict(data: Mapping[str, Any]) -> TankParams:
     appendage = check_keys(_optional_section(data, "appendage_damping"), "appendage_damping",
                            ("linear", "quadratic", "wake_fraction", "wake_time_constant"))
     wake = check_keys(_optional_section(data, "paw_wake"), "paw_wake", ("fraction", "time_constant", "body_share"))
+    imu = check_keys(_optional_section(data, "imu"), "imu", ("field_residual",))
 
     def axes(section: Mapping[str, Any], key: str, high: float) -> Vec3:
         return tuple(vector(section.get(key, [0.0, 0.0, 0.0]), "appendage_damping." + key, 3,
@@ -424,7 +448,9 @@ def tank_params_from_dict(data: Mapping[str, Any]) -> TankParams:
         paw_wake_body_share=number(wake.get("body_share", 1.0), "paw_wake.body_share", 0.0, 1.0),
         body_wake_fraction=number(appendage.get("wake_fraction", 0.0), "appendage_damping.wake_fraction", 0.0, 0.95),
         body_wake_time_constant=number(appendage.get("wake_time_constant", 5.0), "appendage_damping.wake_time_constant",
-                                       0.05, 1000.0))
+                                       0.05, 1000.0),
+        imu_field_residual=tuple(vector(imu.get("field_residual", [0.0, 0.0, 0.0]), "imu.field_residual", 3,
+                                        -MAX_IMU_FIELD_RESIDUAL, MAX_IMU_FIELD_RESIDUAL)))  # type: ignore[arg-type]
 
 
 def load_tank_params(path: Optional[str] = None, tree: Optional[Mapping[str, Any]] = None) -> TankParams:
@@ -472,6 +498,7 @@ class TankModel(FloatingBaseModel):
     def __init__(self, params: RobotParams, tank: TankParams) -> None:
         super().__init__(params)
         self.tank = tank
+        self.imu_field_residual = np.array(tank.imu_field_residual, dtype=float) if tank.heading_disturbed else None
         self.drag_constant *= tank.paw_drag_scale
         if not tank.drag:
             self.drag_constant = 0.0

@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 
 from quadruped_common import jit
-from quadruped_common.so3 import rpy_to_rot
+from quadruped_common.so3 import rotations_to_rpy, rpy_to_rot
 from quadruped_control.control.controller_config import load_controller_config
 from quadruped_control.model.params import load_robot_params
 from quadruped_control.sim.batch import BatchSimulation, BatchTrial
@@ -165,7 +165,8 @@ def test_tank_batch_agrees_with_the_per_trial_tank_plant_bit_for_bit_over_10_s(r
              base.with_values(appendage_damping_linear=(0.02, 0.03, 0.01), appendage_damping_quadratic=(0.05, 0.05, 0.1),
                               body_wake_fraction=0.6, body_wake_time_constant=2.0, block_mass=0.3, block_drag=2.0,
                               hook_friction_arm=0.003, hook_friction_angle=0.002, hook_friction_static_ratio=1.8,
-                              hook_friction_stribeck_rate=0.05, hook_friction_roll_ratio=2.2),
+                              hook_friction_stribeck_rate=0.05, hook_friction_roll_ratio=2.2,
+                              imu_field_residual=(0.2, -0.5, 0.6)),
              base.with_values(rope_torsion_stiffness=0.05, rope_torsion_damping=0.02, paw_drag_scale=0.6,
                               paw_wake_fraction=0.5, paw_wake_time_constant=0.2, paw_wake_body_share=0.3,
                               servo_stall_torque=3.9, paw_buoyancy_offset=0.06, hook_friction_arm=0.002),
@@ -192,6 +193,11 @@ def test_tank_batch_agrees_with_the_per_trial_tank_plant_bit_for_bit_over_10_s(r
     for i, sim in enumerate(sims):
         out = sim.run(10.0)
         _assert_states_agree(result, i, out, "trial %d (%s)" % (i, specs[i].label))
+        # the attitude the metrics are taken from: as the IMU reports it (trial 1's heading turned)
+        assert np.array_equal(result.rpy[i], out.rpy) and np.array_equal(result.geodesic[i], out.geodesic)
+        assert (out.reported_rotation is not None) == (i == 1)
+    # and it is not the true attitude there: the heading differs by more than a milliradian somewhere
+    assert np.max(np.abs(result.rpy[1, :, 2] - rotations_to_rpy(result.states["rotation"][1])[:, 2])) > 1e-3
 
 
 @pytest.mark.skipif(not jit.AVAILABLE, reason="numba is not installed: the batch already runs the plain functions")

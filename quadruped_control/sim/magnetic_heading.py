@@ -1,0 +1,56 @@
+"""The heading a tilt-compensating AHRS (the VN-100) reports when a residual magnetic field rides with the body.
+
+Beyond the paper. The VN-100 takes its heading from its magnetometer: it levels the measured field with the
+tilt it knows (accelerometers and gyros) and points its yaw at the field's horizontal part. A field that
+rides with the body and is not calibrated out (the servos' motor magnets and currents, the battery, a
+hard-iron calibration made level, which cannot see the vertical component) adds to the earth's, and the
+reported heading turns away from the true one by an angle that depends on the attitude.
+
+With R = Rz(psi) R_t (ZYX yaw psi, tilt R_t), the earth's field H (0, 1, -V/H) in world ENU (north is +y)
+and a residual b in body axes (FLU) in units of the earth's horizontal field H, the levelled field in
+the heading frame is Rz(psi)^T (0, H, -V) + R_t b H, so the AHRS reports
+
+    psi_m = atan2(sin psi + c_x, cos psi + c_y),   (c_x, c_y) = Rz(-psi) (R b)_xy,
+
+and the reported attitude is Rz(psi_m - psi) R: roll and pitch as true, the heading turned. Level, a
+horizontal residual gives the classic one-cycle heading error; tilted, the vertical component enters in
+proportion to the sine of the tilt. The vertical field V drops out (the tilt is assumed known), and so
+does the filter: the error is taken as the magnetometer's steady answer, without the AHRS's lag.
+
+Near pitch +-90 deg the heading is undefined and so is the error, as on the sensor.
+"""
+from __future__ import annotations
+
+import numpy as np
+
+__all__ = ["heading_error", "reported_rotation"]
+
+
+def heading_error(R: np.ndarray, residual: np.ndarray) -> np.ndarray:
+    """psi_m - psi in (-pi, pi] (rad) of attitude(s) R (..., 3, 3) with the residual field(s) ``residual``
+    (..., 3), body axes, in units of the earth's horizontal field (module docstring)."""
+    R = np.asarray(R, dtype=float)
+    b = np.asarray(residual, dtype=float)
+    psi = np.arctan2(R[..., 1, 0], R[..., 0, 0])
+    cos_psi, sin_psi = np.cos(psi), np.sin(psi)
+    # (R b)_x and (R b)_y: the residual's horizontal part in the world frame. Written out element by
+    # element so that one attitude and a stack of them round alike (the two engines agree to the bit).
+    world_x = R[..., 0, 0] * b[..., 0] + R[..., 0, 1] * b[..., 1] + R[..., 0, 2] * b[..., 2]
+    world_y = R[..., 1, 0] * b[..., 0] + R[..., 1, 1] * b[..., 1] + R[..., 1, 2] * b[..., 2]
+    level_x = cos_psi * world_x + sin_psi * world_y   # Rz(-psi) (R b)_xy
+    level_y = -sin_psi * world_x + cos_psi * world_y
+    reported = np.arctan2(sin_psi + level_x, cos_psi + level_y)
+    return np.pi - np.mod(np.pi - (reported - psi), 2.0 * np.pi)
+
+
+def reported_rotation(R: np.ndarray, residual: np.ndarray) -> np.ndarray:
+    """Rz(psi_m - psi) R: the attitude(s) the AHRS reports for the true R (..., 3, 3) (:func:`heading_error`)."""
+    R = np.asarray(R, dtype=float)
+    delta = heading_error(R, residual)
+    cos_d, sin_d = np.cos(delta), np.sin(delta)
+    out = np.empty(R.shape)
+    # rows 0 and 1 turned about z, row 2 (the tilt's) unchanged
+    out[..., 0, :] = cos_d[..., None] * R[..., 0, :] - sin_d[..., None] * R[..., 1, :]
+    out[..., 1, :] = sin_d[..., None] * R[..., 0, :] + cos_d[..., None] * R[..., 1, :]
+    out[..., 2, :] = R[..., 2, :]
+    return out
