@@ -18,12 +18,18 @@ proportion to the sine of the tilt. The vertical field V drops out (the tilt is 
 does the filter: the error is taken as the magnetometer's steady answer, without the AHRS's lag.
 
 Near pitch +-90 deg the heading is undefined and so is the error, as on the sensor.
+
+The levelled residual (c_x, c_y) = (R_t b)_xy depends on the tilt only, so for a residual weaker than the
+earth's horizontal field (|b| < 1) the heading the AHRS reports is a one-to-one function of the true one
+at each tilt, and :func:`true_rotation` inverts it exactly: the true heading's unit vector is r u - c,
+u = (sin psi_m, cos psi_m), with r > 0 the root of |r u - c| = 1. A study that starts a trial where Table 1
+says the robot started (its IMU's theta_init and psi_init) starts the plant there.
 """
 from __future__ import annotations
 
 import numpy as np
 
-__all__ = ["heading_error", "reported_rotation"]
+__all__ = ["heading_error", "reported_rotation", "true_rotation"]
 
 
 def heading_error(R: np.ndarray, residual: np.ndarray) -> np.ndarray:
@@ -43,14 +49,38 @@ def heading_error(R: np.ndarray, residual: np.ndarray) -> np.ndarray:
     return np.pi - np.mod(np.pi - (reported - psi), 2.0 * np.pi)
 
 
-def reported_rotation(R: np.ndarray, residual: np.ndarray) -> np.ndarray:
-    """Rz(psi_m - psi) R: the attitude(s) the AHRS reports for the true R (..., 3, 3) (:func:`heading_error`)."""
-    R = np.asarray(R, dtype=float)
-    delta = heading_error(R, residual)
+def _turned(R: np.ndarray, delta: np.ndarray) -> np.ndarray:
+    """Rz(delta) R: rows 0 and 1 turned about the world vertical, row 2 (the tilt's) unchanged."""
     cos_d, sin_d = np.cos(delta), np.sin(delta)
     out = np.empty(R.shape)
-    # rows 0 and 1 turned about z, row 2 (the tilt's) unchanged
     out[..., 0, :] = cos_d[..., None] * R[..., 0, :] - sin_d[..., None] * R[..., 1, :]
     out[..., 1, :] = sin_d[..., None] * R[..., 0, :] + cos_d[..., None] * R[..., 1, :]
     out[..., 2, :] = R[..., 2, :]
     return out
+
+
+def reported_rotation(R: np.ndarray, residual: np.ndarray) -> np.ndarray:
+    """Rz(psi_m - psi) R: the attitude(s) the AHRS reports for the true R (..., 3, 3) (:func:`heading_error`)."""
+    R = np.asarray(R, dtype=float)
+    return _turned(R, heading_error(R, residual))
+
+
+def true_rotation(reported: np.ndarray, residual: np.ndarray) -> np.ndarray:
+    """The true attitude(s) whose :func:`reported_rotation` is ``reported`` (..., 3, 3), for residuals weaker
+    than the earth's horizontal field (|b| < 1; ValueError otherwise, where a heading can have no true one)."""
+    reported = np.asarray(reported, dtype=float)
+    b = np.asarray(residual, dtype=float)
+    if np.any(np.sum(b * b, axis=-1) >= 1.0):
+        raise ValueError("a residual field at least the earth's horizontal field (|b| >= 1) leaves some "
+                         "headings without a true one, got %r" % (residual,))
+    psi_m = np.arctan2(reported[..., 1, 0], reported[..., 0, 0])
+    u_x, u_y = np.sin(psi_m), np.cos(psi_m)
+    # (R b)_xy of the reported attitude is Rz(psi_m) (R_t b)_xy; turned back, the levelled residual c
+    world_x = reported[..., 0, 0] * b[..., 0] + reported[..., 0, 1] * b[..., 1] + reported[..., 0, 2] * b[..., 2]
+    world_y = reported[..., 1, 0] * b[..., 0] + reported[..., 1, 1] * b[..., 1] + reported[..., 1, 2] * b[..., 2]
+    c_x = np.cos(psi_m) * world_x + np.sin(psi_m) * world_y
+    c_y = -np.sin(psi_m) * world_x + np.cos(psi_m) * world_y
+    along = u_x * c_x + u_y * c_y
+    r = along + np.sqrt(along * along - (c_x * c_x + c_y * c_y) + 1.0)
+    psi = np.arctan2(r * u_x - c_x, r * u_y - c_y)
+    return _turned(reported, psi - psi_m)

@@ -89,8 +89,12 @@ __all__ = ["PLANT_PARAMETERS", "SERVO_FITTED", "SERVO_GRID", "SERVO_PARAMETERS",
 #: The identification's parameters of the servo model: the replay drives the plant with the measured
 #: joints, so these do not enter it.
 SERVO_PARAMETERS = ("servo_speed_scale", "servo_lag_scale", "servo_load_slope", "servo_dead_band")
+#: The heading the IMU reports (a residual field at it): a property of the sensor, not of the plant. The
+#: replay starts each window from the recorded attitude as if it were the true one and compares the plant's
+#: true attitude with the record, so it cannot fit them.
+SENSOR_PARAMETERS = ("imu_field_x", "imu_field_y", "imu_field_z")
 #: Every parameter of :data:`~quadruped_control.studies.identify.PARAMETERS` that the replay can fit.
-PLANT_PARAMETERS = tuple(name for name, _, _ in PARAMETERS if name not in SERVO_PARAMETERS)
+PLANT_PARAMETERS = tuple(name for name, _, _ in PARAMETERS if name not in SERVO_PARAMETERS + SENSOR_PARAMETERS)
 
 #: The plant's step (s): the controller's period, on which the closed-loop engines hold the joints.
 GRID_DT = 0.01
@@ -396,6 +400,10 @@ def _check_parameters(names: Sequence[str]) -> List[str]:
     if servo:
         raise StudyError("identify_bags: %s belong to the servo model, which the replay does not run: the "
                          "measured joint angles drive the plant" % ", ".join(servo))
+    sensor = [n for n in names if n in SENSOR_PARAMETERS]
+    if sensor:
+        raise StudyError("identify_bags: %s belong to the IMU's heading, which the replay does not model: it "
+                         "takes the recorded attitude as the true one" % ", ".join(sensor))
     if len(set(names)) != len(names):
         raise StudyError("identify_bags: a parameter is named twice")
     if len(names) < 2:  # pycma does not fit one dimension (pycma issue 86)

@@ -20,6 +20,7 @@ from quadruped_common.config import ParameterError, config_path
 from quadruped_common.so3 import rpy_to_rot
 from quadruped_control.control.controller_config import load_controller_config
 from quadruped_control.model.params import load_robot_params
+from quadruped_control.sim.magnetic_heading import true_rotation
 from quadruped_control.sim.plants import load_tank_params, make_plant
 from quadruped_control.sim.servo_model import load_servo_params, make_servo_model, tank_servo_params
 from quadruped_control.sim.simulation import ClosedLoopSimulation, SimulationResult, load_simulation_settings
@@ -44,6 +45,7 @@ class TrialSpec:
 
     label: str
     setpoint_rpy_deg: Tuple[float, float, float]
+    #: the initial attitude as the robot's IMU reports it (the true one unless the tank's IMU turns the heading)
     initial_rpy_deg: Tuple[float, float, float] = (0.0, 0.0, 0.0)
     duration: float = 120.0
     gains: str = "simulation"
@@ -100,6 +102,10 @@ class TrialSetup:
     config: Any
     servo_params: Any
     model: Any
+    #: the plant's initial attitude: the spec's, which is what the robot's IMU reported (Table 1's theta_init
+    #: and psi_init), turned back to the true heading when the tank's IMU turns it
+    #: (:func:`~quadruped_control.sim.magnetic_heading.true_rotation`)
+    initial_R: Any = None
 
 
 def trial_setup(spec: TrialSpec) -> TrialSetup:
@@ -130,7 +136,10 @@ def trial_setup(spec: TrialSpec) -> TrialSetup:
             tank = tank.with_values(**{k: (tuple(v) if isinstance(v, list) else v) for k, v in spec.tank_overrides})
         model = make_plant(spec.plant, robot, tank)
         servo_params = tank_servo_params(servo_params, tank)
-    return TrialSetup(robot=robot, config=config, servo_params=servo_params, model=model)
+    initial_R = rpy_to_rot(*np.radians(spec.initial_rpy_deg))
+    if model is not None and model.imu_field_residual is not None:
+        initial_R = true_rotation(initial_R, model.imu_field_residual)
+    return TrialSetup(robot=robot, config=config, servo_params=servo_params, model=model, initial_R=initial_R)
 
 
 def run_trial(spec: TrialSpec) -> Dict[str, Any]:
@@ -143,7 +152,7 @@ def run_trial(spec: TrialSpec) -> Dict[str, Any]:
         raise ValueError("controller must be 'on' or 'off', got %r" % (spec.controller,))
     sim = ClosedLoopSimulation(
         robot, config, servo,
-        initial_R=rpy_to_rot(*np.radians(spec.initial_rpy_deg)),
+        initial_R=setup.initial_R,
         setpoint_R=rpy_to_rot(*np.radians(spec.setpoint_rpy_deg)),
         restoring_offset=spec.restoring_offset, seed=spec.seed,
         attitude_noise=math.radians(spec.attitude_noise_deg), gyro_noise=spec.gyro_noise,
@@ -228,7 +237,7 @@ def run_batch(specs: Sequence[TrialSpec]) -> List[Dict[str, Any]]:
     for indices in groups.values():
         setups = [trial_setup(specs[i]) for i in indices]
         trials = [BatchTrial(config=setup.config, setpoint=rpy_to_rot(*np.radians(specs[i].setpoint_rpy_deg)),
-                             initial=rpy_to_rot(*np.radians(specs[i].initial_rpy_deg)),
+                             initial=setup.initial_R,
                              servo_model=specs[i].servo_model, servo_params=setup.servo_params,
                              restoring_offset=specs[i].restoring_offset,
                              tank=setup.model.tank if setup.model is not None else None, seed=specs[i].seed,

@@ -201,8 +201,8 @@ HOOK_FRICTION_STRIBECK_RATE_RANGE = (1e-4, 1.0)
 #: The tie's roll over pitch friction ratios tank.yaml accepts: 0.1 to 10, past a screw eye's ring radius over
 #: its wire's radius (2-5) either way round; a larger one is a tie that holds about one axis only.
 HOOK_FRICTION_ROLL_RATIO_RANGE = (0.1, 10.0)
-#: Largest residual field component at the IMU, in units of the earth's horizontal field: beyond it the
-#: levelled field's horizontal part can vanish and the reported heading is undefined.
+#: Largest residual field at the IMU (its norm), in units of the earth's horizontal field: at 1 the levelled
+#: field's horizontal part can vanish, the reported heading is undefined and some headings have no true one.
 MAX_IMU_FIELD_RESIDUAL = 0.95
 
 
@@ -351,9 +351,9 @@ class TankParams:
             if len(value) != 3 or not all(math.isfinite(float(v)) and float(v) >= 0.0 for v in value):
                 raise ParameterError("tank %s must be 3 finite numbers >= 0 (body axes), got %r" % (name, value))
         value = self.imu_field_residual
-        if len(value) != 3 or not all(math.isfinite(float(v)) and abs(float(v)) <= MAX_IMU_FIELD_RESIDUAL
-                                      for v in value):
-            raise ParameterError("tank imu_field_residual must be 3 finite numbers within +-%g (the earth's "
+        if len(value) != 3 or not all(math.isfinite(float(v)) for v in value) \
+                or math.sqrt(sum(float(v) ** 2 for v in value)) > MAX_IMU_FIELD_RESIDUAL:
+            raise ParameterError("tank imu_field_residual must be 3 finite numbers of norm at most %g (the earth's "
                                  "horizontal field), got %r" % (MAX_IMU_FIELD_RESIDUAL, value))
 
     @property

@@ -7,7 +7,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from quadruped_common.so3 import rotations_to_rpy, rpy_to_rot
-from quadruped_control.sim.magnetic_heading import heading_error, reported_rotation
+from quadruped_control.sim.magnetic_heading import heading_error, reported_rotation, true_rotation
 
 angles = st.floats(-math.pi, math.pi, allow_nan=False)
 tilts = st.floats(-1.3, 1.3, allow_nan=False)  # away from pitch +-90 deg, where the heading is undefined
@@ -69,3 +69,22 @@ def test_one_attitude_and_a_stack_round_alike():
     stacked = reported_rotation(R, b)
     for i in range(64):
         assert np.array_equal(reported_rotation(R[i], b[i]), stacked[i])
+
+
+@settings(max_examples=200, deadline=None)
+@given(angles, tilts, angles, fields, fields, fields)
+def test_the_true_attitude_of_a_reported_one_reports_it_back(roll, pitch, yaw, bx, by, bz):
+    """Below the horizontal field (|b| < 1) every reported attitude has one true attitude, with the same tilt."""
+    b = np.array([bx, by, bz])
+    if np.linalg.norm(b) >= 0.99:
+        b = b * (0.98 / np.linalg.norm(b))
+    reported = rpy_to_rot(roll, pitch, yaw)
+    true = true_rotation(reported, b)
+    np.testing.assert_allclose(true[2], reported[2], rtol=0, atol=0)
+    np.testing.assert_allclose(reported_rotation(true, b), reported, atol=1e-9)
+    np.testing.assert_allclose(true_rotation(reported_rotation(reported, b), b), reported, atol=1e-9)
+
+
+def test_a_residual_as_strong_as_the_earths_field_has_headings_without_a_true_one():
+    with pytest.raises(ValueError, match="horizontal field"):
+        true_rotation(np.eye(3), (0.0, 1.0, 0.0))

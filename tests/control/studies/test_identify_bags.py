@@ -323,3 +323,12 @@ def test_a_broken_tank_yaml_is_named(capsys, tmp_path) -> None:
 def test_bad_options_are_refused(argv) -> None:
     with pytest.raises(SystemExit):
         ib.main(argv)
+
+
+def test_the_imus_heading_is_no_parameter_of_the_replay():
+    """The replay takes the recorded attitude as the true one: the residual field at the IMU is refused."""
+    from quadruped_control.studies.identify_bags import PLANT_PARAMETERS, SENSOR_PARAMETERS, _check_parameters
+
+    assert not set(SENSOR_PARAMETERS) & set(PLANT_PARAMETERS)
+    with pytest.raises(StudyError, match="IMU's heading"):
+        _check_parameters(["cob_z", "imu_field_z"])

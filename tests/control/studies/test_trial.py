@@ -2,11 +2,14 @@
 from __future__ import annotations
 
 import dataclasses
+import math
 
+import numpy as np
 import pytest
 
+from quadruped_common.so3 import rotations_to_rpy, rpy_to_rot
 from quadruped_control.sim.simulation import SimulationError
-from quadruped_control.studies.trial import TrialSpec, batch_unsupported, run_batch, run_trial
+from quadruped_control.studies.trial import TrialSpec, batch_unsupported, run_batch, run_trial, trial_setup
 
 
 def _specs():
@@ -111,3 +114,21 @@ def test_a_study_runs_batched_from_the_command_line(tmp_path):
     for path in files:
         with open(path) as stream:
             assert json.load(stream)["engine"] == "batch"
+
+
+def test_a_trial_starts_where_the_imu_reports_the_specs_attitude_on_both_engines():
+    """initial_rpy_deg is what the robot's IMU reported (Table 1's theta_init and psi_init): with a residual
+    field at the tank's IMU the plant starts at the true attitude that reports it, so the recorded (reported)
+    attitude starts at the spec's on both engines, and the engines agree."""
+    spec = TrialSpec(label="turned", setpoint_rpy_deg=(30.0, 0.0, 0.0), initial_rpy_deg=(40.0, -15.0, 75.0),
+                     duration=0.5, gains="experiment", servo_model="rate-limited", plant="tank", quiet=True,
+                     tank_overrides=(("imu_field_residual", (0.2, -0.4, 0.5)),))
+    setup = trial_setup(spec)
+    reported = rpy_to_rot(*np.radians(spec.initial_rpy_deg))
+    assert np.degrees(np.abs(rotations_to_rpy(setup.initial_R[None])[0][2] - math.radians(75.0))) > 1.0
+    per_trial, batched = run_trial(spec), run_batch([spec])[0]
+    for summary in (per_trial, batched):
+        np.testing.assert_allclose(np.degrees(summary["trace"]["rpy"][0]), spec.initial_rpy_deg, atol=1e-9)
+    np.testing.assert_array_equal(per_trial["trace"]["rpy"], batched["trace"]["rpy"])
+    plain = trial_setup(dataclasses.replace(spec, tank_overrides=()))
+    np.testing.assert_array_equal(plain.initial_R, reported)

@@ -1012,3 +1012,25 @@ def test_hook_friction_keys_are_checked(tmp_path, key: str, value, good: float) 
         TankParams(hook_friction_stribeck_rate=0.0)
     with pytest.raises(ParameterError, match="hook_friction_roll_ratio"):
         TankParams(hook_friction_roll_ratio=float("inf"))
+
+
+@pytest.mark.parametrize("value, message", [([0.0, 0.0, 0.96], "imu.field_residual"), ([0.0, "x", 0.0], "imu.field_residual"),
+                                            ([0.7, 0.7, 0.0], "norm at most"), ([0.0, 0.0], "imu.field_residual")])
+def test_the_imu_field_residual_key_is_checked(tmp_path, value, message: str) -> None:
+    """tank.yaml's imu.field_residual: off (zeros) by default; a component past 0.95 of the earth's horizontal
+    field, a norm past it (some headings would have no true one) or a malformed vector is refused."""
+    import yaml
+    with open(config_path("tank.yaml")) as stream:
+        tree = yaml.safe_load(stream)
+    assert tree["imu"]["field_residual"] == [0.0, 0.0, 0.0]
+    assert not load_tank_params().heading_disturbed and TankModel(load_robot_params(), load_tank_params()).imu_field_residual is None
+    tree["imu"]["field_residual"] = value
+    path = tmp_path / "tank.yaml"
+    path.write_text(yaml.safe_dump(tree))
+    with pytest.raises(ParameterError, match=message):
+        load_tank_params(str(path))
+    tree["imu"]["field_residual"] = [0.1, -0.4, 0.5]
+    path.write_text(yaml.safe_dump(tree))
+    params = load_tank_params(str(path))
+    assert params.imu_field_residual == (0.1, -0.4, 0.5) and params.heading_disturbed
+    np.testing.assert_array_equal(TankModel(load_robot_params(), params).imu_field_residual, [0.1, -0.4, 0.5])
