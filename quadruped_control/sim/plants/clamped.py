@@ -9,8 +9,8 @@ was attached. After every step :attr:`ClampedTank.torques` gains the torque the 
 :mod:`quadruped_control.studies.torque_map` runs it against the model's own controller.
 
 It stands in for a plant in :class:`~quadruped_control.sim.simulation.PlantSimulator`, which calls
-``attach``, ``leg_input``, ``step_trusted`` and reads ``joint_loads``; nothing else of the plant's
-interface is offered.
+``attach``, ``leg_input``, ``step_trusted`` and reads ``joint_loads`` and ``imu_field_residual`` (the
+closed loop's IMU); nothing else of the plant's interface is offered.
 """
 from __future__ import annotations
 
@@ -33,6 +33,11 @@ class ClampedTank:
         self.model = model
         self.torques: List[Tuple[float, float, float]] = []
         self._held: Optional[RigidBodyState] = None
+
+    @property
+    def imu_field_residual(self) -> Optional[np.ndarray]:
+        """The residual field at the IMU, as the model has it: on the bench the IMU reports as on the robot."""
+        return self.model.imu_field_residual
 
     @property
     def joint_loads(self) -> Any:
