@@ -105,6 +105,7 @@ PARAMETERS: Tuple[Tuple[str, float, float], ...] = (
     ("hook_friction_static_ratio", 1.0, 2.0),  # the tie's static over sliding friction: none to dry fibre's 2
     ("hook_friction_stribeck_rate", 0.01, 0.3),  # rad/s: 30 um/s to 1 mm/s of slip on a 3 mm wire
     ("hook_friction_roll_ratio", 0.25, 4.0),  # the tie's roll over pitch friction: a screw eye's R_e / r_w, either way
+    ("hook_friction_wrap", 0.0, 0.5),      # per rad: the tether's capstan friction on the rope, none to rubber on braid
     ("imu_field_x", -0.5, 0.5),            # residual field at the IMU / the earth's horizontal field: 10 uT, a
     ("imu_field_y", -0.5, 0.5),            #    servo's motor magnet at 13 cm; a level calibration leaves z; the
     ("imu_field_z", -0.5, 0.5),            #    norm stays below the horizontal field (sim/magnetic_heading.py)
@@ -170,6 +171,7 @@ _PLACES: Dict[str, _Place] = {
     "hook_friction_static_ratio": _Place("hook_friction_static_ratio", (), "suspension", "friction_static_ratio"),
     "hook_friction_stribeck_rate": _Place("hook_friction_stribeck_rate", (), "suspension", "friction_stribeck_rate"),
     "hook_friction_roll_ratio": _Place("hook_friction_roll_ratio", (), "suspension", "friction_roll_ratio"),
+    "hook_friction_wrap": _Place("hook_friction_wrap", (), "suspension", "friction_wrap"),
     "imu_field_x": _Place("imu_field_residual", (0,), "imu", "field_residual"),
     "imu_field_y": _Place("imu_field_residual", (1,), "imu", "field_residual"),
     "imu_field_z": _Place("imu_field_residual", (2,), "imu", "field_residual"),

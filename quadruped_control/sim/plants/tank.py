@@ -128,8 +128,12 @@ Candidate effects of the identification against Table 1, each zero (today's mode
   1, the default, is the isotropic tie exactly): a turn in the ring's plane slides the rope's loop along
   the wire around the ring (arm mu R_e), a turn about the wire rolls it round the wire's section (arm mu
   r_w), and a screw eye's R_e / r_w is 2-5. The paper does not say which way the eye faces, so the ratio
-  may be either side of 1. It is the one candidate that acts on roll and not on pitch. arm = 0 (the
-  default) is today's model exactly.
+  may be either side of 1. It is the one candidate that acts on roll and not on pitch. The robot's tether
+  hangs beside the rope, and each turn about the rope winds it round the rope and the tie: the tie then
+  holds more, by the capstan law tau_c exp(mu_w |phi|) with phi the turn since the rope hung untwisted
+  (``hook_friction_wrap`` mu_w, :func:`~.tank_dynamics.wound_friction_limit`; 0, the default, is the
+  unwound tie exactly). It grows with the turn already made, so it is largest where Table 1's roll group
+  ends its long heading changes. arm = 0 (the default) is today's model exactly.
 
 - **The heading the IMU reports** (not a force: what the robot's VN-100 told its controller and the
   paper's Table 1). A magnetic field that rides with the body and is not calibrated out (motor magnets
@@ -162,7 +166,8 @@ from quadruped_control.sim.plants.rigid_body import (Mat3, RigidBodyState, StepC
 from quadruped_control.sim.plants.tank_dynamics import (TankConstants, appendage_damping_torque, body_wake_update,
                                                         floating_block_update, hook_friction_update, leg_sums,
                                                         mass_solver, paw_joint_loads, paw_wake_update, rope_force,
-                                                        rope_torsion_torque, rope_twist, tank_forces, tank_rk4)
+                                                        rope_torsion_torque, rope_twist, tank_forces, tank_rk4,
+                                                        wound_friction_limit)
 
 __all__ = ["TankModel", "TankParams", "appendage_damping_torque", "hydrostatic_wrench", "load_tank_params",
            "rope_force", "rope_torsion_torque", "rope_twist", "torso_ellipsoid"]
@@ -189,6 +194,10 @@ MAX_HOOK_FRICTION_ARM = 0.05
 #: roll inertia (0.058 kg m^2 without added mass) it rings at 51 rad/s, 0.5 rad per step, well inside what a
 #: held step resolves.
 MIN_HOOK_FRICTION_ANGLE = 0.001
+
+#: The largest capstan coefficient of the tether on the rope tank.yaml accepts (per rad): 1, twice dry rubber on
+#: fibre; at 2 rad of turn the tie then holds 7.4 times its unwound friction.
+MAX_HOOK_FRICTION_WRAP = 1.0
 
 #: The largest static over sliding friction ratio tank.yaml accepts: 3, past the 1.1-2 of dry fibre on metal,
 #: so that a ratio of torques (N m for mN m) is refused.
@@ -270,6 +279,9 @@ class TankParams:
     hook_friction_stribeck_rate: float = 0.02
     #: its Coulomb torque about the body's x (roll) axis over the one about the other axes (1: the same)
     hook_friction_roll_ratio: float = 1.0
+    #: the tether's capstan friction on the rope mu_w (per rad of turn about the rope; 0: an unwound tie):
+    #: the Coulomb torque is tau_c exp(mu_w |phi|) (:func:`~.tank_dynamics.wound_friction_limit`)
+    hook_friction_wrap: float = 0.0
     #: the residual magnetic field at the VN-100 in body axes (FLU), in units of the earth's horizontal field:
     #: the heading the IMU reports (:mod:`quadruped_control.sim.magnetic_heading`); 0 the true heading
     imu_field_residual: Vec3 = (0.0, 0.0, 0.0)
@@ -337,6 +349,9 @@ class TankParams:
         if not (math.isfinite(self.hook_friction_roll_ratio) and low <= self.hook_friction_roll_ratio <= high):
             raise ParameterError("tank hook_friction_roll_ratio must be in [%g, %g] (the tie's friction about "
                                  "roll over pitch), got %r" % (low, high, self.hook_friction_roll_ratio))
+        if not (math.isfinite(self.hook_friction_wrap) and 0.0 <= self.hook_friction_wrap <= MAX_HOOK_FRICTION_WRAP):
+            raise ParameterError("tank hook_friction_wrap must be in [0, %g] per rad (the tether's friction on "
+                                 "the rope; 0: off), got %r" % (MAX_HOOK_FRICTION_WRAP, self.hook_friction_wrap))
         if not math.isfinite(self.net_weight):
             raise ParameterError("tank net_weight must be finite, got %r" % (self.net_weight,))
         if not (math.isfinite(self.paw_buoyancy_offset) and abs(self.paw_buoyancy_offset) <= 1.0):
@@ -385,7 +400,7 @@ def tank_params_from_dict(data: Mapping[str, Any]) -> TankParams:
     rope = check_keys(data["suspension"], "suspension",
                       ("hook", "length", "stiffness", "damping", "torsion_stiffness", "torsion_damping",
                        "block_mass", "block_drag", "block_tie_stiffness", "friction_arm", "friction_angle",
-                       "friction_static_ratio", "friction_stribeck_rate", "friction_roll_ratio"),
+                       "friction_static_ratio", "friction_stribeck_rate", "friction_roll_ratio", "friction_wrap"),
                       required=("hook", "length", "stiffness", "damping"))
     hydro = check_keys(data["hydrostatics"], "hydrostatics",
                        ("net_weight", "center_of_buoyancy", "paw_buoyancy_offset"),
@@ -443,6 +458,8 @@ def tank_params_from_dict(data: Mapping[str, Any]) -> TankParams:
                                            "suspension.friction_stribeck_rate", *HOOK_FRICTION_STRIBECK_RATE_RANGE),
         hook_friction_roll_ratio=number(rope.get("friction_roll_ratio", 1.0), "suspension.friction_roll_ratio",
                                         *HOOK_FRICTION_ROLL_RATIO_RANGE),
+        hook_friction_wrap=number(rope.get("friction_wrap", 0.0), "suspension.friction_wrap", 0.0,
+                                  MAX_HOOK_FRICTION_WRAP),
         paw_wake_fraction=number(wake.get("fraction", 0.0), "paw_wake.fraction", 0.0, 0.95),
         paw_wake_time_constant=number(wake.get("time_constant", 0.3), "paw_wake.time_constant", 0.02, 100.0),
         paw_wake_body_share=number(wake.get("body_share", 1.0), "paw_wake.body_share", 0.0, 1.0),
@@ -702,7 +719,8 @@ class TankModel(FloatingBaseModel):
             held = _STILL
             if self._friction_limit > 0.0:
                 tank = self.tank
-                held = hook_friction_update(self.hook_friction, self._friction_limit, tank.hook_friction_angle,
+                limit = wound_friction_limit(self._friction_limit, tank.hook_friction_wrap, R0, self._untwisted)
+                held = hook_friction_update(self.hook_friction, limit, tank.hook_friction_angle,
                                             tank.hook_friction_static_ratio, tank.hook_friction_stribeck_rate,
                                             tank.hook_friction_roll_ratio, y0[0:3], y0[3:6], R0, y0[9:12],
                                             self._hook, self._anchor, tank.rope_length, dt)

@@ -26,7 +26,7 @@ from quadruped_control.sim.plants.rigid_body import RigidBodyState
 from quadruped_control.sim.plants.tank import TankModel, TankParams
 from quadruped_control.sim.plants.tank_dynamics import (body_wake_update, floating_block_update, hook_friction_update,
                                                         leg_sums, mass_solver, paw_joint_loads, paw_wake_update,
-                                                        tank_rk4)
+                                                        tank_rk4, wound_friction_limit)
 
 __all__ = ["TankPlantBatch", "tank_batch_step", "tank_trial_step"]
 
@@ -71,7 +71,8 @@ def tank_trial_step(i, frames, five_bar, net_paw_buoyancy, drag_constant, drag, 
     y0 = (p[i, 0], p[i, 1], p[i, 2], v[i, 0], v[i, 1], v[i, 2], 0.0, 0.0, 0.0, w[i, 0], w[i, 1], w[i, 2])
     held = (0.0, 0.0, 0.0)
     if hook_friction[i, 0] > 0.0:
-        held = hook_friction_update(friction[i], hook_friction[i, 0], hook_friction[i, 1], hook_friction[i, 2],
+        limit = wound_friction_limit(hook_friction[i, 0], hook_friction[i, 5], R0, untwisted[i])
+        held = hook_friction_update(friction[i], limit, hook_friction[i, 1], hook_friction[i, 2],
                                     hook_friction[i, 3], hook_friction[i, 4], (y0[0], y0[1], y0[2]),
                                     (y0[3], y0[4], y0[5]), R0, (y0[9], y0[10], y0[11]), hook[i], anchor[i], rope[i, 0],
                                     dt)
@@ -92,8 +93,8 @@ def tank_batch_step(frames, five_bar, net_paw_buoyancy, drag_constant, drag, ext
     trial's torso buoyancy moment matrix, ``net_paw_buoyancy`` (N,) each trial's paws' buoyancy, ``block``
     (N, 3) each floating block's mass, drag and tie stiffness (mass 0: a fixed anchor), ``block_rest``
     (N, 3) where it rests, ``friction`` (N, 3) each hook's friction torque (advanced in place) and
-    ``hook_friction`` (N, 5) its Coulomb torque tau_c (0: off), presliding angle, static over sliding
-    friction, Stribeck rate and roll over pitch friction."""
+    ``hook_friction`` (N, 6) its Coulomb torque tau_c (0: off), presliding angle, static over sliding
+    friction, Stribeck rate, roll over pitch friction and the tether's capstan coefficient."""
     feet = np.empty((4, 6))
     drag_feet = np.empty((4, 6))
     for i in range(p.shape[0]):
@@ -136,13 +137,13 @@ class TankPlantBatch:
         self.block = np.array([[tank.block_mass, tank.block_drag, tank.block_tie_stiffness] for tank in tanks],
                               dtype=float).reshape(self.n, 3)
         self.block_rest = np.zeros((self.n, 3))
-        #: Each trial's hook friction (N, 5): tau_c (TankModel.hook_friction_limit; 0: off), the presliding
-        #: angle, the static over sliding friction, the Stribeck rate and the roll over pitch friction; its
-        #: torque (N, 3, body axes): TankModel.hook_friction for N trials.
+        #: Each trial's hook friction (N, 6): tau_c (TankModel.hook_friction_limit; 0: off), the presliding
+        #: angle, the static over sliding friction, the Stribeck rate, the roll over pitch friction and the
+        #: tether's capstan coefficient; its torque (N, 3, body axes): TankModel.hook_friction for N trials.
         self.hook_friction = np.array([[m.hook_friction_limit(), tank.hook_friction_angle,
                                         tank.hook_friction_static_ratio, tank.hook_friction_stribeck_rate,
-                                        tank.hook_friction_roll_ratio]
-                                       for m, tank in zip(self.models, tanks)], dtype=float).reshape(self.n, 5)
+                                        tank.hook_friction_roll_ratio, tank.hook_friction_wrap]
+                                       for m, tank in zip(self.models, tanks)], dtype=float).reshape(self.n, 6)
         self.friction = np.zeros((self.n, 3))
         self._load_constants()
 

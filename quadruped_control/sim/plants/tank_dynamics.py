@@ -5,7 +5,7 @@ when it is installed, :mod:`quadruped_common.jit`).
 
 - :func:`rope_force`, :func:`rope_twist`, :func:`rope_torsion_torque`, :func:`appendage_damping_torque`,
   :func:`paw_wake_update`, :func:`body_wake_update`, :func:`floating_block_update`,
-  :func:`hook_friction_update`: the tank's own force laws, the paws' wake, the water the body's appendages
+  :func:`hook_friction_update`, :func:`wound_friction_limit`: the tank's own force laws, the paws' wake, the water the body's appendages
   set turning, the floating block the rope hangs from and the friction where the rope is tied to the hook
   (physics and sources in :mod:`.tank`'s docstring);
 - :func:`leg_sums`, :func:`mass_solver`, :func:`solve_mass`: the mass matrix
@@ -35,7 +35,7 @@ from quadruped_control.sim.plants.rigid_body import Mat3, chart_point
 __all__ = ["TankConstants", "appendage_damping_torque", "body_wake_update", "floating_block_update",
            "hook_friction_update", "leg_sums",
            "mass_solver", "paw_joint_loads", "paw_wake_update", "rope_force", "rope_torsion_torque", "rope_twist",
-           "solve_mass", "tank_chart_derivative", "tank_forces", "tank_rk4"]
+           "solve_mass", "tank_chart_derivative", "tank_forces", "tank_rk4", "wound_friction_limit"]
 
 Vec3 = Tuple[float, float, float]
 
@@ -215,6 +215,23 @@ def floating_block_update(anchor: Any, rest: Sequence[float], p: Sequence[float]
     anchor[3], anchor[4] = vx, vy
     anchor[0] += dt * vx
     anchor[1] += dt * vy
+
+
+@jitable
+def wound_friction_limit(limit: float, wrap: float, R: Sequence[float], untwisted: Sequence[float]) -> float:
+    """The hook's Coulomb torque (N m) once the tether has wound round the rope: tau_c exp(mu_w |phi|),
+    with phi the body's turn about the world vertical since the rope hung untwisted (:func:`rope_twist` of
+    ``R`` from ``untwisted``, both row-major) and mu_w (``wrap``, per rad) the tether's friction on the rope.
+
+    The robot's tether leaves the enclosure beside the hook (the paper, section "Robot Design": the tether
+    cable enters the main enclosure through a penetrator) and hangs along the suspension rope; each turn of
+    the body about the rope winds it round the rope and the tie. Wound strands grip what they are wound on
+    as a rope grips a capstan, by the Euler-Eytelwein (capstan) law T_1 = T_0 exp(mu phi), so the tie's
+    friction grows with the turn already made and falls back as it unwinds.
+    ``wrap`` 0 returns ``limit`` itself (today's tie, bit for bit)."""
+    if wrap == 0.0:
+        return limit
+    return limit * math.exp(wrap * abs(rope_twist(R, untwisted)))
 
 
 @jitable

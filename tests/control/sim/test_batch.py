@@ -169,7 +169,8 @@ def test_tank_batch_agrees_with_the_per_trial_tank_plant_bit_for_bit_over_10_s(r
                               imu_field_residual=(0.2, -0.5, 0.6)),
              base.with_values(rope_torsion_stiffness=0.05, rope_torsion_damping=0.02, paw_drag_scale=0.6,
                               paw_wake_fraction=0.5, paw_wake_time_constant=0.2, paw_wake_body_share=0.3,
-                              servo_stall_torque=3.9, paw_buoyancy_offset=0.06, hook_friction_arm=0.002),
+                              servo_stall_torque=3.9, paw_buoyancy_offset=0.06, hook_friction_arm=0.002,
+                              hook_friction_wrap=0.4),
              base.with_values(added_mass_scale=3.0, paw_added_mass_scale=2.0, net_weight=2.0, servo_stall_torque=1.5,
                               block_mass=1.0, block_drag=10.0, block_tie_stiffness=5.0, servo_dead_band=0.01),
              base.with_values(suspension=False, hydrostatics=False)]
@@ -215,7 +216,8 @@ def test_compiled_loops_compute_what_their_plain_python_computes(robot, plant, p
     config = load_controller_config(None, "experiment")
     # the tank with its loaded servos on (the plant computes the joint loads, the servo step reads them)
     tank = load_tank_params().with_values(servo_stall_torque=2.0, servo_dead_band=0.005, hook_friction_arm=0.002,
-                                          hook_friction_static_ratio=1.5, hook_friction_roll_ratio=0.6) \
+                                          hook_friction_static_ratio=1.5, hook_friction_roll_ratio=0.6,
+                                          hook_friction_wrap=0.3) \
         if plant == "tank" else None
     servo_params = dataclasses.replace(load_servo_params(), stall_torque=2.0 if plant == "tank" else 0.0,
                                        dead_band=0.005 if plant == "tank" else 0.0)

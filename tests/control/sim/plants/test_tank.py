@@ -969,6 +969,43 @@ def test_a_tie_that_holds_more_about_roll_keeps_a_rolled_robot_and_lets_a_pitche
     assert rolled_tie_rate == pitched_rate
 
 
+def test_the_wound_tether_grows_the_ties_friction_by_the_capstan_law() -> None:
+    """wound_friction_limit: tau_c exp(mu_w |phi|) with phi the turn about the world vertical since the rope
+    hung untwisted, either way round; a tilt is no turn; mu_w = 0 returns tau_c itself whatever the turn."""
+    from quadruped_control.sim.plants.tank_dynamics import wound_friction_limit
+    untwisted = rpy_to_rot(0.3, -0.2, 0.4).ravel().tolist()
+    for turn in (math.pi / 2.0, -2.1):
+        turned = (rpy_to_rot(0.0, 0.0, turn) @ rpy_to_rot(0.3, -0.2, 0.4)).ravel().tolist()
+        assert wound_friction_limit(0.004, 0.3, turned, untwisted) == pytest.approx(0.004 * math.exp(0.3 * abs(turn)),
+                                                                                  rel=1e-12)
+        assert wound_friction_limit(0.004, 0.0, turned, untwisted) == 0.004
+    assert wound_friction_limit(0.004, 0.3, untwisted, untwisted) == pytest.approx(0.004, rel=1e-15)
+    # a tilt about a horizontal world axis is no turn about the rope (the twist of the swing-twist is 0)
+    tilted = (rpy_to_rot(0.5, 0.0, 0.0) @ rpy_to_rot(0.3, -0.2, 0.4)).ravel().tolist()
+    assert wound_friction_limit(0.004, 0.3, tilted, untwisted) == pytest.approx(0.004, rel=1e-12)
+
+
+def test_the_plant_holds_a_body_turned_since_the_rope_hung_with_the_wound_tie() -> None:
+    """TankModel: a level body rolling at 0.3 rad/s, its rope hung untwisted a quarter turn ago (attached at
+    heading -90 deg), builds exp(mu_w pi / 2) times the friction of an unturned body in one step; with
+    mu_w = 0 the quarter turn changes nothing, to the bit."""
+    tank = TankParams(center_of_buoyancy=(0.0, 0.0, 0.0), hook_friction_arm=0.002)
+    rolling = RigidBodyState(rotation=np.eye(3), omega=np.array([0.3, 0.0, 0.0]))
+    held = {}
+    for wrap in (0.0, 0.4):
+        for heading in (0.0, -math.pi / 2.0):
+            model = TankModel(ROBOT, tank.with_values(hook_friction_wrap=wrap))
+            model.attach(RigidBodyState(rotation=rpy_to_rot(0.0, 0.0, heading)))
+            end = model.step(rolling, nominal_joint_angles(ROBOT), np.zeros((4, 3)), DT)
+            held[wrap, heading] = (model.hook_friction.copy(), end.omega.copy())
+    assert held[0.0, 0.0][0][0] > 1e-5
+    np.testing.assert_array_equal(held[0.0, -math.pi / 2.0][0], held[0.0, 0.0][0])
+    np.testing.assert_array_equal(held[0.0, -math.pi / 2.0][1], held[0.0, 0.0][1])
+    np.testing.assert_array_equal(held[0.4, 0.0][0], held[0.0, 0.0][0])
+    np.testing.assert_allclose(held[0.4, -math.pi / 2.0][0], held[0.0, 0.0][0] * math.exp(0.4 * math.pi / 2.0),
+                               rtol=1e-12)
+
+
 def test_hook_friction_tends_to_todays_model_as_it_vanishes() -> None:
     """The limiting case: arm 0 is today's model exactly (whatever the presliding angle), and a vanishing arm
     tends to it (1e-9 m: states within 1e-9 after 5 s of a released swing)."""
@@ -986,7 +1023,8 @@ def test_hook_friction_tends_to_todays_model_as_it_vanishes() -> None:
                                               ("friction_static_ratio", 3.5, 1.6), ("friction_static_ratio", "x", 1.6),
                                               ("friction_stribeck_rate", 0.0, 0.05),
                                               ("friction_stribeck_rate", 2.0, 0.05),
-                                              ("friction_roll_ratio", 0.05, 3.0), ("friction_roll_ratio", 12.0, 0.3)])
+                                              ("friction_roll_ratio", 0.05, 3.0), ("friction_roll_ratio", 12.0, 0.3),
+                                              ("friction_wrap", -0.1, 0.3), ("friction_wrap", 1.5, 0.3)])
 def test_hook_friction_keys_are_checked(tmp_path, key: str, value, good: float) -> None:
     """Each of tank.yaml's suspension.friction_* keys: a value out of its bounds is refused by name, one inside
     reaches TankParams.hook_friction_*; the static friction and the roll ratio are off by default."""
@@ -995,6 +1033,7 @@ def test_hook_friction_keys_are_checked(tmp_path, key: str, value, good: float) 
         tree = yaml.safe_load(stream)
     assert tree["suspension"]["friction_static_ratio"] == 1.0  # off by default
     assert tree["suspension"]["friction_roll_ratio"] == 1.0
+    assert tree["suspension"]["friction_wrap"] == 0.0
     tree["suspension"][key] = value
     path = tmp_path / "tank.yaml"
     path.write_text(yaml.safe_dump(tree))
@@ -1012,6 +1051,8 @@ def test_hook_friction_keys_are_checked(tmp_path, key: str, value, good: float) 
         TankParams(hook_friction_stribeck_rate=0.0)
     with pytest.raises(ParameterError, match="hook_friction_roll_ratio"):
         TankParams(hook_friction_roll_ratio=float("inf"))
+    with pytest.raises(ParameterError, match="hook_friction_wrap"):
+        TankParams(hook_friction_wrap=float("nan"))
 
 
 @pytest.mark.parametrize("value, message", [([0.0, 0.0, 0.96], "imu.field_residual"), ([0.0, "x", 0.0], "imu.field_residual"),
