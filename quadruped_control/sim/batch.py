@@ -204,10 +204,11 @@ class BatchSimulation:
         R[self.heading_turned] = reported_rotation(self.rotation[self.heading_turned], self._field_residual)
         return R
 
-    def _measure(self):
-        """What each trial's IMU reports: the reported attitude and the true rate, with noise where the
-        trial has some."""
-        seen = self._reported()
+    def _measure(self, seen: Optional[np.ndarray] = None):
+        """What each trial's IMU reports: the reported attitude (``seen``, :meth:`_reported` unless given) and
+        the true rate, with noise where the trial has some."""
+        if seen is None:
+            seen = self._reported()
         if not self.noisy:
             return seen, self.omega
         R, omega = seen.copy(), self.omega.copy()
@@ -217,9 +218,10 @@ class BatchSimulation:
                                              trial.gyro_noise)
         return R, omega
 
-    def _control(self) -> np.ndarray:
-        """The controllers' step at t_k on the measurement; the joint targets (N, 4, 3)."""
-        return self.controller.step(self.k * self.dt, *self._measure())
+    def _control(self, seen: Optional[np.ndarray] = None) -> np.ndarray:
+        """The controllers' step at t_k on the measurement (of the reported attitude ``seen`` when given);
+        the joint targets (N, 4, 3)."""
+        return self.controller.step(self.k * self.dt, *self._measure(seen))
 
     def step(self) -> None:
         """One control period of every trial: measure at t_k, control, hold the joint targets to t_k+1."""
@@ -274,14 +276,15 @@ class BatchSimulation:
         setpoint_rows = np.ascontiguousarray(setpoints.reshape(-1, 9))
         for i in range(samples):
             times[i] = self.k * self.dt
-            record_attitude(self._reported(), setpoint_rows, i, rpy, geodesic)  # as the IMU reports it
+            seen = self._reported()  # once per sample: the record and the controller's measurement
+            record_attitude(seen, setpoint_rows, i, rpy, geodesic)  # as the IMU reports it
             if i < kept:
                 for key, value in (("position", self.position), ("velocity", self.velocity),
                                    ("rotation", self.rotation), ("omega", self.omega), ("joints", self.q)):
                     states[key].append(value.copy())
             if i >= steps and metrics is None:
                 continue  # the last sample: only the stroke metrics need the controller's answer to it
-            targets = self._control()
+            targets = self._control(seen)
             if i < kept and i < steps:
                 states["targets"].append(targets.copy())
             if metrics is not None:

@@ -32,19 +32,23 @@ import numpy as np
 __all__ = ["heading_error", "reported_rotation", "true_rotation"]
 
 
-def heading_error(R: np.ndarray, residual: np.ndarray) -> np.ndarray:
-    """psi_m - psi in (-pi, pi] (rad) of attitude(s) R (..., 3, 3) with the residual field(s) ``residual``
-    (..., 3), body axes, in units of the earth's horizontal field (module docstring)."""
-    R = np.asarray(R, dtype=float)
-    b = np.asarray(residual, dtype=float)
+def _levelled_residual(R: np.ndarray, b: np.ndarray):
+    """(psi, cos psi, sin psi, c_x, c_y) of attitude(s) R (..., 3, 3): its heading and the residual b (..., 3)
+    levelled into its heading frame, (c_x, c_y) = Rz(-psi) (R b)_xy = (R_t b)_xy (module docstring)."""
     psi = np.arctan2(R[..., 1, 0], R[..., 0, 0])
     cos_psi, sin_psi = np.cos(psi), np.sin(psi)
     # (R b)_x and (R b)_y: the residual's horizontal part in the world frame. Written out element by
     # element so that one attitude and a stack of them round alike (the two engines agree to the bit).
     world_x = R[..., 0, 0] * b[..., 0] + R[..., 0, 1] * b[..., 1] + R[..., 0, 2] * b[..., 2]
     world_y = R[..., 1, 0] * b[..., 0] + R[..., 1, 1] * b[..., 1] + R[..., 1, 2] * b[..., 2]
-    level_x = cos_psi * world_x + sin_psi * world_y   # Rz(-psi) (R b)_xy
-    level_y = -sin_psi * world_x + cos_psi * world_y
+    return psi, cos_psi, sin_psi, cos_psi * world_x + sin_psi * world_y, -sin_psi * world_x + cos_psi * world_y
+
+
+def heading_error(R: np.ndarray, residual: np.ndarray) -> np.ndarray:
+    """psi_m - psi in (-pi, pi] (rad) of attitude(s) R (..., 3, 3) with the residual field(s) ``residual``
+    (..., 3), body axes, in units of the earth's horizontal field (module docstring)."""
+    psi, cos_psi, sin_psi, level_x, level_y = _levelled_residual(np.asarray(R, dtype=float),
+                                                                 np.asarray(residual, dtype=float))
     reported = np.arctan2(sin_psi + level_x, cos_psi + level_y)
     return np.pi - np.mod(np.pi - (reported - psi), 2.0 * np.pi)
 
@@ -73,13 +77,8 @@ def true_rotation(reported: np.ndarray, residual: np.ndarray) -> np.ndarray:
     if np.any(np.sum(b * b, axis=-1) >= 1.0):
         raise ValueError("a residual field at least the earth's horizontal field (|b| >= 1) leaves some "
                          "headings without a true one, got %r" % (residual,))
-    psi_m = np.arctan2(reported[..., 1, 0], reported[..., 0, 0])
-    u_x, u_y = np.sin(psi_m), np.cos(psi_m)
-    # (R b)_xy of the reported attitude is Rz(psi_m) (R_t b)_xy; turned back, the levelled residual c
-    world_x = reported[..., 0, 0] * b[..., 0] + reported[..., 0, 1] * b[..., 1] + reported[..., 0, 2] * b[..., 2]
-    world_y = reported[..., 1, 0] * b[..., 0] + reported[..., 1, 1] * b[..., 1] + reported[..., 1, 2] * b[..., 2]
-    c_x = np.cos(psi_m) * world_x + np.sin(psi_m) * world_y
-    c_y = -np.sin(psi_m) * world_x + np.cos(psi_m) * world_y
+    # the reported attitude's levelled residual is the true one's: the tilt is the same
+    psi_m, u_y, u_x, c_x, c_y = _levelled_residual(reported, b)
     along = u_x * c_x + u_y * c_y
     r = along + np.sqrt(along * along - (c_x * c_x + c_y * c_y) + 1.0)
     psi = np.arctan2(r * u_x - c_x, r * u_y - c_y)

@@ -450,8 +450,7 @@ class ClosedLoopSimulation:
     def _reported(self, rotation: np.ndarray) -> np.ndarray:
         """The attitude the IMU reports, noise apart: the true one, or with the heading a residual field at
         the IMU turns (the plant's ``imu_field_residual``, :mod:`~quadruped_control.sim.magnetic_heading`)."""
-        # a plant that says nothing of the IMU (a test double) reports the true attitude
-        residual = getattr(self.plant.model, "imu_field_residual", None)
+        residual = self.plant.model.imu_field_residual
         return rotation if residual is None else reported_rotation(rotation, residual)
 
     def _measure(self, state: RigidBodyState) -> Tuple[np.ndarray, np.ndarray]:
