@@ -74,6 +74,7 @@ from quadruped_common.so3 import exp_so3, rpy_to_rot
 from quadruped_control.analysis.bag_report import BagData, BagReportError, read_bags, sorted_unique
 from quadruped_control.analysis.strokes import foot_paths
 from quadruped_control.model.params import RobotParams, load_robot_params
+from quadruped_control.sim.magnetic_heading import reported_rotation
 from quadruped_control.sim.plants.tank import TankParams, load_tank_params
 from quadruped_control.sim.replay import (Record, attitude_errors, joint_errors, replay, replay_servos,
                                           sample_index, still_errors, window_starts)
@@ -217,8 +218,11 @@ def simulated_record(truth_yaml: str, setpoint_rpy_deg: Sequence[float], initial
                      duration: float, gains: str = "experiment", attitude_noise_deg: float = 0.0,
                      joint_noise_deg: float = 0.0, seed: int = 0) -> Record:
     """A run of the simulated robot on the tank plant of ``truth_yaml`` (module docstring) as a bag would
-    record it: the true attitude turned by an isotropic rotation-vector noise of ``attitude_noise_deg``
-    (std), the true body rate, and the servos' angles plus a noise of ``joint_noise_deg`` (std)."""
+    record it: the attitude the IMU reports (the true one, with the heading turned where the truth has a
+    residual field at the IMU, :mod:`~quadruped_control.sim.magnetic_heading`) turned by an isotropic
+    rotation-vector noise of ``attitude_noise_deg`` (std), the true body rate, and the servos' angles plus a
+    noise of ``joint_noise_deg`` (std). The run starts where the IMU reports ``initial_rpy_deg``, as a
+    Table-1 trial does (:class:`~quadruped_control.studies.trial.TrialSetup`'s ``initial_R``)."""
     from quadruped_control.sim.batch import BatchSimulation, BatchTrial
     from quadruped_control.studies.trial import TrialSpec, trial_setup
 
@@ -227,7 +231,7 @@ def simulated_record(truth_yaml: str, setpoint_rpy_deg: Sequence[float], initial
                      servo_model="rate-limited", plant="tank", tank_yaml=truth_yaml)
     setup = trial_setup(spec)
     trial = BatchTrial(config=setup.config, setpoint=rpy_to_rot(*np.radians(spec.setpoint_rpy_deg)),
-                       initial=rpy_to_rot(*np.radians(spec.initial_rpy_deg)), servo_model="rate-limited",
+                       initial=setup.initial_R, servo_model="rate-limited",
                        servo_params=setup.servo_params, tank=setup.model.tank)
     simulation = BatchSimulation(setup.robot, [trial])
     samples = int(round(duration / simulation.dt)) + 1
@@ -236,6 +240,8 @@ def simulated_record(truth_yaml: str, setpoint_rpy_deg: Sequence[float], initial
         raise StudyError("identify_bags: the simulated run on %s failed" % truth_yaml)
     states = result.states
     rotation, omega, joints = states["rotation"][0].copy(), states["omega"][0].copy(), states["joints"][0].copy()
+    if setup.model.imu_field_residual is not None:  # the bag holds what the IMU reported
+        rotation = reported_rotation(rotation, setup.model.imu_field_residual)
     commands = np.full_like(joints, math.nan)
     commands[:-1] = states["targets"][0]  # none after the last step
     rng = np.random.default_rng(seed)

@@ -332,3 +332,30 @@ def test_the_imus_heading_is_no_parameter_of_the_replay():
     assert not set(SENSOR_PARAMETERS) & set(PLANT_PARAMETERS)
     with pytest.raises(StudyError, match="IMU's heading"):
         _check_parameters(["cob_z", "imu_field_z"])
+
+
+def test_a_simulated_bag_records_the_heading_the_imu_reports(tmp_path) -> None:
+    """With a residual field at the truth's IMU the simulated bag holds what the VN-100 would publish: the
+    attitude the controller saw (the batch's reported rpy, BatchResult.rpy, of the run started where the IMU
+    reports the initial attitude), not the plant's true one, which differs from it in heading."""
+    from quadruped_common.so3 import rotations_to_rpy, rpy_to_rot
+    from quadruped_control.sim.batch import BatchSimulation, BatchTrial
+    from quadruped_control.studies.trial import TrialSpec, trial_setup
+
+    with open(os.path.join(REPO_ROOT, TANK)) as stream:
+        text = stream.read()
+    assert "\nimu:" not in text  # the identified set's IMU reports the true heading
+    truth = tmp_path / "magnetic.yaml"
+    truth.write_text(text + "\nimu:\n  field_residual: [0.1, -0.3, 0.4]\n")
+    record = ib.simulated_record(str(truth), (30.0, 0.0, 0.0), (0.0, 0.0, 60.0), 2.0)
+    spec = TrialSpec(label="x", setpoint_rpy_deg=(30.0, 0.0, 0.0), initial_rpy_deg=(0.0, 0.0, 60.0), duration=2.0,
+                     gains="experiment", servo_model="rate-limited", plant="tank", tank_yaml=str(truth))
+    setup = trial_setup(spec)
+    trial = BatchTrial(config=setup.config, setpoint=rpy_to_rot(math.radians(30.0), 0.0, 0.0),
+                       initial=setup.initial_R, servo_model="rate-limited", servo_params=setup.servo_params,
+                       tank=setup.model.tank)
+    result = BatchSimulation(setup.robot, [trial]).run(2.0, record_states=201)
+    np.testing.assert_allclose(rotations_to_rpy(record.rotation), result.rpy[0], atol=1e-12)
+    np.testing.assert_allclose(result.rpy[0, 0], [0.0, 0.0, math.radians(60.0)], atol=1e-12)
+    true_heading = rotations_to_rpy(result.states["rotation"][0])[:, 2]
+    assert np.abs(true_heading - result.rpy[0, :, 2]).min() > math.radians(1.0)
