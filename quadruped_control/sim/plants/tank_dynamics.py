@@ -5,9 +5,10 @@ when it is installed, :mod:`quadruped_common.jit`).
 
 - :func:`rope_force`, :func:`rope_twist`, :func:`rope_torsion_torque`, :func:`appendage_damping_torque`,
   :func:`paw_wake_update`, :func:`body_wake_update`, :func:`floating_block_update`,
-  :func:`hook_friction_update`, :func:`wound_friction_limit`: the tank's own force laws, the paws' wake, the water the body's appendages
-  set turning, the floating block the rope hangs from and the friction where the rope is tied to the hook
-  (physics and sources in :mod:`.tank`'s docstring);
+  :func:`hook_friction_update`, :func:`wound_friction_limit`: the tank's own force laws, the paws' wake,
+  the water the body's appendages set turning, the floating block the rope hangs from and the friction
+  where the rope is tied to the hook, with the tether wound round it (physics and sources in
+  :mod:`.tank`'s docstring);
 - :func:`leg_sums`, :func:`mass_solver`, :func:`solve_mass`: the mass matrix
   M = M_RB + M_A + sum_i M_paw(r_i) of a held step and its solution by the Schur complement;
 - :func:`tank_forces`: the right-hand side of eq. (tank), the paper's forces
