@@ -42,7 +42,7 @@ from typing import Optional, Sequence
 from quadruped_common.config import ParameterError
 from quadruped_control.control.strokes import SCHEMES
 from quadruped_control.model.params import load_robot_params
-from quadruped_control.sim.plants import PLANTS
+from quadruped_control.sim.plants import PLANTS, VALIDITY_NOTE
 from quadruped_control.sim.simulation import SimulationError, load_simulation_settings
 from quadruped_control.studies import StudyError, identify, paper_experiments, paper_sim, robustness, schemes
 from quadruped_control.studies.runner import command_line
@@ -215,6 +215,8 @@ def main(argv: Optional[Sequence[str]] = None) -> int:
                                % (spec.label, spec.plant, spec.gains, spec.servo_model, summary["scheme"], spec.duration,
                                   summary["real_time_factor"])))
     print("wrote %s/{timeseries.csv, metrics.json, attitude.png}" % args.out)
+    if spec.plant == "tank":
+        print("note: %s" % VALIDITY_NOTE)
     return 0
 
 

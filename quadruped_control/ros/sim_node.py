@@ -71,7 +71,7 @@ from quadruped_common.robot import JOINT_NAMES
 from quadruped_common.so3 import rot_to_quat, rpy_to_rot
 from quadruped_common.ros.diagnostics import Updater
 from quadruped_control.model.params import load_robot_params
-from quadruped_control.sim.plants import load_tank_params, make_plant
+from quadruped_control.sim.plants import VALIDITY_NOTE, load_tank_params, make_plant
 from quadruped_control.sim.servo_model import make_servo_model, tank_servo_params
 from quadruped_control.sim.simulation import PlantSimulator, SimulationError, load_simulation_settings
 from quadruped_drivers.bus_bridge import BusBridgeServer
@@ -110,6 +110,7 @@ class SimNode:
             tank = load_tank_params(optional("~tank_yaml"))
             model = make_plant(plant, self.robot, tank)
             servo_params = tank_servo_params(servo_params, tank)  # the tank's servos, as the offline trials
+            rospy.logwarn("sim_node: %s", VALIDITY_NOTE)
         servo = make_servo_model(rospy.get_param("~servo_model", "rate-limited"), servo_params)
         self.plant = PlantSimulator(self.robot, servo,
                                     initial_rotation=rpy_to_rot(roll, pitch, yaw),

@@ -31,6 +31,7 @@ import numpy as np
 from scipy.optimize import brentq
 
 from quadruped_common.so3 import rot_to_rpy, rpy_to_rot
+from quadruped_control.sim.plants import VALIDITY_NOTE
 from quadruped_control.studies.trial import GAIN_ALIASES, TrialSpec, run_many
 
 __all__ = ["DURATION", "PAPER_TABLE", "agreement", "case_label", "comparison_rows", "format_table", "initial_attitude",
@@ -263,6 +264,8 @@ def main_study(args: argparse.Namespace) -> int:
     title = "%s plant, %s gains, %s servos, %g s trials" % (plant, gains, servo, duration)
     figures = plot_sets(results, rows, os.path.join(args.out, "paper_experiments"), title)
     markdown = format_table(table_rows, title)
+    if plant == "tank":
+        markdown += "\nNote: %s.\n" % VALIDITY_NOTE
     with open(os.path.join(args.out, "paper_experiments.md"), "w") as stream:
         stream.write(markdown)
     with open(os.path.join(args.out, "paper_experiments.json"), "w") as stream:

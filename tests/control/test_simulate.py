@@ -10,6 +10,7 @@ import sys
 import pytest
 
 from quadruped_control import simulate
+from quadruped_control.sim.plants import VALIDITY_NOTE
 from quadruped_control.sim.simulation import SimulationResult
 from tests.repo import REPO_ROOT as ROOT
 
@@ -141,7 +142,7 @@ def test_bad_robot_yaml_is_a_clear_error(tmp_path, capsys) -> None:
     assert not os.path.exists(str(tmp_path / "s" / "study.json"))
 
 
-def test_tank_plant_controller_off_and_com_columns(tmp_path) -> None:
+def test_tank_plant_controller_off_and_com_columns(tmp_path, capsys) -> None:
     out = str(tmp_path / "tank")
     assert simulate.main(["--plant", "tank", "--controller", "off", "--initial-rpy", "20", "0", "0",
                           "--duration", "2", "--out", out, "--quiet"]) == 0
@@ -152,5 +153,8 @@ def test_tank_plant_controller_off_and_com_columns(tmp_path) -> None:
     with open(os.path.join(out, "metrics.json")) as stream:
         info = json.load(stream)["info"]
     assert info["plant"] == "tank" and info["controller"] == "off"
+    assert "note: %s" % VALIDITY_NOTE in capsys.readouterr().out  # no result on it is the robot's
+    assert simulate.main(["--duration", "0.5", "--out", str(tmp_path / "paper"), "--quiet"]) == 0
+    assert VALIDITY_NOTE not in capsys.readouterr().out
     with pytest.raises(SystemExit):
         simulate.main(["--plant", "tank", "--restoring-offset", "0", "0", "0.01", "--out", out])

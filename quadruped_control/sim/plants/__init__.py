@@ -15,11 +15,11 @@ from typing import Optional
 
 from quadruped_control.model.params import RobotParams
 from quadruped_control.sim.plants.paper import FloatingBaseModel
-from quadruped_control.sim.plants.tank import TankModel, TankParams, load_tank_params
+from quadruped_control.sim.plants.tank import VALIDITY_NOTE, TankModel, TankParams, load_tank_params
 
 PLANTS = ("paper", "tank")
 
-__all__ = ["PLANTS", "TankModel", "TankParams", "load_tank_params", "make_plant"]
+__all__ = ["PLANTS", "TankModel", "TankParams", "VALIDITY_NOTE", "load_tank_params", "make_plant"]
 
 
 def make_plant(name: str, robot: RobotParams, tank: Optional[TankParams] = None) -> FloatingBaseModel:

@@ -12,6 +12,7 @@ import pytest
 
 from quadruped_common.so3 import geodesic_angle, rpy_to_rot
 from quadruped_control import simulate
+from quadruped_control.sim.plants import VALIDITY_NOTE
 from quadruped_control.studies import paper_experiments as pe
 
 
@@ -64,7 +65,19 @@ def test_study_cli_writes_the_table_json_and_figures(tmp_path) -> None:
     with open(os.path.join(out, "paper_experiments.md")) as stream:
         text = stream.read()
     assert "| roll+pitch | 60 (t_rec 1.0) |" in text and "(R)" in text
+    assert VALIDITY_NOTE not in text  # the paper's own model needs no warning against the robot
     assert all(os.path.exists(p) for p in study["figures"]) and len(study["figures"]) == 3
+
+
+def test_the_tank_plants_table_says_the_plant_is_not_validated(tmp_path, capsys) -> None:
+    """A table made on the tank plant sits beside the paper's values; it must not be read as the robot's."""
+    out = str(tmp_path / "pe")
+    assert simulate.main(["--study", "paper-experiments", "--duration", "1", "--engine", "batch", "--out", out,
+                          "--quiet", "--jobs", "1"]) == 0
+    with open(os.path.join(out, "paper_experiments.md")) as stream:
+        text = stream.read()
+    assert "tank plant" in text.splitlines()[0] and "Note: %s." % VALIDITY_NOTE in text
+    assert VALIDITY_NOTE in capsys.readouterr().out
 
 
 def test_the_slow_recovery_trials_are_the_t_rec_cases_with_the_default_recovery() -> None:
