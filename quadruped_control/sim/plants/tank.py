@@ -174,8 +174,9 @@ __all__ = ["TankModel", "TankParams", "VALIDITY_NOTE", "appendage_damping_torque
 
 #: What the tank plant can tell a roboticist today, said wherever it runs (the simulate command, the Table-1
 #: study's report, sim.launch plant:=tank), so that no result made on it is read as the robot's. The figures
-#: behind it are in docs/identification.md, "Where it stands": no parameter set within physical bounds
-#: predicts the settling of experiments held out of its fit.
+#: behind it are in docs/identification.md, "Where it stands": no model predicts the settling of experiments
+#: held out of its fit reliably (one draw of the twenty-seventh run met the targets, at the edge; the same
+#: model's other draws did not).
 VALIDITY_NOTE = ("the tank plant is not yet a validated model of the robot. config/tank.yaml (the default) holds "
                  "a priori estimates and cannot hold a tilt past about 16 deg; the sets fitted to the paper's "
                  "Table 1 (config/tank_identified.yaml, --tank-yaml) predict experiments held out of their fit with "
