@@ -109,6 +109,10 @@ def build_parser() -> argparse.ArgumentParser:
     parser.add_argument("--parameters", nargs="+", default=[], metavar="PARAMETER",
                         help="identify: fit exactly these parameters (the screening still runs and is "
                              "reported; to repeat an earlier run's choice with another budget)")
+    parser.add_argument("--start", choices=("screening", "nominal"), default="screening",
+                        help="identify: where every fit starts: the screening's best set (the full fit) or its best "
+                             "on the fold's training groups (default, as the runs before it), or the nominal values "
+                             "of --tank-yaml (the same start whatever other candidates the screening spans)")
     parser.add_argument("--slow-recovery-check", action="store_true",
                         help="identify: the paper's t_rec observation as three more experiments: pitch 75, 90 and "
                              "roll+pitch 60 with t_rec = 1.5 s must not settle (the paper needed 1.0 s there)")

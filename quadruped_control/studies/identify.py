@@ -34,7 +34,9 @@ Design (:func:`main_study`):
    a candidate effect under test), the others stay at their config/tank.yaml values (the data cannot pin
    them down).
 2. Fit: CMA-ES (the ``cma`` package) over the identified parameters scaled to [0, 1], ``--evaluations``
-   parameter sets, seeded; with ``--polish-evaluations N`` a compass search from its best set follows
+   parameter sets, seeded, from the screening's best set (the folds: its best on their training groups,
+   :func:`best_on`), or with ``--start nominal`` from the nominal values, which do not change when a
+   candidate is added to the screening; with ``--polish-evaluations N`` a compass search from its best set follows
    (:func:`polish`, up to N sets: the budgets end before CMA-ES converges). The folds' fits are polished
    the same way.
 3. Cross-validation: for each group of experiments (roll, pitch, coupled), the same fit on the other
@@ -640,7 +642,13 @@ def main_study(args: argparse.Namespace) -> int:
     if len(chosen) < 2:  # pycma does not fit one dimension (pycma issue 86); say so before the fit fails
         raise StudyError("identify: the screening chose %s; CMA-ES fits two or more parameters: add one with "
                          "--include or name them with --parameters" % (", ".join(chosen) or "no parameter"))
-    start = screening["best"]["values"]
+    start_from = getattr(args, "start", "screening")
+    if start_from not in ("screening", "nominal"):
+        raise StudyError("identify: --start is 'screening' or 'nominal', got %r" % (start_from,))
+    # The screening's best set varies every parameter it spans, so it (and every fit from it) changes when a
+    # candidate is added to PARAMETERS, even for fits of the same few parameters; the nominal start does not
+    # (docs/identification.md, twenty-eighth run).
+    start = screening["best"]["values"] if start_from == "screening" else nominal
     fixed = {n: (start[n] if n in chosen else nominal[n]) for n in nominal}
     polish_budget = int(getattr(args, "polish_evaluations", 0))
 
@@ -670,7 +678,7 @@ def main_study(args: argparse.Namespace) -> int:
     for group in GROUPS:
         train = evaluate.cases([g for g in GROUPS if g != group])
         held = evaluate.cases([group])
-        fold_start = best_on(screening["results"], train)["values"]
+        fold_start = best_on(screening["results"], train)["values"] if start_from == "screening" else nominal
         fold_results, fold_polish, fold_search = fit_and_polish(fold_start, args.cv_evaluations, args.seed + 1,
                                                                 train, "cv-" + group)
         fold_fit = fold_results[0]
@@ -700,7 +708,7 @@ def main_study(args: argparse.Namespace) -> int:
                                           % (note, i, result["objective"])))
         paths.append(path)
     report = {"study": "identify", "command": getattr(args, "command", None), "code": code,
-              "duration": duration, "servo_model": servo, "seed": args.seed,
+              "duration": duration, "servo_model": servo, "seed": args.seed, "start": start_from,
               "slow_recovery_check": bool(evaluate.check_row), "band": evaluate.band,
               "weights": WEIGHTS, "parameters": [list(p) for p in PARAMETERS], "nominal": nominal,
               "screening": {k: v for k, v in screening.items() if k not in ("best", "results")}, "identified": chosen,
@@ -774,6 +782,8 @@ def _report_text(report: Dict[str, Any], best: Dict[str, Any]) -> str:
     lines += ["", "Timing terms counted beyond a factor %g of the paper's (--band)." % band] if band != 1.0 else []
     polish_report = report["fit"].get("polish") or {"evaluations": 0}  # reports before the polish have none
     search = "CMA-ES, %d sets" % report["fit"]["evaluations"]
+    if report.get("start") == "nominal":  # reports before --start all started from the screening's best
+        search += ", from the nominal values"
     if polish_report["evaluations"]:
         search += ", of which %d of the compass search from CMA-ES's best (%.2f)" % (
             polish_report["evaluations"], polish_report["objective_before"])

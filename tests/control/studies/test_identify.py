@@ -13,6 +13,7 @@ from quadruped_control import simulate
 from quadruped_control.sim.plants import TankParams, load_tank_params
 from quadruped_control.studies import StudyError
 from quadruped_control.studies import identify as idf
+from quadruped_control.studies import paper_experiments as pe
 from quadruped_control.studies.runner import code_fingerprint
 
 
@@ -362,6 +363,35 @@ def test_identify_fits_exactly_the_parameters_given(tmp_path) -> None:
         for name, value in result["values"].items():
             if name not in ("cob_z", "servo_lag_scale"):
                 assert value == fixed[name]
+
+
+def test_every_fit_starts_from_the_nominal_values_with_start_nominal(tmp_path, monkeypatch) -> None:
+    """--start nominal: the full fit and every fold start at --tank-yaml's values, whatever the screening
+    found; the default starts the full fit at the screening's best set and each fold at its best on the
+    fold's training groups (so adding a candidate to the screening moves every start)."""
+    starts, screenings = [], []
+    real_fit, real_screen = idf.fit, idf.screen
+    monkeypatch.setattr(idf, "fit", lambda evaluate, names, fixed, start, *rest, **kw: starts.append(
+        (tuple(names), dict(start))) or real_fit(evaluate, names, fixed, start, *rest, **kw))
+    monkeypatch.setattr(idf, "screen", lambda *a: screenings.append(real_screen(*a)) or screenings[-1])
+    names = ("cob_z", "net_weight")
+    nominal = idf.nominal_values(load_tank_params())
+    report = _tiny_identify(str(tmp_path / "nominal"), 2, 1, "--parameters", *names, "--start", "nominal")
+    assert report["start"] == "nominal" and len(starts) == 4  # the full fit and three folds
+    for fitted, start in starts:
+        assert fitted == names and all(start[n] == nominal[n] for n in names)
+    with open(os.path.join(str(tmp_path / "nominal"), "identify.md")) as stream:
+        assert "from the nominal values" in stream.read()
+    del starts[:]
+    report = _tiny_identify(str(tmp_path / "screening"), 2, 1, "--parameters", *names)
+    assert report["start"] == "screening" and len(starts) == 4
+    results = screenings[-1]["results"]
+    assert starts[0][1] == min(results, key=lambda r: r["objective"])["values"]
+    for (_, start), group in zip(starts[1:], idf.GROUPS):
+        train = [k for k, row in enumerate(pe.PAPER_TABLE) if row["set"] != group]
+        assert start == idf.best_on(results, train)["values"]
+    with pytest.raises(SystemExit):  # only the two starts
+        simulate.main(["--study", "identify", "--start", "best", "--out", str(tmp_path)])
 
 
 def _bowl(names, centre, asked=None):
