@@ -202,7 +202,12 @@ def main(argv: Optional[Sequence[str]] = None) -> int:
             if len(set(args.parameters)) == 1:  # pycma: "optimization in 1-D is not supported" (pycma issue 86)
                 parser.error("--parameters: CMA-ES fits two or more parameters; name a second one")
         if args.study is not None:
-            return STUDIES[args.study].main_study(args)
+            status = STUDIES[args.study].main_study(args)
+            # the studies that run on the plant --plant names; paper-experiments (on the tank by default)
+            # writes the note into its report, identify is the tank plant's identification itself
+            if args.plant == "tank" and args.study in ("paper-sim", "robustness", "schemes"):
+                print("note: %s" % VALIDITY_NOTE)
+            return status
         spec = TrialSpec(label="setpoint %s deg" % " ".join("%g" % v for v in args.rpy),
                          setpoint_rpy_deg=tuple(args.rpy), initial_rpy_deg=tuple(args.initial_rpy),
                          duration=args.duration, gains=GAIN_ALIASES[args.gains], servo_model=args.servo_model,

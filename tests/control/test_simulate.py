@@ -142,6 +142,25 @@ def test_bad_robot_yaml_is_a_clear_error(tmp_path, capsys) -> None:
     assert not os.path.exists(str(tmp_path / "s" / "study.json"))
 
 
+@pytest.mark.parametrize("study", ["paper-sim", "robustness", "schemes"])
+def test_a_study_on_the_tank_plant_ends_with_its_validity_note(study, tmp_path, capsys, monkeypatch) -> None:
+    """The studies that run on the plant --plant names print the note after their report on the tank, not on
+    the paper's model; the status is the study's."""
+    ran = []
+
+    class Study:
+        @staticmethod
+        def main_study(args):
+            ran.append(args.plant)
+            return 2
+
+    monkeypatch.setitem(simulate.STUDIES, study, Study)
+    assert simulate.main(["--study", study, "--plant", "tank", "--out", str(tmp_path), "--quiet"]) == 2
+    assert capsys.readouterr().out.strip().endswith("note: %s" % VALIDITY_NOTE)
+    assert simulate.main(["--study", study, "--out", str(tmp_path), "--quiet"]) == 2
+    assert VALIDITY_NOTE not in capsys.readouterr().out and ran == ["tank", None]
+
+
 def test_tank_plant_controller_off_and_com_columns(tmp_path, capsys) -> None:
     out = str(tmp_path / "tank")
     assert simulate.main(["--plant", "tank", "--controller", "off", "--initial-rpy", "20", "0", "0",

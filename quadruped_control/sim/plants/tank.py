@@ -172,8 +172,9 @@ from quadruped_control.sim.plants.tank_dynamics import (TankConstants, appendage
 __all__ = ["TankModel", "TankParams", "VALIDITY_NOTE", "appendage_damping_torque", "hydrostatic_wrench",
            "load_tank_params", "rope_force", "rope_torsion_torque", "rope_twist", "torso_ellipsoid"]
 
-#: What the tank plant can tell a roboticist today, said wherever it runs (the simulate command, the Table-1
-#: study's report, sim.launch plant:=tank), so that no result made on it is read as the robot's. The figures
+#: What the tank plant can tell a roboticist today, said wherever a user runs it (the simulate command and its
+#: paper-sim, robustness and schemes studies with --plant tank, the Table-1 study's report, sim.launch
+#: plant:=tank), so that no result made on it is read as the robot's. The figures
 #: behind it are in docs/identification.md, "Where it stands": no model predicts the settling of experiments
 #: held out of its fit reliably (one draw of the twenty-seventh run met the targets, at the edge; the same
 #: model's other draws did not).
