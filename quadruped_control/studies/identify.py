@@ -36,8 +36,8 @@ Design (:func:`main_study`):
 2. Fit: CMA-ES (the ``cma`` package) over the identified parameters scaled to [0, 1], ``--evaluations``
    parameter sets, seeded, from the screening's best set (the folds: its best on their training groups,
    :func:`best_on`), or with ``--start nominal`` from the nominal values, which do not change when a
-   candidate is added to the screening; with ``--polish-evaluations N`` a compass search from its best set follows
-   (:func:`polish`, up to N sets: the budgets end before CMA-ES converges). The folds' fits are polished
+   candidate is added to the screening; with ``--polish-evaluations N`` a compass search from its best
+   set follows (:func:`polish`, up to N sets: the budgets end before CMA-ES converges). The folds' fits are polished
    the same way.
 3. Cross-validation: for each group of experiments (roll, pitch, coupled), the same fit on the other
    two groups (``--cv-evaluations`` sets) predicts the held-out group; the baseline is config/tank.yaml

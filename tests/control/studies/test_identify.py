@@ -314,8 +314,9 @@ def test_the_slow_recovery_check_adds_the_papers_t_rec_cases_to_their_groups(tmp
         assert "beyond a factor 2 of the paper's (--band)" in stream.read()
 
 
-def test_a_screening_that_chooses_one_parameter_is_refused_by_name(tmp_path, monkeypatch) -> None:
-    """pycma does not fit one dimension: the study says so instead of failing inside the fit."""
+def _screening_without_trials(monkeypatch, mu_star) -> None:
+    """The study with no trial to run: an evaluator of one experiment that runs nothing, and a screening
+    that returns ``mu_star`` (one per parameter) and no set."""
     class NoTrials:
         trials, check_row = 0, {}
 
@@ -328,10 +329,26 @@ def test_a_screening_that_chooses_one_parameter_is_refused_by_name(tmp_path, mon
     names = [name for name, _, _ in idf.PARAMETERS]
     monkeypatch.setattr(idf, "Evaluator", NoTrials)
     monkeypatch.setattr(idf, "screen", lambda *args: {"names": names, "best": {"values": {}}, "results": [],
-                                                      "mu_star": [1.0] + [0.0] * (len(names) - 1)})
+                                                      "mu_star": list(mu_star)})
+
+
+def test_a_screening_that_chooses_one_parameter_is_refused_by_name(tmp_path, monkeypatch) -> None:
+    """pycma does not fit one dimension: the study says so instead of failing inside the fit."""
+    _screening_without_trials(monkeypatch, [1.0] + [0.0] * (len(idf.PARAMETERS) - 1))
     args = simulate.build_parser().parse_args(["--study", "identify", "--out", str(tmp_path)])
     args.duration_given, args.servo_model_given = False, None
     with pytest.raises(StudyError, match="chose cob_z; CMA-ES fits two or more"):
+        idf.main_study(args)
+
+
+def test_a_start_that_is_neither_the_screening_nor_the_nominal_values_is_refused(tmp_path, monkeypatch) -> None:
+    """Called without the CLI (whose choices refuse it first), main_study names the bad --start before any
+    fit."""
+    _screening_without_trials(monkeypatch, [1.0] * len(idf.PARAMETERS))
+    monkeypatch.setattr(idf, "fit", lambda *args, **kw: pytest.fail("no fit may run"))
+    args = simulate.build_parser().parse_args(["--study", "identify", "--out", str(tmp_path)])
+    args.duration_given, args.servo_model_given, args.start = False, None, "best"
+    with pytest.raises(StudyError, match="--start is 'screening' or 'nominal', got 'best'"):
         idf.main_study(args)
 
 
