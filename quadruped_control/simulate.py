@@ -109,7 +109,7 @@ def build_parser() -> argparse.ArgumentParser:
     parser.add_argument("--parameters", nargs="+", default=[], metavar="PARAMETER",
                         help="identify: fit exactly these parameters (the screening still runs and is "
                              "reported; to repeat an earlier run's choice with another budget)")
-    parser.add_argument("--start", choices=("screening", "nominal"), default="screening",
+    parser.add_argument("--start", choices=identify.STARTS, default="screening",
                         help="identify: where every fit starts: the screening's best set (the full fit) or its best "
                              "on the fold's training groups (default, as the runs before it), or the nominal values "
                              "of --tank-yaml (the same start whatever other candidates the screening spans)")

@@ -70,7 +70,7 @@ from quadruped_control.studies.paper_experiments import experiment_specs
 from quadruped_control.studies.runner import code_fingerprint
 from quadruped_control.studies.trial import TrialSpec, run_batch, run_many
 
-__all__ = ["BOUNDS", "Evaluator", "GROUPS", "PARAMETERS", "WEIGHTS", "best_on", "case_cost", "fit",
+__all__ = ["BOUNDS", "Evaluator", "GROUPS", "PARAMETERS", "STARTS", "WEIGHTS", "best_on", "case_cost", "fit",
            "morris_sets", "nominal_values", "objective", "plot_report", "polish", "targets", "tank_overrides",
            "timing_bias", "update_tank_yaml", "yaw_first_ratio"]
 
@@ -122,6 +122,8 @@ WEIGHTS: Dict[str, float] = {"outcome": 1.0, "t_s": 1.0, "t_r": 1.0, "e_ss": 1.0
 
 #: The three groups of Table 1 (the folds of the cross-validation).
 GROUPS = ("roll", "pitch", "roll+pitch")
+#: where every fit starts (``--start``): the screening's best set, or the nominal values of --tank-yaml
+STARTS = ("screening", "nominal")
 
 
 @dataclasses.dataclass(frozen=True)
@@ -643,8 +645,8 @@ def main_study(args: argparse.Namespace) -> int:
         raise StudyError("identify: the screening chose %s; CMA-ES fits two or more parameters: add one with "
                          "--include or name them with --parameters" % (", ".join(chosen) or "no parameter"))
     start_from = getattr(args, "start", "screening")
-    if start_from not in ("screening", "nominal"):
-        raise StudyError("identify: --start is 'screening' or 'nominal', got %r" % (start_from,))
+    if start_from not in STARTS:
+        raise StudyError("identify: --start is %s, got %r" % (" or ".join(map(repr, STARTS)), start_from))
     # The screening's best set varies every parameter it spans, so it (and every fit from it) changes when a
     # candidate is added to PARAMETERS, even for fits of the same few parameters; the nominal start does not
     # (docs/identification.md, twenty-eighth run).
