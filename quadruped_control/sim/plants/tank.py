@@ -133,7 +133,8 @@ Candidate effects of the identification against Table 1, each zero (today's mode
   holds more, by the capstan law tau_c exp(mu_w |phi|) with phi the turn since the rope hung untwisted
   (``hook_friction_wrap`` mu_w, :func:`~.tank_dynamics.wound_friction_limit`; 0, the default, is the
   unwound tie exactly). It grows with the turn already made, so it is largest where Table 1's roll group
-  ends its long heading changes. arm = 0 (the default) is today's model exactly.
+  ends its long heading changes, and falls as the tether unwinds: what the tie stored beyond its new
+  limit then slips at once. arm = 0 (the default) is today's model exactly.
 
 - **The heading the IMU reports** (not a force: what the robot's VN-100 told its controller and the
   paper's Table 1). A magnetic field that rides with the body and is not calibrated out (motor magnets

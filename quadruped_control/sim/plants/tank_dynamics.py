@@ -271,7 +271,12 @@ def hook_friction_update(friction: Any, limit: float, angle: float, static_ratio
     the wire's section (arm mu r_w), so the tie's Coulomb torque about the body's x (roll) axis is
     ``roll_ratio`` times the one about the other axes: the limit is the ellipse tau_c (m_x s_x, s_y,
     s_z) / |s|, m_x = roll_ratio, and Dahl's stiffness scales with it (theta_p stays the wire's). Sliding
-    still dissipates, tau_f . s = g |s|^-1 (m_x s_x^2 + s_y^2 + s_z^2) >= 0. The body's state (p, v world,
+    still dissipates, tau_f . s = g |s|^-1 (m_x s_x^2 + s_y^2 + s_z^2) >= 0.
+
+    A limit that falls (``limit`` is the step's own; :func:`wound_friction_limit` shrinks as the tether
+    unwinds) caps what the tie stores at once: a stored torque beyond the most the tie now holds, r tau_c
+    on the ellipse (r = max(1, tau_s / tau_c)), slips back to it along its own direction, even with the
+    body still (s = 0), where the update above would keep it. The body's state (p, v world,
     R row-major, omega body) is the step's start; ``anchor`` (6 floats) the rope's upper end and its
     velocity."""
     qx, qy, qz, qvx, qvy, qvz = _hook_motion(p[0], p[1], p[2], v[0], v[1], v[2], R, w[0], w[1], w[2], hook)
@@ -308,6 +313,16 @@ def hook_friction_update(friction: Any, limit: float, angle: float, static_ratio
     friction[0] -= along * bx
     friction[1] -= along * by
     friction[2] -= along * bz
+    # a tie holds no more than it grips now: when the limit has fallen (a tether unwinding), what it stored
+    # above its largest torque r tau_c slips at once; the 1e-12 leaves rounding alone, so a constant limit
+    # is the update above bit for bit
+    most = limit * (static_ratio if static_ratio > 1.0 else 1.0)
+    stored = (friction[0] / roll_ratio) ** 2 + friction[1] ** 2 + friction[2] ** 2
+    if stored > most * most * (1.0 + 1e-12):
+        scale = most / math.sqrt(stored)
+        friction[0] *= scale
+        friction[1] *= scale
+        friction[2] *= scale
     return (-friction[0], -friction[1], -friction[2])
 
 

@@ -985,6 +985,32 @@ def test_the_wound_tether_grows_the_ties_friction_by_the_capstan_law() -> None:
     assert wound_friction_limit(0.004, 0.3, tilted, untwisted) == pytest.approx(0.004, rel=1e-12)
 
 
+def test_a_tie_whose_limit_falls_slips_down_to_what_it_now_holds_even_with_the_body_still() -> None:
+    """The tether unwinding lowers the tie's limit: a tie that slid at a wound limit 1.9 tau_c, then a step
+    with the body still (s = 0, where Dahl's update keeps what is stored) and the limit back at tau_c, holds
+    tau_c along the same direction; with static friction, r tau_c; with a roll ratio m, the ellipse's point
+    (m tau_c s_x, tau_c s_y) / |s| scaled back along itself; a stored torque already below the new limit
+    is kept to the bit."""
+    limit, angle, wound = 0.004, 0.005, 0.004 * math.exp(0.4 * math.pi / 2.0)
+    for ratio, m in ((1.0, 1.0), (1.5, 1.0), (1.0, 2.5)):
+        friction = np.zeros(3)
+        for _ in range(100):  # slides at the wound limit, diagonally across the rope
+            _hook_friction_step(friction, (0.2, 0.1, 0.0), wound, angle, static_ratio=ratio, stribeck_rate=0.02,
+                                roll_ratio=m)
+        before = friction.copy()
+        assert math.hypot(before[0] / m, before[1]) == pytest.approx(wound, rel=1e-8)  # slid at tau_c: no static
+        felt = _hook_friction_step(friction, (0.0, 0.0, 0.0), limit, angle, static_ratio=ratio, stribeck_rate=0.02,
+                                   roll_ratio=m)
+        most = limit * max(1.0, ratio)
+        assert math.hypot(friction[0] / m, friction[1]) == pytest.approx(most, rel=1e-12)
+        np.testing.assert_allclose(friction, before * most / wound, rtol=1e-8)
+        np.testing.assert_array_equal(felt, -friction)
+    kept = np.array([0.5 * limit, -0.3 * limit, 0.0])
+    friction = kept.copy()
+    _hook_friction_step(friction, (0.0, 0.0, 0.0), limit, angle)
+    np.testing.assert_array_equal(friction, kept)
+
+
 def test_the_plant_holds_a_body_turned_since_the_rope_hung_with_the_wound_tie() -> None:
     """TankModel: a level body rolling at 0.3 rad/s, its rope hung untwisted a quarter turn ago (attached at
     heading -90 deg), builds exp(mu_w pi / 2) times the friction of an unturned body in one step; with
