@@ -52,7 +52,12 @@ from quadruped_control.studies.trial import AUTO_BATCH_MIN, GAIN_ALIASES, TrialS
 STUDIES = {"paper-sim": paper_sim, "robustness": robustness, "schemes": schemes,
            "paper-experiments": paper_experiments, "identify": identify}
 
-__all__ = ["STUDIES", "build_parser", "main"]
+#: The studies after which ``--plant tank`` prints :data:`VALIDITY_NOTE`: those that run on the plant
+#: ``--plant`` names. paper-experiments (on the tank by default) writes the note into its own report;
+#: identify measures the tank plant against the robot and reports its own figures.
+NOTE_AFTER_STUDIES = ("paper-sim", "robustness", "schemes")
+
+__all__ = ["NOTE_AFTER_STUDIES", "STUDIES", "build_parser", "main"]
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -203,9 +208,7 @@ def main(argv: Optional[Sequence[str]] = None) -> int:
                 parser.error("--parameters: CMA-ES fits two or more parameters; name a second one")
         if args.study is not None:
             status = STUDIES[args.study].main_study(args)
-            # the studies that run on the plant --plant names; paper-experiments (on the tank by default)
-            # writes the note into its report, identify is the tank plant's identification itself
-            if args.plant == "tank" and args.study in ("paper-sim", "robustness", "schemes"):
+            if args.plant == "tank" and args.study in NOTE_AFTER_STUDIES:
                 print("note: %s" % VALIDITY_NOTE)
             return status
         spec = TrialSpec(label="setpoint %s deg" % " ".join("%g" % v for v in args.rpy),

@@ -161,6 +161,21 @@ def test_a_study_on_the_tank_plant_ends_with_its_validity_note(study, tmp_path, 
     assert VALIDITY_NOTE not in capsys.readouterr().out and ran == ["tank", None]
 
 
+@pytest.mark.parametrize("study", ["paper-experiments", "identify"])
+def test_the_studies_that_report_on_the_tank_themselves_print_no_second_note(study, tmp_path, capsys,
+                                                                              monkeypatch) -> None:
+    """paper-experiments writes the note into its own report and identify measures the tank plant: simulate
+    adds nothing after them."""
+    class Study:
+        @staticmethod
+        def main_study(args):
+            return 0
+
+    monkeypatch.setitem(simulate.STUDIES, study, Study)
+    assert simulate.main(["--study", study, "--plant", "tank", "--out", str(tmp_path), "--quiet"]) == 0
+    assert VALIDITY_NOTE not in capsys.readouterr().out
+
+
 def test_tank_plant_controller_off_and_com_columns(tmp_path, capsys) -> None:
     out = str(tmp_path / "tank")
     assert simulate.main(["--plant", "tank", "--controller", "off", "--initial-rpy", "20", "0", "0",
