@@ -30,10 +30,14 @@ Candidate effects of the identification against Table 1, each zero (today's mode
   turns), per body axis -(c_lin + c_quad |omega|) omega: the linear (skin friction, laminar) plus
   quadratic (form drag, strip theory of appendages at radius r: 1/2 rho C_D A r^3 |omega| omega) damping
   of Fossen, "Handbook of Marine Craft Hydrodynamics and Motion Control" (2011), section 6.4.
-- ``tau_torsion`` (:func:`rope_torsion_torque`): the rope and its floating block resist twisting: a
-  torque about the rope's (vertical) axis -(k_t theta + c_t omega_z^W), theta the body's twist about the
-  world vertical since :meth:`TankModel.attach` (the twist of the swing-twist decomposition of
-  R R_0^T), omega_z^W the vertical component of the angular velocity. Acts only with the suspension on.
+- ``tau_torsion`` (:func:`rope_torsion_torque`): the rope and its floating block resist twisting:
+  -(k_t theta + c_t theta_dot) g, theta the body's twist about the world vertical since
+  :meth:`TankModel.attach` (the twist of the swing-twist decomposition of R R_0^T) and g its gradient
+  (theta_dot = g . omega): the spring of potential k_t theta^2 / 2 and a damper on the twist's rate. For a
+  turn about the vertical alone, -(k_t theta + c_t omega_z^W) about the world vertical; tilted, g leans
+  with the swing, so that the spring stays conservative (a torque about the vertical at any tilt, as
+  the first version had, does work round a closed path of tilts and turns). Acts only with the
+  suspension on.
 
 - ``paw wake`` (:func:`paw_wake_update`): a paw that strokes sets the water around it moving, and the
   recovery stroke reverses into that water. Each paw carries a wake velocity w_i (body axes) that relaxes
@@ -190,6 +194,15 @@ Vec3 = Tuple[float, float, float]
 
 #: The plant step the floating block's stability check allows for (s): the 100 Hz control period.
 _MAX_STEP = 0.01
+
+#: |lambda| dt the explicit terms of a tank step may reach (:meth:`TankModel.check_step_stability`): RK4 is
+#: stable to 2.785 on the negative real axis and 2.83 on the imaginary one; 2.5 leaves a margin for the
+#: angles between.
+_RK4_LIMIT = 2.5
+
+#: The body rate (rad/s) at which the quadratic appendage damping's stiffness is checked: past the rates
+#: of any manoeuvre (Table 1's fastest turn is under 0.5 rad/s).
+_CHECK_RATE = 1.0
 
 #: The water's rate without the body wake: the appendage damping sees omega itself.
 _STILL: Vec3 = (0.0, 0.0, 0.0)
@@ -593,6 +606,60 @@ class TankModel(FloatingBaseModel):
         # tau_c of the hook friction (N m; 0: off) and the hook as the friction update takes it
         self._friction_limit = self.hook_friction_limit()
         self._hook = tuple(float(x) for x in tank.hook)
+        self.check_step_stability()
+
+    def check_step_stability(self, dt: float = _MAX_STEP) -> None:
+        """ParameterError, naming the tank.yaml keys, unless a step of ``dt`` (default the 100 Hz control
+        period) resolves every stiff term of these parameters. Each is a rate of the linearised plant
+        against the body's own mass and inertia (the torso's, with added mass, without the paws': the
+        smaller, so the stricter):
+        - in the RK4 step, |lambda| dt <= 2.5: the appendage damping c / I and, at 1 rad/s, 2 k |w| / I
+          per axis; the rope's torsion c_t / I_zz and sqrt(k_t / I_zz); the rope's damping c / M_z and
+          stiffness sqrt(k / M_z), and both again through the hook's arm h about the tilts (c h^2 / I,
+          sqrt(k h^2 / I));
+        - the hook friction's presliding spring, held over the step (:func:`~.tank_dynamics.hook_friction_update`
+          takes the rate at the step's start, so body and tie advance as symplectic Euler, stable below 4):
+          K dt^2 / I <= 1 at its stiffest, K = tau_c max(1, tau_s / tau_c) max(1, m_x) exp(mu_w pi) / theta_p;
+        - the torso's buoyancy positive: a net weight at or above the torso's weight leaves none.
+        Past these the plant rings or blows up without telling (a tie that pumps energy into the swing,
+        a rope that chatters), so the set is refused instead."""
+        tank, limit = self.tank, _RK4_LIMIT / dt
+        inertia = np.diag(self.body_mass_matrix[3:, 3:])
+        tilt_inertia, heave_mass = float(min(inertia[0], inertia[1])), float(self.body_mass_matrix[2, 2])
+        problems = []
+        for axis, name in enumerate("xyz"):
+            if tank.appendage_damping_linear[axis] / inertia[axis] > limit:
+                problems.append("appendage_damping.linear[%d] (%s) = %g N m s/rad > %.3g" % (
+                    axis, name, tank.appendage_damping_linear[axis], limit * inertia[axis]))
+            if 2.0 * tank.appendage_damping_quadratic[axis] * _CHECK_RATE / inertia[axis] > limit:
+                problems.append("appendage_damping.quadratic[%d] (%s) = %g N m s^2/rad^2 > %.3g" % (
+                    axis, name, tank.appendage_damping_quadratic[axis], limit * inertia[axis] / (2.0 * _CHECK_RATE)))
+        if tank.suspension:
+            arm2 = float(np.dot(self.hook, self.hook))
+            if tank.rope_torsion_damping / inertia[2] > limit:
+                problems.append("suspension.torsion_damping = %g N m s/rad > %.3g" % (
+                    tank.rope_torsion_damping, limit * inertia[2]))
+            if tank.rope_torsion_stiffness / inertia[2] > limit ** 2:
+                problems.append("suspension.torsion_stiffness = %g N m/rad > %.3g" % (
+                    tank.rope_torsion_stiffness, limit ** 2 * inertia[2]))
+            rope_mass = min(heave_mass, tilt_inertia / arm2 if arm2 > 0.0 else math.inf)  # at the hook
+            if tank.rope_damping / rope_mass > limit:
+                problems.append("suspension.damping = %g N s/m > %.3g" % (tank.rope_damping, limit * rope_mass))
+            if tank.rope_stiffness / rope_mass > limit ** 2:
+                problems.append("suspension.stiffness = %g N/m > %.3g" % (tank.rope_stiffness, limit ** 2 * rope_mass))
+            if self._friction_limit > 0.0:
+                stiffest = (self._friction_limit * max(1.0, tank.hook_friction_static_ratio)
+                            * max(1.0, tank.hook_friction_roll_ratio) * math.exp(tank.hook_friction_wrap * math.pi)
+                            / tank.hook_friction_angle)
+                if stiffest * dt * dt / tilt_inertia > 1.0:
+                    problems.append("the hook friction's presliding stiffness %.3g N m/rad > %.3g (suspension."
+                                    "friction_arm, friction_angle, friction_static_ratio, friction_roll_ratio, "
+                                    "friction_wrap and the rope's tension)" % (stiffest, tilt_inertia / (dt * dt)))
+        if tank.hydrostatics and self.torso_buoyancy <= 0.0:
+            problems.append("hydrostatics.net_weight = %g N leaves the torso (%.3g N) no buoyancy"
+                            % (tank.net_weight, self.torso_weight))
+        if problems:
+            raise ParameterError("tank parameters a %g s step cannot resolve: %s" % (dt, "; ".join(problems)))
 
     # ---- set-up ------------------------------------------------------------------------------
 

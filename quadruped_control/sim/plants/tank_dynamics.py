@@ -112,12 +112,29 @@ def rope_twist(R: Sequence[float], R0: Sequence[float]) -> float:
 def rope_torsion_torque(R: Sequence[float], R0: Sequence[float], omega: Sequence[float], stiffness: float,
                         damping: float) -> Vec3:
     """Body-axes torque (N m) of a rope twisted by :func:`rope_twist` from its untwisted attitude ``R0``:
-    T = -(k_t theta + c_t omega_z^W) about the world vertical, i.e. T R^T z_hat in body axes
-    (:mod:`.tank`). ``R``, ``R0`` row-major; ``omega`` body axes."""
-    ux, uy, uz = R[6], R[7], R[8]  # R^T z_hat
-    omega_z_world = ux * omega[0] + uy * omega[1] + uz * omega[2]
-    torque = -(stiffness * rope_twist(R, R0) + damping * omega_z_world)
-    return (torque * ux, torque * uy, torque * uz)
+    the spring's potential k_t theta^2 / 2 and a damper on the twist's rate, tau = -(k_t theta + c_t
+    theta_dot) g (:mod:`.tank`). ``R``, ``R0`` row-major; ``omega`` body axes.
+
+    g is the twist's gradient: theta_dot = g . omega (world axes), and with Q = R R0^T,
+    g = (Q_02, Q_12, 1 + Q_22) / (1 + Q_22) (from theta = 2 atan2(q_z, q_w) and q_dot = (0, omega) q / 2:
+    theta_dot = ((q_w q_y + q_x q_z) omega_x + (q_y q_z - q_w q_x) omega_y + (q_w^2 + q_z^2) omega_z) /
+    (q_w^2 + q_z^2)). So the spring does no net work round any closed path of attitudes and the damper only
+    takes energy out. A turn about the vertical alone has g = z_hat: the torque -(k_t theta + c_t
+    omega_z^W) about the world vertical. Past a swing of 179.9 deg (1 + Q_22 < 1e-6) the twist is
+    undefined, and the rope exerts no torsion."""
+    q02 = R[0] * R0[6] + R[1] * R0[7] + R[2] * R0[8]
+    q12 = R[3] * R0[6] + R[4] * R0[7] + R[5] * R0[8]
+    level = 1.0 + R[6] * R0[6] + R[7] * R0[7] + R[8] * R0[8]
+    if level < 1e-6:
+        return (0.0, 0.0, 0.0)
+    gx, gy = q02 / level, q12 / level
+    # g in body axes, R^T g (g_z = 1)
+    bx = R[0] * gx + R[3] * gy + R[6]
+    by = R[1] * gx + R[4] * gy + R[7]
+    bz = R[2] * gx + R[5] * gy + R[8]
+    twist_rate = bx * omega[0] + by * omega[1] + bz * omega[2]
+    torque = -(stiffness * rope_twist(R, R0) + damping * twist_rate)
+    return (torque * bx, torque * by, torque * bz)
 
 
 @jitable

@@ -486,3 +486,14 @@ def test_identify_polishes_the_full_fit_and_every_fold(tmp_path) -> None:
         assert "Where each search found its best" in stream.read()
     with pytest.raises(SystemExit):  # a negative budget is refused
         simulate.main(["--study", "identify", "--polish-evaluations", "-1", "--out", str(tmp_path / "neg")])
+
+
+def test_both_corners_of_the_identifications_bounds_are_plants_a_control_step_resolves() -> None:
+    """Every parameter at its lower bound, and every one at its upper bound (the stiffest tie, the most
+    damping, the heaviest net weight): TankModel's step check takes both, so no fit meets a refused set."""
+    from quadruped_control.model.params import load_robot_params
+    from quadruped_control.sim.plants import TankModel
+    robot, base = load_robot_params(), load_tank_params()
+    for corner in (0, 1):
+        values = {name: (low, high)[corner] for name, low, high in idf.PARAMETERS}
+        TankModel(robot, base.with_values(**dict(idf.tank_overrides(values))))

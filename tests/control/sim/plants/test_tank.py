@@ -384,6 +384,36 @@ def test_rope_twist_is_the_rotation_about_the_vertical() -> None:
     assert rope_twist(flat(rpy_to_rot(0.0, 0.0, 0.5) @ R0), flat(R0)) == pytest.approx(0.5, abs=1e-12)
 
 
+@pytest.mark.parametrize("untwisted_rpy, rpy", [((0.0, 0.0, 0.0), (0.6, 0.0, 1.2)), ((0.2, -0.1, 1.0), (1.1, 0.7, -0.4)),
+                                              ((0.0, 0.0, 0.0), (0.0, 0.0, 0.8)), ((0.3, 0.2, -2.0), (-1.3, 0.5, 2.2))])
+def test_rope_torsion_is_the_twists_spring_and_damper_at_any_tilt(untwisted_rpy, rpy) -> None:
+    """The torsion torque is -k_t theta times the twist's gradient (body axes: theta(R exp(d)) - theta(R) =
+    g_B . d, by central differences), so the spring does no work round a closed path of attitudes even
+    tilted, and its damper is -c_t theta_dot g with theta_dot = g_B . omega, which only takes energy out; a
+    turn about the vertical alone is the torque about the world vertical."""
+    from quadruped_control.sim.plants.tank_dynamics import rope_torsion_torque, rope_twist
+    flat = lambda R: np.asarray(R).ravel().tolist()  # noqa: E731
+    R0, R = rpy_to_rot(*untwisted_rpy), rpy_to_rot(*rpy) @ rpy_to_rot(*untwisted_rpy)
+
+    def exp_body(d):
+        angle = float(np.linalg.norm(d))
+        axis = np.asarray(d) / angle
+        K = np.array([[0.0, -axis[2], axis[1]], [axis[2], 0.0, -axis[0]], [-axis[1], axis[0], 0.0]])
+        return np.eye(3) + math.sin(angle) * K + (1.0 - math.cos(angle)) * K @ K
+
+    gradient = np.array([(rope_twist(flat(R @ exp_body(1e-6 * e)), flat(R0))
+                          - rope_twist(flat(R @ exp_body(-1e-6 * e)), flat(R0))) / 2e-6 for e in np.eye(3)])
+    theta = rope_twist(flat(R), flat(R0))
+    spring = np.array(rope_torsion_torque(flat(R), flat(R0), (0.0, 0.0, 0.0), 0.7, 0.0))
+    np.testing.assert_allclose(spring, -0.7 * theta * gradient, rtol=1e-7, atol=1e-9)
+    omega = (0.3, -0.2, 0.5)
+    damper = np.array(rope_torsion_torque(flat(R), flat(R0), omega, 0.0, 0.4))
+    np.testing.assert_allclose(damper, -0.4 * float(gradient @ omega) * gradient, rtol=1e-7, atol=1e-9)
+    assert float(damper @ omega) <= 0.0
+    if rpy[:2] == (0.0, 0.0) and untwisted_rpy == (0.0, 0.0, 0.0):  # about the vertical: along R^T z_hat
+        np.testing.assert_allclose(spring, -0.7 * theta * R[2, :], rtol=1e-12)
+
+
 def test_rope_torsion_turns_the_robot_back_with_its_period_and_keeps_the_energy() -> None:
     """Small twist, nothing else acting: theta'' = -(k_t / I_zz) theta, period 2 pi sqrt(I_zz / k_t);
     without torsion damping the energy (1/2 I w^2 + 1/2 k_t theta^2) stays."""
@@ -1009,6 +1039,41 @@ def test_a_tie_whose_limit_falls_slips_down_to_what_it_now_holds_even_with_the_b
     friction = kept.copy()
     _hook_friction_step(friction, (0.0, 0.0, 0.0), limit, angle)
     np.testing.assert_array_equal(friction, kept)
+
+
+@pytest.mark.parametrize("values, named", [
+    ({"appendage_damping_linear": (20.0, 0.0, 0.0)}, "appendage_damping.linear[0] (x)"),
+    ({"appendage_damping_quadratic": (0.0, 0.0, 30.0)}, "appendage_damping.quadratic[2] (z)"),
+    ({"rope_torsion_damping": 60.0}, "suspension.torsion_damping"),
+    ({"rope_torsion_stiffness": 2e4}, "suspension.torsion_stiffness"),
+    ({"rope_damping": 1e4}, "suspension.damping"),
+    ({"rope_stiffness": 1e7}, "suspension.stiffness"),
+    ({"hook_friction_arm": 0.05, "hook_friction_angle": 0.001, "hook_friction_wrap": 1.0}, "presliding stiffness"),
+    ({"net_weight": 60.0}, "hydrostatics.net_weight"),
+])
+def test_a_set_a_control_step_cannot_resolve_is_refused_by_key(values, named) -> None:
+    """Stiff terms the 10 ms step would ring on (a tie that pumps energy into the swing, a rope that
+    chatters, damping past RK4's stability) and a torso without buoyancy: TankModel refuses them by name."""
+    with pytest.raises(ParameterError, match="step cannot resolve") as error:
+        TankModel(ROBOT, TankParams().with_values(**values))
+    assert named in str(error.value)
+
+
+def test_the_step_check_passes_the_shipped_sets_and_stops_at_its_stated_limits() -> None:
+    """config/tank.yaml and config/tank_identified.yaml pass; the linear appendage damping is refused just
+    past 2.5 I / dt and taken just below it, and a finer step takes what the 10 ms step refuses."""
+    for name in ("tank.yaml", "tank_identified.yaml"):
+        TankModel(ROBOT, load_tank_params(config_path(name)))
+    model = TankModel(ROBOT, TankParams())
+    edge = 2.5 * float(model.body_mass_matrix[3, 3]) / 0.01
+    TankModel(ROBOT, TankParams().with_values(appendage_damping_linear=(0.99 * edge, 0.0, 0.0)))
+    with pytest.raises(ParameterError):
+        TankModel(ROBOT, TankParams().with_values(appendage_damping_linear=(1.01 * edge, 0.0, 0.0)))
+    stiff = TankModel(ROBOT, TankParams())
+    stiff.tank = TankParams().with_values(rope_damping=1e4)
+    stiff.check_step_stability(0.001)
+    with pytest.raises(ParameterError):
+        stiff.check_step_stability(0.01)
 
 
 def test_the_plant_holds_a_body_turned_since_the_rope_hung_with_the_wound_tie() -> None:
