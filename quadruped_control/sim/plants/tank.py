@@ -56,13 +56,13 @@ Candidate effects of the identification against Table 1, each zero (today's mode
   Forces on Offshore Structures" (1981), ch. 3).
   kappa = 0 is today's quasi-steady drag. The wake is integrated once per step with the legs and the body
   velocity of the step's start held (exact for the linear relaxation), and held through the step's RK4
-  stages: tau_w >= 0.05 s against the 10 ms step.
+  stages: tau_w >= 0.02 s (two 10 ms steps; the identification keeps it >= 0.05 s).
 - ``body wake`` (:func:`body_wake_update`): the legs, housings and corners that the appendage damping
   stands for set the water around the body turning with it, and that water keeps turning after the body
   slows. The water's rate W (world axes) relaxes towards a fraction kappa_b of the body's,
   dW/dt = (kappa_b R omega - W) / tau_b, and the appendage damping acts on the body's rate relative to
   it, -(c_lin + c_quad |omega - R^T W|) (omega - R^T W) per body axis. While the body turns steadily its
-  damping drops to (1 - kappa_b) of tau_appendage; when it slows, the water pushes it on, the
+  damping drops to (1 - kappa_b) of tau_appendage's linear part and (1 - kappa_b)^2 of its quadratic part; when it slows, the water pushes it on, the
   mechanism of an overshoot that only a fluid memory on the time scale of the manoeuvre (seconds, not the
   paws' tenths) gives. The same first-order "entrained water" model as the paws' wake, applied to the
   body's rotation: the history (memory) effects of unsteady flow around a body that starts and stops
@@ -149,8 +149,10 @@ Candidate effects of the identification against Table 1, each zero (today's mode
 
 Each effect has a switch (:class:`TankParams`); with all of them off the equations reduce to the paper's
 eq. (trans), (rot) (tested). Parameters: ``config/tank.yaml``.
-Integration: the model's generic RK4 on SO(3) (``_rk4`` with this class's ``_chart_derivative``, the
-chart helpers of :mod:`.rigid_body`).
+Integration: :func:`~.tank_dynamics.tank_rk4`, the classic RK4 in the SO(3) chart (the chart helpers of
+:mod:`.rigid_body`) over :func:`~.tank_dynamics.tank_chart_derivative`, with the inputs and the plant's
+own states (wakes, block, tie) held over the step; the batch runs the same function. The paper model's
+continuous-time methods (``wrench``, ``derivative``, ``step_continuous``) raise NotImplementedError here.
 """
 from __future__ import annotations
 
@@ -203,6 +205,10 @@ _RK4_LIMIT = 2.5
 #: The body rate (rad/s) at which the quadratic appendage damping's stiffness is checked: past the rates
 #: of any manoeuvre (Table 1's fastest turn is under 0.5 rad/s).
 _CHECK_RATE = 1.0
+
+#: What the paper model's continuous-time methods say on the tank plant.
+_PAPER_ONLY = ("TankModel.%s is the paper model's and leaves out the tank's rope, hydrostatics, added mass and "
+               "candidate effects; use step (tank_dynamics.tank_rk4) or held_wrench")
 
 #: The water's rate without the body wake: the appendage damping sees omega itself.
 _STILL: Vec3 = (0.0, 0.0, 0.0)
@@ -820,6 +826,21 @@ class TankModel(FloatingBaseModel):
                               tank.block_drag, tank.block_tie_stiffness, dt)
         self._anchor = tuple(self.block.tolist())
         self._constants = self._build_constants()
+
+    # The paper model's continuous-time interface (its force breakdown, right-hand side, joint-trajectory
+    # step and generic chart RK4) knows nothing of the rope, the hydrostatics, the added mass or any effect
+    # of TankParams: inherited, it would answer for another plant. The tank's own are held_wrench and step.
+    def wrench(self, state: RigidBodyState, q: Any, q_dot: Any) -> Any:
+        raise NotImplementedError(_PAPER_ONLY % "wrench")
+
+    def derivative(self, state: RigidBodyState, q: Any, q_dot: Any) -> Any:
+        raise NotImplementedError(_PAPER_ONLY % "derivative")
+
+    def step_continuous(self, state: RigidBodyState, t: float, dt: float, joint_trajectory: Any) -> RigidBodyState:
+        raise NotImplementedError(_PAPER_ONLY % "step_continuous")
+
+    def _chart_derivative(self, context: Any, R0: Mat3, y: Sequence[float]) -> Tuple[float, ...]:
+        raise NotImplementedError(_PAPER_ONLY % "_chart_derivative")
 
     def step(self, state: RigidBodyState, q: Any, q_dot: Any, dt: float) -> RigidBodyState:
         dt = check_dt(dt)

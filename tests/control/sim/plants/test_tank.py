@@ -1076,6 +1076,19 @@ def test_the_step_check_passes_the_shipped_sets_and_stops_at_its_stated_limits()
         stiff.check_step_stability(0.01)
 
 
+def test_the_paper_models_continuous_time_methods_are_refused_on_the_tank() -> None:
+    """wrench, derivative, step_continuous and the generic chart derivative are the paper model's: on the
+    tank they would leave out the rope and everything else, so they raise and name what to use."""
+    model = TankModel(ROBOT, TankParams())
+    q, still = nominal_joint_angles(ROBOT), np.zeros((4, 3))
+    calls = (lambda: model.wrench(RigidBodyState(), q, still), lambda: model.derivative(RigidBodyState(), q, still),
+             lambda: model.step_continuous(RigidBodyState(), 0.0, DT, lambda t: (q, still)),
+             lambda: model._chart_derivative(None, None, [0.0] * 12))  # noqa: SLF001
+    for call in calls:
+        with pytest.raises(NotImplementedError, match="held_wrench"):
+            call()
+
+
 def test_the_plant_holds_a_body_turned_since_the_rope_hung_with_the_wound_tie() -> None:
     """TankModel: a level body rolling at 0.3 rad/s, its rope hung untwisted a quarter turn ago (attached at
     heading -90 deg), builds exp(mu_w pi / 2) times the friction of an unturned body in one step; with
