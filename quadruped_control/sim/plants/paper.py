@@ -34,9 +34,9 @@ depends on v, R and omega, on plain floats (faster than numpy for 3-vectors).
 :meth:`FloatingBaseModel.step` and :meth:`~FloatingBaseModel.step_trusted` run that held-input RK4 on
 unpacked floats (``_rk4_held``: no position in the stages, since no force depends on it); the generic
 ``_rk4`` over 12-float chart states (:meth:`~FloatingBaseModel._chart_derivative`) is the reference it is
-tested against (the tank plant has its own, :func:`~.tank_dynamics.tank_rk4`). :meth:`FloatingBaseModel.step_continuous` samples a
-smooth joint trajectory at the stage times instead (reference solutions). A non-finite result raises
-:class:`DynamicsError` and leaves the input state as is.
+tested against (the tank plant has its own, :func:`~.tank_dynamics.tank_rk4`).
+:meth:`FloatingBaseModel.step_continuous` samples a smooth joint trajectory at the stage times instead
+(reference solutions). A non-finite result raises :class:`DynamicsError` and leaves the input state as is.
 """
 from __future__ import annotations
 

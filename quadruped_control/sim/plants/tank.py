@@ -57,19 +57,19 @@ Candidate effects of the identification against Table 1, each zero (today's mode
   kappa = 0 is today's quasi-steady drag. The wake is integrated once per step with the legs and the body
   velocity of the step's start held (exact for the linear relaxation), and held through the step's RK4
   stages: tau_w >= 0.02 s (two 10 ms steps; the identification keeps it >= 0.05 s).
-- ``body wake`` (:func:`body_wake_update`): the legs, housings and corners that the appendage damping
-  stands for set the water around the body turning with it, and that water keeps turning after the body
-  slows. The water's rate W (world axes) relaxes towards a fraction kappa_b of the body's,
-  dW/dt = (kappa_b R omega - W) / tau_b, and the appendage damping acts on the body's rate relative to
-  it, -(c_lin + c_quad |omega - R^T W|) (omega - R^T W) per body axis. While the body turns steadily its
-  damping drops to (1 - kappa_b) of tau_appendage's linear part and (1 - kappa_b)^2 of its quadratic part; when it slows, the water pushes it on, the
-  mechanism of an overshoot that only a fluid memory on the time scale of the manoeuvre (seconds, not the
-  paws' tenths) gives. The same first-order "entrained water" model as the paws' wake, applied to the
-  body's rotation: the history (memory) effects of unsteady flow around a body that starts and stops
-  (Sarpkaya and Isaacson, "Mechanics of Wave Forces on Offshore Structures" (1981), ch. 3; the
-  convolution (retardation) terms of Cummins' equation, Fossen (2011), section 5.4, whose simplest
-  state-space form is this one pole). kappa_b = 0 is today's damping. Held over a step like the paws'
-  wake: tau_b >= 0.05 s against the 10 ms step.
+- ``body wake`` (:func:`body_wake_update`): the legs, housings and corners that the appendage damping stands
+  for set the water around the body turning with it, and that water keeps turning after the body slows. The
+  water's rate W (world axes) relaxes towards a fraction kappa_b of the body's, dW/dt = (kappa_b R omega -
+  W) / tau_b, and the appendage damping acts on the body's rate relative to it, -(c_lin + c_quad |omega -
+  R^T W|) (omega - R^T W) per body axis. While the body turns steadily its damping drops to (1 - kappa_b) of
+  tau_appendage's linear part and (1 - kappa_b)^2 of its quadratic part; when it slows, the water pushes it
+  on, the mechanism of an overshoot that only a fluid memory on the time scale of the manoeuvre (seconds,
+  not the paws' tenths) gives. The same first-order "entrained water" model as the paws' wake, applied to
+  the body's rotation: the history (memory) effects of unsteady flow around a body that starts and stops
+  (Sarpkaya and Isaacson, "Mechanics of Wave Forces on Offshore Structures" (1981), ch. 3; the convolution
+  (retardation) terms of Cummins' equation, Fossen (2011), section 5.4, whose simplest state-space form is
+  this one pole). kappa_b = 0 is today's damping. Held over a step like the paws' wake: tau_b >= 0.05 s
+  against the 10 ms step.
 - ``floating block`` (:func:`~.tank_dynamics.floating_block_update`, ``block_mass``, ``block_drag``,
   ``block_tie_stiffness``): the rope hangs from a foam block that floats on the surface, tied to a gantry
   (the paper, section "Experimental Setup"), not from a fixed point. The block moves horizontally under

@@ -384,8 +384,10 @@ def test_rope_twist_is_the_rotation_about_the_vertical() -> None:
     assert rope_twist(flat(rpy_to_rot(0.0, 0.0, 0.5) @ R0), flat(R0)) == pytest.approx(0.5, abs=1e-12)
 
 
-@pytest.mark.parametrize("untwisted_rpy, rpy", [((0.0, 0.0, 0.0), (0.6, 0.0, 1.2)), ((0.2, -0.1, 1.0), (1.1, 0.7, -0.4)),
-                                              ((0.0, 0.0, 0.0), (0.0, 0.0, 0.8)), ((0.3, 0.2, -2.0), (-1.3, 0.5, 2.2))])
+@pytest.mark.parametrize("untwisted_rpy, rpy", [((0.0, 0.0, 0.0), (0.6, 0.0, 1.2)),
+                                              ((0.2, -0.1, 1.0), (1.1, 0.7, -0.4)),
+                                              ((0.0, 0.0, 0.0), (0.0, 0.0, 0.8)),
+                                              ((0.3, 0.2, -2.0), (-1.3, 0.5, 2.2))])
 def test_rope_torsion_is_the_twists_spring_and_damper_at_any_tilt(untwisted_rpy, rpy) -> None:
     """The torsion torque is -k_t theta times the twist's gradient (body axes: theta(R exp(d)) - theta(R) =
     g_B . d, by central differences), so the spring does no work round a closed path of attitudes even
