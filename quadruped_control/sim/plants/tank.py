@@ -194,7 +194,8 @@ VALIDITY_NOTE = ("the tank plant is not yet a validated model of the robot. conf
 
 Vec3 = Tuple[float, float, float]
 
-#: The plant step the floating block's stability check allows for (s): the 100 Hz control period.
+#: The plant step the stability checks allow for (s; the floating block's in TankParams, the rest in
+#: TankModel.check_step_stability): the 100 Hz control period.
 _MAX_STEP = 0.01
 
 #: |lambda| dt the explicit terms of a tank step may reach (:meth:`TankModel.check_step_stability`): RK4 is
@@ -222,10 +223,10 @@ MAX_SERVO_DEAD_BAND = 0.1
 #: identification gives it; a larger one is a unit slip (mm for m), not a tie.
 MAX_HOOK_FRICTION_ARM = 0.05
 
-#: The smallest presliding angle (rad): the friction's spring, tau_c / theta_p, is held over each 10 ms step.
-#: At 1 mrad with the largest arm tank.yaml accepts (0.15 N m at a 3 N tension: 150 N m/rad) on the body's
-#: roll inertia (0.058 kg m^2 without added mass) it rings at 51 rad/s, 0.5 rad per step, well inside what a
-#: held step resolves.
+#: The smallest presliding angle (rad) tank.yaml accepts: the friction's spring, tau_c / theta_p, is held over
+#: each 10 ms step. Whether a step resolves it depends on the arm, the tension, the static and roll ratios and
+#: the tether's wrap together, which TankModel.check_step_stability checks (the audit found 1 mrad with the
+#: largest arm, a 3 N tension and a wound tether ringing).
 MIN_HOOK_FRICTION_ANGLE = 0.001
 
 #: The largest capstan coefficient of the tether on the rope tank.yaml accepts (per rad): 1, twice dry rubber on

@@ -10,7 +10,7 @@ import pytest
 from scipy.integrate import solve_ivp
 
 from quadruped_common.config import ParameterError, config_path
-from quadruped_common.so3 import rpy_to_rot
+from quadruped_common.so3 import exp_so3, rpy_to_rot
 from quadruped_control.control.controller_config import load_controller_config
 from quadruped_control.model.params import load_robot_params
 from quadruped_control.sim.plants import TankModel, TankParams, load_tank_params, make_plant
@@ -396,15 +396,8 @@ def test_rope_torsion_is_the_twists_spring_and_damper_at_any_tilt(untwisted_rpy,
     from quadruped_control.sim.plants.tank_dynamics import rope_torsion_torque, rope_twist
     flat = lambda R: np.asarray(R).ravel().tolist()  # noqa: E731
     R0, R = rpy_to_rot(*untwisted_rpy), rpy_to_rot(*rpy) @ rpy_to_rot(*untwisted_rpy)
-
-    def exp_body(d):
-        angle = float(np.linalg.norm(d))
-        axis = np.asarray(d) / angle
-        K = np.array([[0.0, -axis[2], axis[1]], [axis[2], 0.0, -axis[0]], [-axis[1], axis[0], 0.0]])
-        return np.eye(3) + math.sin(angle) * K + (1.0 - math.cos(angle)) * K @ K
-
-    gradient = np.array([(rope_twist(flat(R @ exp_body(1e-6 * e)), flat(R0))
-                          - rope_twist(flat(R @ exp_body(-1e-6 * e)), flat(R0))) / 2e-6 for e in np.eye(3)])
+    gradient = np.array([(rope_twist(flat(R @ exp_so3(1e-6 * e)), flat(R0))
+                          - rope_twist(flat(R @ exp_so3(-1e-6 * e)), flat(R0))) / 2e-6 for e in np.eye(3)])
     theta = rope_twist(flat(R), flat(R0))
     spring = np.array(rope_torsion_torque(flat(R), flat(R0), (0.0, 0.0, 0.0), 0.7, 0.0))
     np.testing.assert_allclose(spring, -0.7 * theta * gradient, rtol=1e-7, atol=1e-9)
