@@ -29,13 +29,18 @@ from __future__ import annotations
 
 import numpy as np
 
+from quadruped_common.so3 import atan2_elementwise
+
 __all__ = ["heading_error", "reported_rotation", "true_rotation"]
 
 
 def _levelled_residual(R: np.ndarray, b: np.ndarray):
     """(psi, cos psi, sin psi, c_x, c_y) of attitude(s) R (..., 3, 3): its heading and the residual b (..., 3)
     levelled into its heading frame, (c_x, c_y) = Rz(-psi) (R b)_xy = (R_t b)_xy (module docstring)."""
-    psi = np.arctan2(R[..., 1, 0], R[..., 0, 0])
+    # atan2_elementwise, not np.arctan2: numpy's SIMD arctan2 rounds a third of its results differently from
+    # the C library's, and whether it runs depends on the stack's length and alignment, so one attitude
+    # and a stack of them would not be reported alike (the batch and the per-trial engine disagreed by an ulp)
+    psi = atan2_elementwise(R[..., 1, 0], R[..., 0, 0])
     cos_psi, sin_psi = np.cos(psi), np.sin(psi)
     # (R b)_x and (R b)_y: the residual's horizontal part in the world frame. Written out element by
     # element so that one attitude and a stack of them round alike (the two engines agree to the bit).
@@ -49,7 +54,7 @@ def heading_error(R: np.ndarray, residual: np.ndarray) -> np.ndarray:
     (..., 3), body axes, in units of the earth's horizontal field (module docstring)."""
     psi, cos_psi, sin_psi, level_x, level_y = _levelled_residual(np.asarray(R, dtype=float),
                                                                  np.asarray(residual, dtype=float))
-    reported = np.arctan2(sin_psi + level_x, cos_psi + level_y)
+    reported = atan2_elementwise(sin_psi + level_x, cos_psi + level_y)
     return np.pi - np.mod(np.pi - (reported - psi), 2.0 * np.pi)
 
 
@@ -81,5 +86,5 @@ def true_rotation(reported: np.ndarray, residual: np.ndarray) -> np.ndarray:
     psi_m, u_y, u_x, c_x, c_y = _levelled_residual(reported, b)
     along = u_x * c_x + u_y * c_y
     r = along + np.sqrt(along * along - (c_x * c_x + c_y * c_y) + 1.0)
-    psi = np.arctan2(r * u_x - c_x, r * u_y - c_y)
+    psi = atan2_elementwise(r * u_x - c_x, r * u_y - c_y)
     return _turned(reported, psi - psi_m)
