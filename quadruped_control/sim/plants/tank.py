@@ -32,7 +32,8 @@ Candidate effects of the identification against Table 1, each zero (today's mode
   of Fossen, "Handbook of Marine Craft Hydrodynamics and Motion Control" (2011), section 6.4.
 - ``tau_torsion`` (:func:`rope_torsion_torque`): the rope and its floating block resist twisting:
   -(k_t theta + c_t theta_dot) g, theta the body's twist about the world vertical since
-  :meth:`TankModel.attach` (the twist of the swing-twist decomposition of R R_0^T) and g its gradient
+  :meth:`TankModel.attach` (the twist of the swing-twist decomposition of R R_0^T, counted in whole turns
+  past half a turn: :func:`~.tank_dynamics.unwrapped_twist`, :attr:`TankModel.twist`) and g its gradient
   (theta_dot = g . omega): the spring of potential k_t theta^2 / 2 and a damper on the twist's rate. For a
   turn about the vertical alone, -(k_t theta + c_t omega_z^W) about the world vertical; tilted, g leans
   with the swing, so that the spring stays conservative (a torque about the vertical at any tilt, as
@@ -42,7 +43,8 @@ Candidate effects of the identification against Table 1, each zero (today's mode
 - ``paw wake`` (:func:`paw_wake_update`): a paw that strokes sets the water around it moving, and the
   recovery stroke reverses into that water. Each paw carries a wake velocity w_i (body axes) that relaxes
   towards a fraction kappa of the paw's own velocity u_i with a time constant tau_w,
-  dw_i/dt = (kappa u_i - w_i) / tau_w, and the drag law sees u_i - w_i: late in the power stroke the paw
+  dw_i/dt = -omega x w_i + (kappa u_i - w_i) / tau_w (the first term turns the water's velocity back as
+  the body turns), and the drag law sees u_i - w_i: late in the power stroke the paw
   pushes water that already moves with it (less thrust), and the retracing recovery stroke meets that
   water head-on (more drag against the stroke), so the net torque of a stroke cycle, the small difference
   of the two impulses, drops; the body's own rotation builds the same wake, so its passive damping drops
@@ -174,7 +176,7 @@ from quadruped_control.sim.plants.tank_dynamics import (TankConstants, appendage
                                                         floating_block_update, hook_friction_update, leg_sums,
                                                         mass_solver, paw_joint_loads, paw_wake_update, rope_force,
                                                         rope_torsion_torque, rope_twist, tank_forces, tank_rk4,
-                                                        wound_friction_limit)
+                                                        unwrapped_twist, wound_friction_limit)
 
 __all__ = ["TankModel", "TankParams", "VALIDITY_NOTE", "appendage_damping_torque", "hydrostatic_wrench",
            "load_tank_params", "rope_force", "rope_torsion_torque", "rope_twist", "torso_ellipsoid"]
@@ -194,8 +196,8 @@ VALIDITY_NOTE = ("the tank plant is not yet a validated model of the robot. conf
 
 Vec3 = Tuple[float, float, float]
 
-#: The plant step the stability checks allow for (s; the floating block's in TankParams, the rest in
-#: TankModel.check_step_stability): the 100 Hz control period.
+#: The plant step TankModel checks its parameters for at construction (s; TankModel.check_step_stability):
+#: the 100 Hz control period. A longer step is checked again when it is asked for (TankModel.check_step).
 _MAX_STEP = 0.01
 
 #: |lambda| dt the explicit terms of a tank step may reach (:meth:`TankModel.check_step_stability`): RK4 is
@@ -359,11 +361,6 @@ class TankParams:
         if not (math.isfinite(self.block_tie_stiffness) and 0.0 <= self.block_tie_stiffness <= 1000.0):
             raise ParameterError("tank block_tie_stiffness must be in [0, 1000] N/m, got %r"
                                  % (self.block_tie_stiffness,))
-        if self.block_mass > 0.0 and (self.rope_stiffness + self.block_tie_stiffness) * _MAX_STEP ** 2 \
-                >= 4.0 * self.block_mass:
-            # floating_block_update keeps the rope's elastic pull explicit: stable while dt^2 (k + k_g) / m_b < 4
-            raise ParameterError("tank block_mass must exceed (rope stiffness + block_tie_stiffness) * %g s^2 / 4 "
-                                 "(stable with a %g s step), got %r" % (_MAX_STEP ** 2, _MAX_STEP, self.block_mass))
         if not (math.isfinite(self.hook_friction_arm) and 0.0 <= self.hook_friction_arm <= MAX_HOOK_FRICTION_ARM):
             raise ParameterError("tank hook_friction_arm must be in [0, %g] m (mu times the eye's radius; 0: off), "
                                  "got %r" % (MAX_HOOK_FRICTION_ARM, self.hook_friction_arm))
@@ -587,6 +584,10 @@ class TankModel(FloatingBaseModel):
         self._anchor: Tuple[float, ...] = (0.0,) * 6
         self.untwisted = np.eye(3)
         self._untwisted = tuple(self.untwisted.ravel().tolist())
+        #: The rope's whole twist (rad) about the world vertical since :meth:`attach`, turns counted
+        #: (:func:`~.tank_dynamics.unwrapped_twist`) at the last step's end: plant state, 0 at attach. A step
+        #: counts it again from the state it is handed, so that state may lie within half a turn of it.
+        self.twist = 0.0
         self._body_m = tuple(self.body_mass_matrix.ravel().tolist())
         #: Each paw's wake velocity (body axes, m/s; :func:`~.tank_dynamics.paw_wake_update`): plant state
         #: beside the rigid body's, zero at :meth:`attach`.
@@ -614,6 +615,14 @@ class TankModel(FloatingBaseModel):
         self._friction_limit = self.hook_friction_limit()
         self._hook = tuple(float(x) for x in tank.hook)
         self.check_step_stability()
+        self._checked_step = _MAX_STEP
+
+    def check_step(self, dt: float) -> None:
+        """:meth:`check_step_stability` for a step of ``dt`` longer than any checked so far (the control
+        period at construction): a plant stepped at 20 Hz must resolve its stiff terms at 50 ms."""
+        if dt > self._checked_step:
+            self.check_step_stability(dt)
+            self._checked_step = dt
 
     def check_step_stability(self, dt: float = _MAX_STEP) -> None:
         """ParameterError, naming the tank.yaml keys, unless a step of ``dt`` (default the 100 Hz control
@@ -627,6 +636,8 @@ class TankModel(FloatingBaseModel):
         - the hook friction's presliding spring, held over the step (:func:`~.tank_dynamics.hook_friction_update`
           takes the rate at the step's start, so body and tie advance as symplectic Euler, stable below 4):
           K dt^2 / I <= 1 at its stiffest, K = tau_c max(1, tau_s / tau_c) max(1, m_x) exp(mu_w pi) / theta_p;
+        - the floating block: :func:`~.tank_dynamics.floating_block_update` keeps the rope's elastic pull
+          explicit, stable while (k + k_g) dt^2 / m_b < 4;
         - the torso's buoyancy positive: a net weight at or above the torso's weight leaves none.
         Past these the plant rings or blows up without telling (a tie that pumps energy into the swing,
         a rope that chatters), so the set is refused instead."""
@@ -662,6 +673,11 @@ class TankModel(FloatingBaseModel):
                     problems.append("the hook friction's presliding stiffness %.3g N m/rad > %.3g (suspension."
                                     "friction_arm, friction_angle, friction_static_ratio, friction_roll_ratio, "
                                     "friction_wrap and the rope's tension)" % (stiffest, tilt_inertia / (dt * dt)))
+        if tank.suspension and tank.block_mass > 0.0 \
+                and (tank.rope_stiffness + tank.block_tie_stiffness) * dt * dt >= 4.0 * tank.block_mass:
+            pull = tank.rope_stiffness + tank.block_tie_stiffness
+            problems.append("suspension.block_mass = %g kg <= (stiffness + block_tie_stiffness) * %g s^2 / 4 = %.3g"
+                            % (tank.block_mass, dt * dt, pull * dt * dt / 4.0))
         if tank.hydrostatics and self.torso_buoyancy <= 0.0:
             problems.append("hydrostatics.net_weight = %g N leaves the torso (%.3g N) no buoyancy"
                             % (tank.net_weight, self.torso_weight))
@@ -693,6 +709,7 @@ class TankModel(FloatingBaseModel):
         # The rope hangs untwisted in this attitude (rope torsion measures the twist from it).
         self.untwisted = np.array(state.rotation, dtype=float)
         self._untwisted = tuple(self.untwisted.ravel().tolist())
+        self.twist = 0.0
         self.wake[:] = 0.0  # still water
         self.body_wake[:] = 0.0
         self.hook_friction[:] = 0.0  # the tie unloaded
@@ -723,7 +740,7 @@ class TankModel(FloatingBaseModel):
                 (self.torso_buoyancy - self.torso_weight) if tank.hydrostatics else 0.0, bool(tank.suspension),
                 tuple(float(x) for x in tank.hook), self._anchor,
                 (float(tank.rope_length), float(tank.rope_stiffness), float(tank.rope_damping)),
-                (float(tank.rope_torsion_stiffness), float(tank.rope_torsion_damping)), self._untwisted,
+                (float(tank.rope_torsion_stiffness), float(tank.rope_torsion_damping), self.twist), self._untwisted,
                 tuple(float(x) for x in tank.appendage_damping_linear),
                 tuple(float(x) for x in tank.appendage_damping_quadratic), self._body_m, float(self.paw_added_mass),
                 float(tank.paw_wake_fraction), float(tank.paw_wake_time_constant), float(tank.paw_wake_body_share),
@@ -792,6 +809,8 @@ class TankModel(FloatingBaseModel):
     def _rk4_tank(self, state: RigidBodyState, dt: float, context: "_TankContext", q: Any = None) -> RigidBodyState:
         R0 = tuple(state.rotation.ravel().tolist())
         y0 = tuple(state.position.tolist() + state.velocity.tolist() + [0.0, 0.0, 0.0] + state.omega.tolist())
+        if self.tank.suspension:
+            self._count_twist(R0)  # the state handed in need not be the one this plant last stepped to
         try:
             loaded = self.tank.servo_stall_torque > 0.0 and q is not None
             motion = self._body_motion(state) if loaded or self.tank.paw_wake_fraction > 0.0 else ()
@@ -807,7 +826,7 @@ class TankModel(FloatingBaseModel):
             held = _STILL
             if self._friction_limit > 0.0:
                 tank = self.tank
-                limit = wound_friction_limit(self._friction_limit, tank.hook_friction_wrap, R0, self._untwisted)
+                limit = wound_friction_limit(self._friction_limit, tank.hook_friction_wrap, self.twist)
                 held = hook_friction_update(self.hook_friction, limit, tank.hook_friction_angle,
                                             tank.hook_friction_static_ratio, tank.hook_friction_stribeck_rate,
                                             tank.hook_friction_roll_ratio, y0[0:3], y0[3:6], R0, y0[9:12],
@@ -816,7 +835,17 @@ class TankModel(FloatingBaseModel):
                          context.leg_sums, context.mass_solver, R0, y0, dt)
         except (ValueError, OverflowError) as exc:  # math.sin(inf) etc. once the state has blown up
             raise diverged(dt, state, str(exc)) from None
-        return chart_step_end(R0, y[0:6], y[6:9], y[9:12], dt, state)
+        end = chart_step_end(R0, y[0:6], y[6:9], y[9:12], dt, state)
+        if self.tank.suspension:
+            self._count_twist(end.rotation.ravel().tolist())
+        return end
+
+    def _count_twist(self, rotation: Sequence[float]) -> None:
+        """Carry :attr:`twist` to ``rotation`` (row-major; a step's start or end: the batch counts at the same
+        two points, so the two plants agree to the bit) and into the constants' torsion field."""
+        self.twist = unwrapped_twist(rotation, self._untwisted, self.twist)
+        k = self._constants
+        self._constants = k[:7] + ((k[7][0], k[7][1], self.twist),) + k[8:]
 
     def _advance_block(self, state: RigidBodyState, R0: Tuple[float, ...], dt: float) -> None:
         """:func:`~.tank_dynamics.floating_block_update` over this step (the body state of its start):
@@ -845,12 +874,15 @@ class TankModel(FloatingBaseModel):
 
     def step(self, state: RigidBodyState, q: Any, q_dot: Any, dt: float) -> RigidBodyState:
         dt = check_dt(dt)
+        self.check_step(dt)
         state = state.validate()
         q = joint_array(q, "q")
         context = self._step_context(q, joint_array(q_dot, "q_dot"))
         return self._rk4_tank(state, dt, context, q)
 
     def step_trusted(self, state: RigidBodyState, q: Any, q_dot: Any, dt: float) -> RigidBodyState:
+        if dt > self._checked_step:
+            self.check_step(dt)
         return self._rk4_tank(state, dt, self._step_context(q, q_dot), q)
 
     def restoring_torque(self, rotation: Any, q: Any) -> np.ndarray:
@@ -886,7 +918,8 @@ class TankModel(FloatingBaseModel):
         return 0.5 * float(nu @ self.mass_matrix(legs.foot_positions.tolist()) @ nu)
 
     def potential_energy(self, state: RigidBodyState, q: Any) -> float:
-        """Paw buoyancy + torso weight and buoyancy + elastic rope energy, J."""
+        """Paw buoyancy + torso weight and buoyancy + elastic rope energy, J. The rope's twist is counted
+        from :attr:`twist`: call it on the state the plant last stepped to (or one within half a turn)."""
         energy = super().potential_energy(state, q)
         R, p = state.rotation, state.position
         if self.tank.hydrostatics:
@@ -895,6 +928,6 @@ class TankModel(FloatingBaseModel):
             stretch = float(np.linalg.norm(self.anchor - (p + R @ self.hook))) - self.tank.rope_length
             if stretch > 0.0:
                 energy += 0.5 * self.tank.rope_stiffness * stretch * stretch
-            twist = rope_twist(R.ravel().tolist(), self._untwisted)
+            twist = unwrapped_twist(R.ravel().tolist(), self._untwisted, self.twist)
             energy += 0.5 * self.tank.rope_torsion_stiffness * twist * twist
         return energy

@@ -26,7 +26,7 @@ from quadruped_control.sim.plants.rigid_body import RigidBodyState
 from quadruped_control.sim.plants.tank import TankModel, TankParams
 from quadruped_control.sim.plants.tank_dynamics import (body_wake_update, floating_block_update, hook_friction_update,
                                                         leg_sums, mass_solver, paw_joint_loads, paw_wake_update,
-                                                        tank_rk4, wound_friction_limit)
+                                                        tank_rk4, unwrapped_twist, wound_friction_limit)
 
 __all__ = ["TankPlantBatch", "tank_batch_step", "tank_trial_step"]
 
@@ -44,6 +44,8 @@ def tank_trial_step(i, frames, five_bar, net_paw_buoyancy, drag_constant, drag, 
     ok, lift, up, R0 = held_step_inputs(q, q_dot, i, frames, five_bar, net_paw_buoyancy[i], restoring, R, feet)
     if not ok:
         return False
+    if suspension[i]:  # the rope's whole twist counted at the step's start and end, as TankModel._count_twist
+        torsion[i, 2] = unwrapped_twist(R0, untwisted[i], torsion[i, 2])
     sums = leg_sums(feet)
     solver = mass_solver(body_m[i], paw_added_mass[i], sums[0], sums[2])
     constants = (drag_constant[i], drag[i], extra_lift[i], suspension[i], hook[i], anchor[i], rope[i],
@@ -71,13 +73,18 @@ def tank_trial_step(i, frames, five_bar, net_paw_buoyancy, drag_constant, drag, 
     y0 = (p[i, 0], p[i, 1], p[i, 2], v[i, 0], v[i, 1], v[i, 2], 0.0, 0.0, 0.0, w[i, 0], w[i, 1], w[i, 2])
     held = (0.0, 0.0, 0.0)
     if hook_friction[i, 0] > 0.0:
-        limit = wound_friction_limit(hook_friction[i, 0], hook_friction[i, 5], R0, untwisted[i])
+        limit = wound_friction_limit(hook_friction[i, 0], hook_friction[i, 5], torsion[i, 2])
         held = hook_friction_update(friction[i], limit, hook_friction[i, 1], hook_friction[i, 2],
                                     hook_friction[i, 3], hook_friction[i, 4], (y0[0], y0[1], y0[2]),
                                     (y0[3], y0[4], y0[5]), R0, (y0[9], y0[10], y0[11]), hook[i], anchor[i], rope[i, 0],
                                     dt)
     y = tank_rk4(constants, feet, rows, turning, held, lift, up, sums, solver, R0, y0, dt)
-    return store_step_end(y, R0, i, p, v, R, w)
+    if not store_step_end(y, R0, i, p, v, R, w):
+        return False
+    if suspension[i]:
+        torsion[i, 2] = unwrapped_twist((R[i, 0, 0], R[i, 0, 1], R[i, 0, 2], R[i, 1, 0], R[i, 1, 1], R[i, 1, 2],
+                                         R[i, 2, 0], R[i, 2, 1], R[i, 2, 2]), untwisted[i], torsion[i, 2])
+    return True
 
 
 @kernel
@@ -157,10 +164,12 @@ class TankPlantBatch:
                           for name, column in zip(names, columns)}
 
     def attach(self, position: np.ndarray, rotation: np.ndarray) -> None:
-        """:meth:`TankModel.attach` of every trial: anchor above the hook, rope untwisted at this attitude."""
+        """:meth:`TankModel.attach` of every trial: anchor above the hook, rope untwisted at this attitude, every
+        trial a new one (a trial that failed before runs again)."""
         for i, model in enumerate(self.models):
             model.attach(RigidBodyState(np.array(position[i], dtype=float), np.zeros(3),
                                         np.array(rotation[i], dtype=float), np.zeros(3)))
+        self.failed[:] = False
         self.wake[:] = 0.0
         self.water[:] = 0.0
         self.friction[:] = 0.0
@@ -171,7 +180,10 @@ class TankPlantBatch:
     def step(self, p: np.ndarray, v: np.ndarray, R: np.ndarray, w: np.ndarray, q: np.ndarray, q_dot: np.ndarray,
              dt: float):
         """(p, v, R, omega) after ``dt`` s with joints q, q_dot (N, 4, 3) held: the tank's RK4 in the chart.
-        The arrays passed in are advanced in place (and returned)."""
+        The arrays passed in are advanced in place (and returned). ParameterError if a trial's parameters
+        cannot take a step of ``dt`` (:meth:`TankModel.check_step_stability`)."""
+        for model in self.models:
+            model.check_step(dt)
         c = self.constants
         tank_batch_step(self.frames, self.five_bar, self.net_paw_buoyancy, c["drag_constant"], c["drag"],
                         c["extra_lift"], c["suspension"], c["hook"], c["anchor"], c["rope"], c["torsion"],

@@ -3,8 +3,8 @@ per-trial plant (:class:`~quadruped_control.sim.plants.tank.TankModel`, plain Py
 (:class:`~quadruped_control.sim.plants.tank_batch.TankPlantBatch`, a loop over trials compiled by numba
 when it is installed, :mod:`quadruped_common.jit`).
 
-- :func:`rope_force`, :func:`rope_twist`, :func:`rope_torsion_torque`, :func:`appendage_damping_torque`,
-  :func:`paw_wake_update`, :func:`body_wake_update`, :func:`floating_block_update`,
+- :func:`rope_force`, :func:`rope_twist`, :func:`unwrapped_twist`, :func:`rope_torsion_torque`,
+  :func:`appendage_damping_torque`, :func:`paw_wake_update`, :func:`body_wake_update`, :func:`floating_block_update`,
   :func:`hook_friction_update`, :func:`wound_friction_limit`: the tank's own force laws, the paws' wake,
   the water the body's appendages set turning, the floating block the rope hangs from and the friction
   where the rope is tied to the hook, with the tether wound round it (physics and sources in
@@ -36,13 +36,15 @@ from quadruped_control.sim.plants.rigid_body import Mat3, chart_point
 __all__ = ["TankConstants", "appendage_damping_torque", "body_wake_update", "floating_block_update",
            "hook_friction_update", "leg_sums",
            "mass_solver", "paw_joint_loads", "paw_wake_update", "rope_force", "rope_torsion_torque", "rope_twist",
-           "solve_mass", "tank_chart_derivative", "tank_forces", "tank_rk4", "wound_friction_limit"]
+           "solve_mass", "tank_chart_derivative", "tank_forces", "tank_rk4", "unwrapped_twist",
+           "wound_friction_limit"]
 
 Vec3 = Tuple[float, float, float]
 
 #: (drag_constant, body drag coefficients (8), extra lift (torso buoyancy - weight, N), suspension (bool),
 #: hook (3, m), anchor (6: position (m) and velocity (m/s) of the rope's upper end, world), rope (length,
-#: stiffness, damping), torsion (stiffness, damping), untwisted R_0 (9), appendage damping linear (3),
+#: stiffness, damping), torsion (stiffness, damping, the rope's whole twist at the step's start, rad:
+#: :func:`unwrapped_twist`), untwisted R_0 (9), appendage damping linear (3),
 #: quadratic (3), M_RB + M_A (36), paw added mass m_a, paw wake (fraction kappa, time constant tau_w in s,
 #: body share s_b), body wake (fraction kappa_b, time constant tau_b in s))
 TankConstants = Tuple[Any, ...]
@@ -109,11 +111,25 @@ def rope_twist(R: Sequence[float], R0: Sequence[float]) -> float:
 
 
 @jitable
+def unwrapped_twist(R: Sequence[float], R0: Sequence[float], reference: float) -> float:
+    """The rope's whole twist (rad, any number of turns) at ``R``: the :func:`rope_twist` of ``R`` from ``R0``
+    plus the whole turns that put it within half a turn of ``reference``, the whole twist a moment before
+    (the plant's state, :attr:`TankModel.twist <quadruped_control.sim.plants.tank.TankModel.twist>`).
+
+    A rope does not forget a turn: twisted by 190 deg it holds 190 deg of twist, not -170 deg, so its torsion
+    and the tether wound round it keep growing past half a turn. The attitude alone gives the twist modulo a
+    turn; the plant carries the count from step to step (a step turns far less than half a turn)."""
+    turn = 2.0 * math.pi
+    change = rope_twist(R, R0) - reference
+    return reference + change - turn * math.floor((change + math.pi) / turn)
+
+
+@jitable
 def rope_torsion_torque(R: Sequence[float], R0: Sequence[float], omega: Sequence[float], stiffness: float,
-                        damping: float) -> Vec3:
-    """Body-axes torque (N m) of a rope twisted by :func:`rope_twist` from its untwisted attitude ``R0``:
-    the spring's potential k_t theta^2 / 2 and a damper on the twist's rate, tau = -(k_t theta + c_t
-    theta_dot) g (:mod:`.tank`). ``R``, ``R0`` row-major; ``omega`` body axes.
+                        damping: float, reference: float) -> Vec3:
+    """Body-axes torque (N m) of a rope twisted by theta (:func:`unwrapped_twist`, near ``reference``) from its
+    untwisted attitude ``R0``: the spring's potential k_t theta^2 / 2 and a damper on the twist's rate,
+    tau = -(k_t theta + c_t theta_dot) g (:mod:`.tank`). ``R``, ``R0`` row-major; ``omega`` body axes.
 
     g is the twist's gradient: theta_dot = g . omega (world axes), and with Q = R R0^T,
     g = (Q_02, Q_12, 1 + Q_22) / (1 + Q_22) (from theta = 2 atan2(q_z, q_w) and q_dot = (0, omega) q / 2:
@@ -133,7 +149,7 @@ def rope_torsion_torque(R: Sequence[float], R0: Sequence[float], omega: Sequence
     by = R[1] * gx + R[4] * gy + R[7]
     bz = R[2] * gx + R[5] * gy + R[8]
     twist_rate = bx * omega[0] + by * omega[1] + bz * omega[2]
-    torque = -(stiffness * rope_twist(R, R0) + damping * twist_rate)
+    torque = -(stiffness * unwrapped_twist(R, R0, reference) + damping * twist_rate)
     return (torque * bx, torque * by, torque * bz)
 
 
@@ -148,11 +164,28 @@ def paw_wake_update(feet: Sequence[Sequence[float]], wake: Any, fraction: float,
     own velocity c_i (the legs' rows ``feet``) and the share s_b (``body_share``) of the velocity the
     body's motion gives the paw (body velocity b, rate omega; s_b = 1: the paw's whole velocity u_i of
     :func:`~quadruped_control.model.hydrodynamics.paw_velocity_f`), held over the step:
-    dw/dt = (kappa u_w,i - w) / tau_w, solved exactly, w <- kappa u_w,i + (w - kappa u_w,i) exp(-dt / tau_w).
+    dw/dt = -omega x w + (kappa u_w,i - w) / tau_w. The first term is the transport: the wake is water
+    moving in the tank, so in the turning body's axes it turns the other way (-omega x w, as any
+    world-fixed vector seen from the body). Split over the step: the turn exp(-hat(omega) dt) first
+    (Rodrigues, exact for the held omega), then the relaxation solved exactly,
+    w <- kappa u_w,i + (w - kappa u_w,i) exp(-dt / tau_w).
     ``drag_feet`` (4 x 6, out): the rows (r_i, c_i - w_i), so that the drag law sees u_i - w_i, the paw's
     velocity relative to its wake."""
     decay = math.exp(-dt / time_constant)
+    rate = math.sqrt(wx * wx + wy * wy + wz * wz)
+    turning = rate > 0.0
+    kx, ky, kz, cos_a, sin_a = 0.0, 0.0, 0.0, 1.0, 0.0
+    if turning:  # exp(-hat(omega) dt) w = w cos a - sin a (k x w) + (1 - cos a) (k . w) k, a = |omega| dt
+        kx, ky, kz = wx / rate, wy / rate, wz / rate
+        cos_a, sin_a = math.cos(rate * dt), math.sin(rate * dt)
     for leg in range(4):
+        if turning:
+            ox, oy, oz = wake[leg, 0], wake[leg, 1], wake[leg, 2]
+            cross_x, cross_y, cross_z = _cross(kx, ky, kz, ox, oy, oz)
+            along = (1.0 - cos_a) * (kx * ox + ky * oy + kz * oz)
+            wake[leg, 0] = ox * cos_a - sin_a * cross_x + along * kx
+            wake[leg, 1] = oy * cos_a - sin_a * cross_y + along * ky
+            wake[leg, 2] = oz * cos_a - sin_a * cross_z + along * kz
         px, py, pz, cx, cy, cz = feet[leg][0], feet[leg][1], feet[leg][2], feet[leg][3], feet[leg][4], feet[leg][5]
         # the body's part of the paw's velocity; c + 1.0 * g is u of paw_velocity_f bit for bit
         gx, gy, gz = paw_velocity_f(px, py, pz, 0.0, 0.0, 0.0, bx, by, bz, wx, wy, wz)
@@ -211,8 +244,8 @@ def floating_block_update(anchor: Any, rest: Sequence[float], p: Sequence[float]
     bounce, is far stiffer than a light block: explicit, it would need dt < 2 m_b / c), solved by
     Sherman-Morrison: ((m_b / dt + c_b |a_dot|) I + c u_h u_h^T) a_dot' = m_b a_dot / dt - T_0 u_h
     - k_g (a - a_0), T_0 the tension with the block still; then a <- a + dt a_dot'. The rope's elastic pull
-    stays explicit: stable while dt^2 (k + k_g) / m_b < 4 (:class:`~quadruped_control.sim.plants.tank.TankParams`
-    checks it)."""
+    stays explicit: stable while dt^2 (k + k_g) / m_b < 4
+    (:meth:`~quadruped_control.sim.plants.tank.TankModel.check_step_stability` checks it)."""
     qx, qy, qz, qvx, qvy, qvz = _hook_motion(p[0], p[1], p[2], v[0], v[1], v[2], R, w[0], w[1], w[2], hook)
     dx, dy, dz = anchor[0] - qx, anchor[1] - qy, anchor[2] - qz
     inertia = mass / dt
@@ -236,10 +269,11 @@ def floating_block_update(anchor: Any, rest: Sequence[float], p: Sequence[float]
 
 
 @jitable
-def wound_friction_limit(limit: float, wrap: float, R: Sequence[float], untwisted: Sequence[float]) -> float:
+def wound_friction_limit(limit: float, wrap: float, twist: float) -> float:
     """The hook's Coulomb torque (N m) once the tether has wound round the rope: tau_c exp(mu_w |phi|),
-    with phi the body's turn about the world vertical since the rope hung untwisted (:func:`rope_twist` of
-    ``R`` from ``untwisted``, both row-major) and mu_w (``wrap``, per rad) the tether's friction on the rope.
+    with phi (``twist``, rad) the body's whole turn about the world vertical since the rope hung untwisted
+    (:func:`unwrapped_twist`: past half a turn the tether goes on winding) and mu_w (``wrap``, per rad) the
+    tether's friction on the rope.
 
     The robot's tether leaves the enclosure beside the hook (the paper, section "Robot Design": the tether
     cable enters the main enclosure through a penetrator) and hangs along the suspension rope; each turn of
@@ -249,7 +283,7 @@ def wound_friction_limit(limit: float, wrap: float, R: Sequence[float], untwiste
     ``wrap`` 0 returns ``limit`` itself (today's tie, bit for bit)."""
     if wrap == 0.0:
         return limit
-    return limit * math.exp(wrap * abs(rope_twist(R, untwisted)))
+    return limit * math.exp(wrap * abs(twist))
 
 
 @jitable
@@ -496,7 +530,8 @@ def tank_forces(k: TankConstants, feet: Sequence[Sequence[float]], drag_feet: Se
         mx, my, mz = _cross(hook[0], hook[1], hook[2], Fbx, Fby, Fbz)
         fx, fy, fz, tx, ty, tz = fx + Fbx, fy + Fby, fz + Fbz, tx + mx, ty + my, tz + mz
         if torsion[0] > 0.0 or torsion[1] > 0.0:
-            mx, my, mz = rope_torsion_torque(R, untwisted, (wx, wy, wz), torsion[0], torsion[1])
+            mx, my, mz = rope_torsion_torque(R, untwisted, (wx, wy, wz), torsion[0], torsion[1],
+                                             torsion[2])
             tx, ty, tz = tx + mx, ty + my, tz + mz
         # the hook's friction (exactly today's torque without it: x + 0.0 == x)
         tx, ty, tz = tx + held_torque[0], ty + held_torque[1], tz + held_torque[2]

@@ -399,14 +399,55 @@ def test_rope_torsion_is_the_twists_spring_and_damper_at_any_tilt(untwisted_rpy,
     gradient = np.array([(rope_twist(flat(R @ exp_so3(1e-6 * e)), flat(R0))
                           - rope_twist(flat(R @ exp_so3(-1e-6 * e)), flat(R0))) / 2e-6 for e in np.eye(3)])
     theta = rope_twist(flat(R), flat(R0))
-    spring = np.array(rope_torsion_torque(flat(R), flat(R0), (0.0, 0.0, 0.0), 0.7, 0.0))
+    spring = np.array(rope_torsion_torque(flat(R), flat(R0), (0.0, 0.0, 0.0), 0.7, 0.0, 0.0))
     np.testing.assert_allclose(spring, -0.7 * theta * gradient, rtol=1e-7, atol=1e-9)
     omega = (0.3, -0.2, 0.5)
-    damper = np.array(rope_torsion_torque(flat(R), flat(R0), omega, 0.0, 0.4))
+    damper = np.array(rope_torsion_torque(flat(R), flat(R0), omega, 0.0, 0.4, 0.0))
     np.testing.assert_allclose(damper, -0.4 * float(gradient @ omega) * gradient, rtol=1e-7, atol=1e-9)
     assert float(damper @ omega) <= 0.0
     if rpy[:2] == (0.0, 0.0) and untwisted_rpy == (0.0, 0.0, 0.0):  # about the vertical: along R^T z_hat
         np.testing.assert_allclose(spring, -0.7 * theta * R[2, :], rtol=1e-12)
+
+
+@pytest.mark.parametrize("turn", [-7.0, -3.5, -0.4, 3.3, 5.0, 10.0])
+def test_the_unwrapped_twist_counts_whole_turns_from_the_twist_a_moment_before(turn) -> None:
+    """unwrapped_twist: the rope twisted by any angle, tilted or not, reads that angle given a reference
+    within half a turn of it (the plant's count one step before), where rope_twist wraps to [-pi, pi]."""
+    from quadruped_control.sim.plants.tank_dynamics import rope_twist, unwrapped_twist
+    R0 = rpy_to_rot(0.2, -0.1, 0.7)
+    R = rpy_to_rot(0.0, 0.0, turn) @ rpy_to_rot(0.3, 0.4, 0.0) @ R0  # turned about the vertical, then tilted
+    flat = lambda M: M.ravel().tolist()  # noqa: E731
+    swing_free = rpy_to_rot(0.0, 0.0, turn) @ R0
+    wrapped = rope_twist(flat(swing_free), flat(R0))
+    assert abs(wrapped) <= math.pi and math.cos(wrapped - turn) == pytest.approx(1.0, abs=1e-12)
+    for reference in (turn - 3.0, turn, turn + 3.0):
+        assert unwrapped_twist(flat(swing_free), flat(R0), reference) == pytest.approx(turn, abs=1e-12)
+    # tilted: the twist of the swing-twist decomposition, counted the same way
+    assert math.cos(unwrapped_twist(flat(R), flat(R0), turn) - rope_twist(flat(R), flat(R0))) == pytest.approx(1.0)
+    assert abs(unwrapped_twist(flat(R), flat(R0), turn) - turn) < math.pi
+
+
+def test_a_rope_twisted_past_half_a_turn_turns_the_robot_back_and_keeps_the_energy() -> None:
+    """Released at rest twist with a yaw rate that winds the rope to 1.4 pi (252 deg), nothing else acting:
+    the spring's k_t theta^2 / 2 stops the body there and turns it back through zero a quarter period later
+    (theta'' = -(k_t / I_zz) theta, linear in the whole twist), the energy kept. A twist read modulo a turn
+    would flip the spring at 180 deg and throw the body on round."""
+    k_t = 0.05
+    model = TankModel(ROBOT, BARE.with_values(suspension=True, rope_torsion_stiffness=k_t))
+    model.attach(RigidBodyState())
+    largest = 1.4 * math.pi
+    rate = largest * math.sqrt(k_t / ROBOT.inertia[2, 2])
+    start = RigidBodyState(omega=np.array([0.0, 0.0, rate]))
+    period = 2.0 * math.pi * math.sqrt(ROBOT.inertia[2, 2] / k_t)
+    q = nominal_joint_angles(ROBOT)
+    twists, energy, states = [], [], [start]
+    for _ in range(int(round(0.5 * period / DT))):
+        states.append(model.step(states[-1], q, np.zeros((4, 3)), DT))
+        twists.append(model.twist)
+        energy.append(model.kinetic_energy(states[-1], q) + model.potential_energy(states[-1], q))
+    assert max(twists) == pytest.approx(largest, rel=1e-3)
+    assert abs(twists[-1]) < 0.02 * largest  # back through the untwisted attitude half a period later
+    assert np.ptp(energy) < 1e-6 * 0.5 * k_t * largest ** 2
 
 
 def test_rope_torsion_turns_the_robot_back_with_its_period_and_keeps_the_energy() -> None:
@@ -553,6 +594,22 @@ def test_a_wake_of_the_strokes_alone_leaves_the_passive_damping_and_body_share_o
         g = np.array(paw_velocity_f(*row[:3], 0.0, 0.0, 0.0, *body))
         target = u if share == 1.0 else np.array(row[3:]) + share * g
         np.testing.assert_array_equal(wake[0], 0.4 * target + (0.0 - 0.4 * target) * math.exp(-0.01 / 0.2))
+
+
+def test_a_paws_wake_is_water_so_it_turns_back_in_body_axes_as_the_body_turns() -> None:
+    """The wake is water moving in the tank: with nothing building it (kappa 0) and no time to relax
+    (tau_w 1e12 s), one step of a body turning at omega leaves it exp(-hat(omega) dt) w in body axes, its
+    speed kept; a body that does not turn leaves it where it was, bit for bit."""
+    from quadruped_control.sim.plants.tank_dynamics import paw_wake_update
+    row, omega, dt = (0.2, 0.1, -0.05, 0.0, 0.0, 0.0), np.array([0.3, -0.5, 1.2]), 0.01
+    before = np.array([[0.1, -0.2, 0.05], [0.0, 0.3, 0.1], [-0.2, 0.0, 0.0], [0.05, 0.05, -0.3]])
+    wake, rows = before.copy(), np.zeros((4, 6))
+    paw_wake_update([row] * 4, wake, 0.0, 1e12, 1.0, 0.0, 0.0, 0.0, *omega, dt, rows)
+    np.testing.assert_allclose(wake, before @ exp_so3(-omega * dt).T, rtol=1e-12, atol=1e-15)
+    np.testing.assert_allclose(np.linalg.norm(wake, axis=1), np.linalg.norm(before, axis=1), rtol=1e-12)
+    held = before.copy()
+    paw_wake_update([row] * 4, held, 0.0, 1e12, 1.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, dt, rows)
+    np.testing.assert_array_equal(held, before * math.exp(-dt / 1e12))
 
 
 def test_paw_joint_loads_are_the_jacobian_transpose_of_the_paw_drag_and_drag_takes_power_from_the_stroke() -> None:
@@ -755,10 +812,18 @@ def test_a_free_block_follows_the_swinging_robot_and_a_stiff_tie_is_the_fixed_an
 
 def test_block_parameters_are_validated() -> None:
     for values in ({"block_mass": -1.0}, {"block_mass": 0.001}, {"block_drag": -0.1}, {"block_drag": float("nan")},
-                   {"block_tie_stiffness": 2000.0}, {"block_mass": 0.04}):  # 0.04 kg: unstable on a 2 kN/m rope
+                   {"block_tie_stiffness": 2000.0}):
         with pytest.raises(ParameterError, match="block"):
             TANK.with_values(**values)
-    assert TANK.with_values(block_mass=0.06).block_mass == 0.06
+    # the explicit rope pull on the block is stable while (k + k_g) dt^2 / m_b < 4: 0.04 kg rings on a 2 kN/m
+    # rope at 10 ms, 0.06 kg does not, and rings at 20 ms (checked when the plant is asked for that step)
+    with pytest.raises(ParameterError, match="block_mass"):
+        TankModel(ROBOT, TANK.with_values(block_mass=0.04))
+    light = TankModel(ROBOT, TANK.with_values(block_mass=0.06))
+    light.attach(RigidBodyState())
+    light.step(RigidBodyState(), nominal_joint_angles(ROBOT), np.zeros((4, 3)), DT)
+    with pytest.raises(ParameterError, match="0.02 s step cannot resolve: suspension.block_mass"):
+        light.step(RigidBodyState(), nominal_joint_angles(ROBOT), np.zeros((4, 3)), 0.02)
 
 
 def test_a_servo_dead_band_is_read_from_tank_yaml_and_a_unit_slip_is_refused(tmp_path) -> None:
@@ -997,17 +1062,19 @@ def test_a_tie_that_holds_more_about_roll_keeps_a_rolled_robot_and_lets_a_pitche
 def test_the_wound_tether_grows_the_ties_friction_by_the_capstan_law() -> None:
     """wound_friction_limit: tau_c exp(mu_w |phi|) with phi the turn about the world vertical since the rope
     hung untwisted, either way round; a tilt is no turn; mu_w = 0 returns tau_c itself whatever the turn."""
-    from quadruped_control.sim.plants.tank_dynamics import wound_friction_limit
+    from quadruped_control.sim.plants.tank_dynamics import unwrapped_twist, wound_friction_limit
     untwisted = rpy_to_rot(0.3, -0.2, 0.4).ravel().tolist()
-    for turn in (math.pi / 2.0, -2.1):
+    for turn in (math.pi / 2.0, -2.1, 4.0):  # 4 rad: past half a turn the tether goes on winding
         turned = (rpy_to_rot(0.0, 0.0, turn) @ rpy_to_rot(0.3, -0.2, 0.4)).ravel().tolist()
-        assert wound_friction_limit(0.004, 0.3, turned, untwisted) == pytest.approx(0.004 * math.exp(0.3 * abs(turn)),
-                                                                                  rel=1e-12)
-        assert wound_friction_limit(0.004, 0.0, turned, untwisted) == 0.004
-    assert wound_friction_limit(0.004, 0.3, untwisted, untwisted) == pytest.approx(0.004, rel=1e-15)
+        twist = unwrapped_twist(turned, untwisted, 0.9 * turn)  # the plant's count a step before
+        assert wound_friction_limit(0.004, 0.3, twist) == pytest.approx(0.004 * math.exp(0.3 * abs(turn)), rel=1e-12)
+        assert wound_friction_limit(0.004, 0.0, twist) == 0.004
+    assert wound_friction_limit(0.004, 0.3, unwrapped_twist(untwisted, untwisted, 0.0)) == pytest.approx(0.004,
+                                                                                                         rel=1e-15)
     # a tilt about a horizontal world axis is no turn about the rope (the twist of the swing-twist is 0)
     tilted = (rpy_to_rot(0.5, 0.0, 0.0) @ rpy_to_rot(0.3, -0.2, 0.4)).ravel().tolist()
-    assert wound_friction_limit(0.004, 0.3, tilted, untwisted) == pytest.approx(0.004, rel=1e-12)
+    assert wound_friction_limit(0.004, 0.3, unwrapped_twist(tilted, untwisted, 0.0)) == pytest.approx(0.004,
+                                                                                                      rel=1e-12)
 
 
 def test_a_tie_whose_limit_falls_slips_down_to_what_it_now_holds_even_with_the_body_still() -> None:

@@ -1,0 +1,87 @@
+"""TankPlantBatch on its own: what it adds to the per-trial TankModel it runs (its set-up, its state across
+attaches, the step it is asked for). The closed-loop agreement of the two engines is in tests/control/sim/
+test_batch.py."""
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+from quadruped_common.config import ParameterError
+from quadruped_control.model.params import load_robot_params
+from quadruped_control.sim.plants.rigid_body import RigidBodyState
+from quadruped_control.sim.plants.tank import TankModel, TankParams
+from quadruped_control.sim.plants.tank_batch import TankPlantBatch
+from quadruped_control.sim.simulation import nominal_joint_angles
+
+ROBOT = load_robot_params()
+DT = 0.01
+#: A rope that only twists (no hydrostatics, no drag): the body turns on the rope's torsion alone.
+TWISTING = TankParams(hydrostatics=False, torso_added_mass=False, paw_added_mass=False, drag=False,
+                      rope_torsion_stiffness=0.05)
+
+
+def _states(n: int, omega_z: float = 0.0):
+    p, v, w = np.zeros((n, 3)), np.zeros((n, 3)), np.zeros((n, 3))
+    w[:, 2] = omega_z
+    return p, v, np.repeat(np.eye(3)[None], n, axis=0), w
+
+
+def _legs(n: int):
+    return np.repeat(nominal_joint_angles(ROBOT)[None], n, axis=0), np.zeros((n, 4, 3))
+
+
+def test_attach_makes_every_trial_a_new_one_a_failed_trial_included() -> None:
+    """A trial that failed is frozen until the batch is attached again: then it runs like the others."""
+    batch = TankPlantBatch(ROBOT, [TWISTING, TWISTING])
+    p, v, R, w = _states(2, 0.5)
+    batch.attach(p, R)
+    batch.failed[1] = True
+    q, q_dot = _legs(2)
+    batch.step(p, v, R, w, q, q_dot, DT)
+    assert not np.array_equal(R[0], np.eye(3)) and np.array_equal(R[1], np.eye(3))  # trial 1 frozen
+    p, v, R, w = _states(2, 0.5)
+    batch.attach(p, R)
+    assert not batch.failed.any()
+    batch.step(p, v, R, w, q, q_dot, DT)
+    np.testing.assert_array_equal(R[1], R[0])
+
+
+def test_a_step_longer_than_a_trial_can_resolve_is_refused_by_name() -> None:
+    """The control period (10 ms) is checked when the batch is built; a longer step is checked when asked
+    for, and a trial whose damping RK4 cannot take at that step is named."""
+    inertia_z = float(TankModel(ROBOT, TWISTING).body_mass_matrix[5, 5])
+    damped = TWISTING.with_values(appendage_damping_linear=(0.0, 0.0, 0.5 * 2.5 * inertia_z / DT))
+    batch = TankPlantBatch(ROBOT, [TWISTING, damped])
+    p, v, R, w = _states(2, 0.1)
+    batch.attach(p, R)
+    q, q_dot = _legs(2)
+    batch.step(p, v, R, w, q, q_dot, DT)
+    with pytest.raises(ParameterError, match=r"0.03 s step cannot resolve: appendage_damping.linear\[2\]"):
+        batch.step(p, v, R, w, q, q_dot, 3.0 * DT)
+
+
+def test_the_batch_counts_the_ropes_turns_as_the_per_trial_plant_does_to_the_bit() -> None:
+    """A body wound by its own yaw rate to 1.4 pi (252 deg) on a twisting rope, the tether winding round the
+    tie too: the batch's states, step by step, are the per-trial plant's, past half a turn and back."""
+    tank = TWISTING.with_values(hook_friction_arm=0.002, hook_friction_wrap=0.3, net_weight=1.0, hydrostatics=True)
+    model = TankModel(ROBOT, tank)
+    rate = 1.4 * math.pi * math.sqrt(0.05 / float(model.body_mass_matrix[5, 5]))
+    batch = TankPlantBatch(ROBOT, [tank])
+    p, v, R, w = _states(1, rate)
+    batch.attach(p, R)
+    state = RigidBodyState(omega=np.array([0.0, 0.0, rate]))
+    model.attach(state)
+    q, q_dot = _legs(1)
+    largest = 0.0
+    for _ in range(400):
+        batch.step(p, v, R, w, q, q_dot, DT)
+        state = model.step(state, q[0], q_dot[0], DT)
+        largest = max(largest, model.twist)
+        for mine, theirs in ((p[0], state.position), (v[0], state.velocity), (R[0], state.rotation),
+                             (w[0], state.omega)):
+            np.testing.assert_array_equal(mine, theirs)
+        assert batch.constants["torsion"][0, 2] == model.twist
+    assert largest > math.pi  # the rope was wound past half a turn
+    assert not batch.failed.any()
