@@ -586,7 +586,8 @@ class TankModel(FloatingBaseModel):
         self._untwisted = tuple(self.untwisted.ravel().tolist())
         #: The rope's whole twist (rad) about the world vertical since :meth:`attach`, turns counted
         #: (:func:`~.tank_dynamics.unwrapped_twist`) at the last step's end: plant state, 0 at attach. A step
-        #: counts it again from the state it is handed, so that state may lie within half a turn of it.
+        #: counts it again from the state it is handed, so that state may lie within half a turn of it. Counted
+        #: only where something reads it (the rope's torsion stiffness, the wound tether); 0 otherwise.
         self.twist = 0.0
         self._body_m = tuple(self.body_mass_matrix.ravel().tolist())
         #: Each paw's wake velocity (body axes, m/s; :func:`~.tank_dynamics.paw_wake_update`): plant state
@@ -614,6 +615,9 @@ class TankModel(FloatingBaseModel):
         # tau_c of the hook friction (N m; 0: off) and the hook as the friction update takes it
         self._friction_limit = self.hook_friction_limit()
         self._hook = tuple(float(x) for x in tank.hook)
+        # Only the rope's spring and the wound tether read the whole twist: without them it is not counted.
+        self._counts_twist = bool(tank.suspension) and (tank.rope_torsion_stiffness > 0.0 or (
+            self._friction_limit > 0.0 and tank.hook_friction_wrap > 0.0))
         self.check_step_stability()
         self._checked_step = _MAX_STEP
 
@@ -809,7 +813,7 @@ class TankModel(FloatingBaseModel):
     def _rk4_tank(self, state: RigidBodyState, dt: float, context: "_TankContext", q: Any = None) -> RigidBodyState:
         R0 = tuple(state.rotation.ravel().tolist())
         y0 = tuple(state.position.tolist() + state.velocity.tolist() + [0.0, 0.0, 0.0] + state.omega.tolist())
-        if self.tank.suspension:
+        if self._counts_twist:
             self._count_twist(R0)  # the state handed in need not be the one this plant last stepped to
         try:
             loaded = self.tank.servo_stall_torque > 0.0 and q is not None
@@ -836,7 +840,7 @@ class TankModel(FloatingBaseModel):
         except (ValueError, OverflowError) as exc:  # math.sin(inf) etc. once the state has blown up
             raise diverged(dt, state, str(exc)) from None
         end = chart_step_end(R0, y[0:6], y[6:9], y[9:12], dt, state)
-        if self.tank.suspension:
+        if self._counts_twist:
             self._count_twist(end.rotation.ravel().tolist())
         return end
 

@@ -44,7 +44,9 @@ def tank_trial_step(i, frames, five_bar, net_paw_buoyancy, drag_constant, drag, 
     ok, lift, up, R0 = held_step_inputs(q, q_dot, i, frames, five_bar, net_paw_buoyancy[i], restoring, R, feet)
     if not ok:
         return False
-    if suspension[i]:  # the rope's whole twist counted at the step's start and end, as TankModel._count_twist
+    # the rope's whole twist counted at the step's start and end where it is read, as TankModel._count_twist
+    counts_twist = suspension[i] and (torsion[i, 0] > 0.0 or (hook_friction[i, 0] > 0.0 and hook_friction[i, 5] > 0.0))
+    if counts_twist:
         torsion[i, 2] = unwrapped_twist(R0, untwisted[i], torsion[i, 2])
     sums = leg_sums(feet)
     solver = mass_solver(body_m[i], paw_added_mass[i], sums[0], sums[2])
@@ -81,7 +83,7 @@ def tank_trial_step(i, frames, five_bar, net_paw_buoyancy, drag_constant, drag, 
     y = tank_rk4(constants, feet, rows, turning, held, lift, up, sums, solver, R0, y0, dt)
     if not store_step_end(y, R0, i, p, v, R, w):
         return False
-    if suspension[i]:
+    if counts_twist:
         torsion[i, 2] = unwrapped_twist((R[i, 0, 0], R[i, 0, 1], R[i, 0, 2], R[i, 1, 0], R[i, 1, 1], R[i, 1, 2],
                                          R[i, 2, 0], R[i, 2, 1], R[i, 2, 2]), untwisted[i], torsion[i, 2])
     return True
@@ -152,6 +154,7 @@ class TankPlantBatch:
                                         tank.hook_friction_roll_ratio, tank.hook_friction_wrap]
                                        for m, tank in zip(self.models, tanks)], dtype=float).reshape(self.n, 6)
         self.friction = np.zeros((self.n, 3))
+        self._checked_step = min(model._checked_step for model in self.models) if self.models else 0.0  # noqa: SLF001
         self._load_constants()
 
     def _load_constants(self) -> None:
@@ -182,8 +185,10 @@ class TankPlantBatch:
         """(p, v, R, omega) after ``dt`` s with joints q, q_dot (N, 4, 3) held: the tank's RK4 in the chart.
         The arrays passed in are advanced in place (and returned). ParameterError if a trial's parameters
         cannot take a step of ``dt`` (:meth:`TankModel.check_step_stability`)."""
-        for model in self.models:
-            model.check_step(dt)
+        if dt > self._checked_step:  # once per new step length, not per step: a loop over N models
+            for model in self.models:
+                model.check_step(dt)
+            self._checked_step = dt
         c = self.constants
         tank_batch_step(self.frames, self.five_bar, self.net_paw_buoyancy, c["drag_constant"], c["drag"],
                         c["extra_lift"], c["suspension"], c["hook"], c["anchor"], c["rope"], c["torsion"],
