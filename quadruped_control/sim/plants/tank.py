@@ -31,14 +31,16 @@ Candidate effects of the identification against Table 1, each zero (today's mode
   quadratic (form drag, strip theory of appendages at radius r: 1/2 rho C_D A r^3 |omega| omega) damping
   of Fossen, "Handbook of Marine Craft Hydrodynamics and Motion Control" (2011), section 6.4.
 - ``tau_torsion`` (:func:`rope_torsion_torque`): the rope and its floating block resist twisting:
-  -(k_t theta + c_t theta_dot) g, theta the body's twist about the world vertical since
-  :meth:`TankModel.attach` (the twist of the swing-twist decomposition of R R_0^T, counted in whole turns
-  past half a turn: :func:`~.tank_dynamics.unwrapped_twist`, :attr:`TankModel.twist`) and g its gradient
-  (theta_dot = g . omega): the spring of potential k_t theta^2 / 2 and a damper on the twist's rate. For a
-  turn about the vertical alone, -(k_t theta + c_t omega_z^W) about the world vertical; tilted, g leans
-  with the swing, so that the spring stays conservative (a torque about the vertical at any tilt, as
-  the first version had, does work round a closed path of tilts and turns). Acts only with the
-  suspension on.
+  -(k_t theta + c_t theta_dot) g, theta the rope's whole twist since :meth:`TankModel.attach`: the integral
+  of the body's rate about the world vertical, every turn counted (plant state, :attr:`TankModel.twist`,
+  carried step by step as the twist of each step's rotation, :func:`~.tank_dynamics.whole_twist`), and g
+  the gradient of that step's twist, the world vertical to first order: the spring of potential
+  k_t theta^2 / 2 and a damper on the twist's rate, about the world vertical at any tilt. A rope is
+  twisted by turns about itself, not by the body's tilts. (Two earlier versions took the twist as a
+  function of the attitude, the twist of the swing-twist decomposition of R R_0^T from the attitude at
+  attach: about the vertical, that torque did work round closed paths of tilts and turns; along that
+  twist's gradient, it pushed the tilt of a twisted rope, without bound near a swing of 180 deg, where a
+  fit's trial diverged.) Acts only with the suspension on.
 
 - ``paw wake`` (:func:`paw_wake_update`): a paw that strokes sets the water around it moving, and the
   recovery stroke reverses into that water. Each paw carries a wake velocity w_i (body axes) that relaxes
@@ -176,7 +178,7 @@ from quadruped_control.sim.plants.tank_dynamics import (TankConstants, appendage
                                                         floating_block_update, hook_friction_update, leg_sums,
                                                         mass_solver, paw_joint_loads, paw_wake_update, rope_force,
                                                         rope_torsion_torque, rope_twist, tank_forces, tank_rk4,
-                                                        unwrapped_twist, wound_friction_limit)
+                                                        whole_twist, wound_friction_limit)
 
 __all__ = ["TankModel", "TankParams", "VALIDITY_NOTE", "appendage_damping_torque", "hydrostatic_wrench",
            "load_tank_params", "rope_force", "rope_torsion_torque", "rope_twist", "torso_ellipsoid"]
@@ -583,12 +585,13 @@ class TankModel(FloatingBaseModel):
         self.block_rest = np.zeros(3)
         self._anchor: Tuple[float, ...] = (0.0,) * 6
         self.untwisted = np.eye(3)
-        self._untwisted = tuple(self.untwisted.ravel().tolist())
-        #: The rope's whole twist (rad) about the world vertical since :meth:`attach`, turns counted
-        #: (:func:`~.tank_dynamics.unwrapped_twist`) at the last step's end: plant state, 0 at attach. A step
-        #: counts it again from the state it is handed, so that state may lie within half a turn of it. Counted
-        #: only where something reads it (the rope's torsion stiffness, the wound tether); 0 otherwise.
+        #: The rope's whole twist (rad) about the world vertical since :meth:`attach`, every turn counted
+        #: (:func:`~.tank_dynamics.whole_twist`), at the attitude :attr:`twist_rotation` (row-major): plant
+        #: state, 0 at the attitude of attach, carried to each step's end. A step counts it again from the
+        #: state it is handed (which may differ from the last end by less than half a turn). Counted only where
+        #: something reads it (the rope's torsion, the wound tether); 0 otherwise.
         self.twist = 0.0
+        self.twist_rotation: Tuple[float, ...] = tuple(self.untwisted.ravel().tolist())
         self._body_m = tuple(self.body_mass_matrix.ravel().tolist())
         #: Each paw's wake velocity (body axes, m/s; :func:`~.tank_dynamics.paw_wake_update`): plant state
         #: beside the rigid body's, zero at :meth:`attach`.
@@ -616,8 +619,9 @@ class TankModel(FloatingBaseModel):
         self._friction_limit = self.hook_friction_limit()
         self._hook = tuple(float(x) for x in tank.hook)
         # Only the rope's spring and the wound tether read the whole twist: without them it is not counted.
-        self._counts_twist = bool(tank.suspension) and (tank.rope_torsion_stiffness > 0.0 or (
-            self._friction_limit > 0.0 and tank.hook_friction_wrap > 0.0))
+        wound = self._friction_limit > 0.0 and tank.hook_friction_wrap > 0.0
+        self._counts_twist = bool(tank.suspension) and (tank.rope_torsion_stiffness > 0.0
+                                                        or tank.rope_torsion_damping > 0.0 or wound)
         self.check_step_stability()
         self._checked_step = _MAX_STEP
 
@@ -710,10 +714,10 @@ class TankModel(FloatingBaseModel):
         self.block_rest = hook + np.array([0.0, 0.0, self.tank.rope_length + stretch])
         self.block = np.concatenate((self.block_rest, np.zeros(3)))  # the block at rest
         self._anchor = tuple(self.block.tolist())
-        # The rope hangs untwisted in this attitude (rope torsion measures the twist from it).
+        # The rope hangs untwisted in this attitude: its twist (rope torsion, wound tether) counts from here.
         self.untwisted = np.array(state.rotation, dtype=float)
-        self._untwisted = tuple(self.untwisted.ravel().tolist())
         self.twist = 0.0
+        self.twist_rotation = tuple(self.untwisted.ravel().tolist())
         self.wake[:] = 0.0  # still water
         self.body_wake[:] = 0.0
         self.hook_friction[:] = 0.0  # the tie unloaded
@@ -734,7 +738,7 @@ class TankModel(FloatingBaseModel):
         return M
 
     def constants(self) -> TankConstants:
-        """This plant's :data:`~.tank_dynamics.TankConstants` (anchor and untwisted attitude of the last
+        """This plant's :data:`~.tank_dynamics.TankConstants` (anchor and twist of the last
         :meth:`attach`)."""
         return self._constants
 
@@ -744,7 +748,8 @@ class TankModel(FloatingBaseModel):
                 (self.torso_buoyancy - self.torso_weight) if tank.hydrostatics else 0.0, bool(tank.suspension),
                 tuple(float(x) for x in tank.hook), self._anchor,
                 (float(tank.rope_length), float(tank.rope_stiffness), float(tank.rope_damping)),
-                (float(tank.rope_torsion_stiffness), float(tank.rope_torsion_damping), self.twist), self._untwisted,
+                (float(tank.rope_torsion_stiffness), float(tank.rope_torsion_damping), self.twist),
+                self.twist_rotation,
                 tuple(float(x) for x in tank.appendage_damping_linear),
                 tuple(float(x) for x in tank.appendage_damping_quadratic), self._body_m, float(self.paw_added_mass),
                 float(tank.paw_wake_fraction), float(tank.paw_wake_time_constant), float(tank.paw_wake_body_share),
@@ -846,10 +851,12 @@ class TankModel(FloatingBaseModel):
 
     def _count_twist(self, rotation: Sequence[float]) -> None:
         """Carry :attr:`twist` to ``rotation`` (row-major; a step's start or end: the batch counts at the same
-        two points, so the two plants agree to the bit) and into the constants' torsion field."""
-        self.twist = unwrapped_twist(rotation, self._untwisted, self.twist)
+        two points, so the two plants agree to the bit) and into the constants' torsion fields. At a step's
+        start it adds exactly 0 when the state is the one the last step ended at."""
+        self.twist = whole_twist(rotation, self.twist_rotation, self.twist)
+        self.twist_rotation = tuple(rotation)
         k = self._constants
-        self._constants = k[:7] + ((k[7][0], k[7][1], self.twist),) + k[8:]
+        self._constants = k[:7] + ((k[7][0], k[7][1], self.twist), self.twist_rotation) + k[9:]
 
     def _advance_block(self, state: RigidBodyState, R0: Tuple[float, ...], dt: float) -> None:
         """:func:`~.tank_dynamics.floating_block_update` over this step (the body state of its start):
@@ -932,6 +939,6 @@ class TankModel(FloatingBaseModel):
             stretch = float(np.linalg.norm(self.anchor - (p + R @ self.hook))) - self.tank.rope_length
             if stretch > 0.0:
                 energy += 0.5 * self.tank.rope_stiffness * stretch * stretch
-            twist = unwrapped_twist(R.ravel().tolist(), self._untwisted, self.twist)
+            twist = whole_twist(R.ravel().tolist(), self.twist_rotation, self.twist)
             energy += 0.5 * self.tank.rope_torsion_stiffness * twist * twist
         return energy

@@ -19,16 +19,25 @@ from typing import Sequence
 
 import numpy as np
 
-from quadruped_common.jit import kernel, trial_step
+from quadruped_common.jit import jitable, kernel, trial_step
 from quadruped_control.model.params import RobotParams
 from quadruped_control.sim.plants.paper_batch import held_step_inputs, leg_geometry, store_step_end
 from quadruped_control.sim.plants.rigid_body import RigidBodyState
 from quadruped_control.sim.plants.tank import TankModel, TankParams
 from quadruped_control.sim.plants.tank_dynamics import (body_wake_update, floating_block_update, hook_friction_update,
                                                         leg_sums, mass_solver, paw_joint_loads, paw_wake_update,
-                                                        tank_rk4, unwrapped_twist, wound_friction_limit)
+                                                        tank_rk4, whole_twist, wound_friction_limit)
 
 __all__ = ["TankPlantBatch", "tank_batch_step", "tank_trial_step"]
+
+
+@jitable
+def _carry_twist(rotation, reference, torsion) -> None:
+    """The rope's whole twist ``torsion[2]`` carried from the attitude ``reference`` (9, in place) to
+    ``rotation`` (9 floats), as TankModel._count_twist."""
+    torsion[2] = whole_twist(rotation, reference, torsion[2])
+    for k in range(9):
+        reference[k] = rotation[k]
 
 
 @trial_step
@@ -44,10 +53,12 @@ def tank_trial_step(i, frames, five_bar, net_paw_buoyancy, drag_constant, drag, 
     ok, lift, up, R0 = held_step_inputs(q, q_dot, i, frames, five_bar, net_paw_buoyancy[i], restoring, R, feet)
     if not ok:
         return False
-    # the rope's whole twist counted at the step's start and end where it is read, as TankModel._count_twist
-    counts_twist = suspension[i] and (torsion[i, 0] > 0.0 or (hook_friction[i, 0] > 0.0 and hook_friction[i, 5] > 0.0))
+    # the rope's whole twist carried to the step's start and end where it is read, as TankModel._count_twist;
+    # ``untwisted`` holds the attitude it belongs to
+    counts_twist = suspension[i] and (torsion[i, 0] > 0.0 or torsion[i, 1] > 0.0
+                                      or (hook_friction[i, 0] > 0.0 and hook_friction[i, 5] > 0.0))
     if counts_twist:
-        torsion[i, 2] = unwrapped_twist(R0, untwisted[i], torsion[i, 2])
+        _carry_twist(R0, untwisted[i], torsion[i])
     sums = leg_sums(feet)
     solver = mass_solver(body_m[i], paw_added_mass[i], sums[0], sums[2])
     constants = (drag_constant[i], drag[i], extra_lift[i], suspension[i], hook[i], anchor[i], rope[i],
@@ -84,8 +95,8 @@ def tank_trial_step(i, frames, five_bar, net_paw_buoyancy, drag_constant, drag, 
     if not store_step_end(y, R0, i, p, v, R, w):
         return False
     if counts_twist:
-        torsion[i, 2] = unwrapped_twist((R[i, 0, 0], R[i, 0, 1], R[i, 0, 2], R[i, 1, 0], R[i, 1, 1], R[i, 1, 2],
-                                         R[i, 2, 0], R[i, 2, 1], R[i, 2, 2]), untwisted[i], torsion[i, 2])
+        _carry_twist((R[i, 0, 0], R[i, 0, 1], R[i, 0, 2], R[i, 1, 0], R[i, 1, 1], R[i, 1, 2], R[i, 2, 0], R[i, 2, 1],
+                      R[i, 2, 2]), untwisted[i], torsion[i])
     return True
 
 

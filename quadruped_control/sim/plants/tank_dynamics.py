@@ -3,7 +3,7 @@ per-trial plant (:class:`~quadruped_control.sim.plants.tank.TankModel`, plain Py
 (:class:`~quadruped_control.sim.plants.tank_batch.TankPlantBatch`, a loop over trials compiled by numba
 when it is installed, :mod:`quadruped_common.jit`).
 
-- :func:`rope_force`, :func:`rope_twist`, :func:`unwrapped_twist`, :func:`rope_torsion_torque`,
+- :func:`rope_force`, :func:`rope_twist`, :func:`whole_twist`, :func:`rope_torsion_torque`,
   :func:`appendage_damping_torque`, :func:`paw_wake_update`, :func:`body_wake_update`, :func:`floating_block_update`,
   :func:`hook_friction_update`, :func:`wound_friction_limit`: the tank's own force laws, the paws' wake,
   the water the body's appendages set turning, the floating block the rope hangs from and the friction
@@ -36,7 +36,7 @@ from quadruped_control.sim.plants.rigid_body import Mat3, chart_point
 __all__ = ["TankConstants", "appendage_damping_torque", "body_wake_update", "floating_block_update",
            "hook_friction_update", "leg_sums",
            "mass_solver", "paw_joint_loads", "paw_wake_update", "rope_force", "rope_torsion_torque", "rope_twist",
-           "solve_mass", "tank_chart_derivative", "tank_forces", "tank_rk4", "unwrapped_twist",
+           "solve_mass", "tank_chart_derivative", "tank_forces", "tank_rk4", "whole_twist",
            "wound_friction_limit"]
 
 Vec3 = Tuple[float, float, float]
@@ -44,7 +44,7 @@ Vec3 = Tuple[float, float, float]
 #: (drag_constant, body drag coefficients (8), extra lift (torso buoyancy - weight, N), suspension (bool),
 #: hook (3, m), anchor (6: position (m) and velocity (m/s) of the rope's upper end, world), rope (length,
 #: stiffness, damping), torsion (stiffness, damping, the rope's whole twist at the step's start, rad:
-#: :func:`unwrapped_twist`), untwisted R_0 (9), appendage damping linear (3),
+#: :func:`whole_twist`), the attitude at the step's start that twist belongs to (9), appendage damping linear (3),
 #: quadratic (3), M_RB + M_A (36), paw added mass m_a, paw wake (fraction kappa, time constant tau_w in s,
 #: body share s_b), body wake (fraction kappa_b, time constant tau_b in s))
 TankConstants = Tuple[Any, ...]
@@ -111,33 +111,40 @@ def rope_twist(R: Sequence[float], R0: Sequence[float]) -> float:
 
 
 @jitable
-def unwrapped_twist(R: Sequence[float], R0: Sequence[float], reference: float) -> float:
-    """The rope's whole twist (rad, any number of turns) at ``R``: the :func:`rope_twist` of ``R`` from ``R0``
-    plus the whole turns that put it within half a turn of ``reference``, the whole twist a moment before
-    (the plant's state, :attr:`TankModel.twist <quadruped_control.sim.plants.tank.TankModel.twist>`).
+def whole_twist(R: Sequence[float], reference_rotation: Sequence[float], reference_twist: float) -> float:
+    """The rope's whole twist (rad, any number of turns) at ``R``: ``reference_twist``, its twist at the
+    attitude ``reference_rotation`` a moment before, plus the :func:`rope_twist` of ``R`` from there.
 
-    A rope does not forget a turn: twisted by 190 deg it holds 190 deg of twist, not -170 deg, so its torsion
-    and the tether wound round it keep growing past half a turn. The attitude alone gives the twist modulo a
-    turn; the plant carries the count from step to step (a step turns far less than half a turn)."""
-    turn = 2.0 * math.pi
-    change = rope_twist(R, R0) - reference
-    return reference + change - turn * math.floor((change + math.pi) / turn)
+    A rope hanging from the hook is twisted by the body's turns about the rope, the world vertical, and not
+    by its tilts (the hook's loop bends the rope, it does not twist it): its twist is the integral of the
+    body's rate about the vertical, theta_dot = z_hat . R omega, and it counts every turn (twisted by 190 deg
+    it holds 190 deg, not -170 deg). That integral depends on the path, so no function of the attitude alone
+    is the twist: the plants carry it as state (:attr:`TankModel.twist
+    <quadruped_control.sim.plants.tank.TankModel.twist>`), with the reference moved to each step's start and
+    end, so that each step adds the twist of its own small rotation (z_hat . R omega dt to first order)."""
+    return reference_twist + rope_twist(R, reference_rotation)
 
 
 @jitable
 def rope_torsion_torque(R: Sequence[float], R0: Sequence[float], omega: Sequence[float], stiffness: float,
                         damping: float, reference: float) -> Vec3:
-    """Body-axes torque (N m) of a rope twisted by theta (:func:`unwrapped_twist`, near ``reference``) from its
-    untwisted attitude ``R0``: the spring's potential k_t theta^2 / 2 and a damper on the twist's rate,
-    tau = -(k_t theta + c_t theta_dot) g (:mod:`.tank`). ``R``, ``R0`` row-major; ``omega`` body axes.
+    """Body-axes torque (N m) of a rope twisted by theta = :func:`whole_twist` (R, R0, ``reference``): the
+    spring's potential k_t theta^2 / 2 and a damper on the twist's rate, tau = -(k_t theta + c_t theta_dot) g
+    (:mod:`.tank`). ``R``, ``R0`` row-major (``R0`` the attitude where the twist was ``reference``: the
+    plants' step start, so that g stays the world vertical to first order in the step's rotation);
+    ``omega`` body axes.
 
     g is the twist's gradient: theta_dot = g . omega (world axes), and with Q = R R0^T,
     g = (Q_02, Q_12, 1 + Q_22) / (1 + Q_22) (from theta = 2 atan2(q_z, q_w) and q_dot = (0, omega) q / 2:
     theta_dot = ((q_w q_y + q_x q_z) omega_x + (q_y q_z - q_w q_x) omega_y + (q_w^2 + q_z^2) omega_z) /
-    (q_w^2 + q_z^2)). So the spring does no net work round any closed path of attitudes and the damper only
-    takes energy out. A turn about the vertical alone has g = z_hat: the torque -(k_t theta + c_t
-    omega_z^W) about the world vertical. Past a swing of 179.9 deg (1 + Q_22 < 1e-6) the twist is
-    undefined, and the rope exerts no torsion."""
+    (q_w^2 + q_z^2)). Near R0 the torque is the gradient of k_t theta^2 / 2 (the spring does no work round
+    a closed path of attitudes there) and the damper only takes energy out. With R0 at the step's start,
+    Q stays within a step's rotation of the identity and g within O(omega dt) of z_hat: the torque is
+    -(k_t theta + c_t omega_z^W) about the world vertical, at any tilt, and the energy the rope stores,
+    k_t theta^2 / 2 with theta the integral of the vertical rate, changes by the work it does. (Measured
+    from a fixed R0 instead, g's horizontal part grows as tan(swing / 2), and a twisted rope would push the
+    tilt, without bound near a swing of 180 deg.) Past a swing of 179.9 deg from R0 (1 + Q_22 < 1e-6) the
+    twist is undefined, and the rope exerts no torsion."""
     q02 = R[0] * R0[6] + R[1] * R0[7] + R[2] * R0[8]
     q12 = R[3] * R0[6] + R[4] * R0[7] + R[5] * R0[8]
     level = 1.0 + R[6] * R0[6] + R[7] * R0[7] + R[8] * R0[8]
@@ -149,7 +156,7 @@ def rope_torsion_torque(R: Sequence[float], R0: Sequence[float], omega: Sequence
     by = R[1] * gx + R[4] * gy + R[7]
     bz = R[2] * gx + R[5] * gy + R[8]
     twist_rate = bx * omega[0] + by * omega[1] + bz * omega[2]
-    torque = -(stiffness * unwrapped_twist(R, R0, reference) + damping * twist_rate)
+    torque = -(stiffness * whole_twist(R, R0, reference) + damping * twist_rate)
     return (torque * bx, torque * by, torque * bz)
 
 
@@ -272,7 +279,7 @@ def floating_block_update(anchor: Any, rest: Sequence[float], p: Sequence[float]
 def wound_friction_limit(limit: float, wrap: float, twist: float) -> float:
     """The hook's Coulomb torque (N m) once the tether has wound round the rope: tau_c exp(mu_w |phi|),
     with phi (``twist``, rad) the body's whole turn about the world vertical since the rope hung untwisted
-    (:func:`unwrapped_twist`: past half a turn the tether goes on winding) and mu_w (``wrap``, per rad) the
+    (:func:`whole_twist`: past half a turn the tether goes on winding) and mu_w (``wrap``, per rad) the
     tether's friction on the rope.
 
     The robot's tether leaves the enclosure beside the hook (the paper, section "Robot Design": the tether

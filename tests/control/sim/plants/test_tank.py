@@ -410,21 +410,64 @@ def test_rope_torsion_is_the_twists_spring_and_damper_at_any_tilt(untwisted_rpy,
 
 
 @pytest.mark.parametrize("turn", [-7.0, -3.5, -0.4, 3.3, 5.0, 10.0])
-def test_the_unwrapped_twist_counts_whole_turns_from_the_twist_a_moment_before(turn) -> None:
-    """unwrapped_twist: the rope twisted by any angle, tilted or not, reads that angle given a reference
-    within half a turn of it (the plant's count one step before), where rope_twist wraps to [-pi, pi]."""
-    from quadruped_control.sim.plants.tank_dynamics import rope_twist, unwrapped_twist
-    R0 = rpy_to_rot(0.2, -0.1, 0.7)
-    R = rpy_to_rot(0.0, 0.0, turn) @ rpy_to_rot(0.3, 0.4, 0.0) @ R0  # turned about the vertical, then tilted
+def test_the_whole_twist_is_the_integral_of_the_turn_about_the_vertical(turn) -> None:
+    """whole_twist carried over small steps: a body turned about the vertical by any angle, tilted all the
+    while, holds that angle of twist (every turn counted, where rope_twist wraps to [-pi, pi]); a tilt and
+    its return, with no turn, leave none."""
+    from quadruped_control.sim.plants.tank_dynamics import rope_twist, whole_twist
     flat = lambda M: M.ravel().tolist()  # noqa: E731
-    swing_free = rpy_to_rot(0.0, 0.0, turn) @ R0
-    wrapped = rope_twist(flat(swing_free), flat(R0))
-    assert abs(wrapped) <= math.pi and math.cos(wrapped - turn) == pytest.approx(1.0, abs=1e-12)
-    for reference in (turn - 3.0, turn, turn + 3.0):
-        assert unwrapped_twist(flat(swing_free), flat(R0), reference) == pytest.approx(turn, abs=1e-12)
-    # tilted: the twist of the swing-twist decomposition, counted the same way
-    assert math.cos(unwrapped_twist(flat(R), flat(R0), turn) - rope_twist(flat(R), flat(R0))) == pytest.approx(1.0)
-    assert abs(unwrapped_twist(flat(R), flat(R0), turn) - turn) < math.pi
+    tilt = rpy_to_rot(0.3, 0.4, 0.0)
+    R_ref, twist = flat(tilt), 0.0
+    for k in range(1, 201):
+        R = rpy_to_rot(0.0, 0.0, turn * k / 200.0) @ tilt
+        twist, R_ref = whole_twist(flat(R), R_ref, twist), flat(R)
+    assert twist == pytest.approx(turn, abs=1e-12)
+    assert abs(rope_twist(R_ref, flat(tilt))) <= math.pi
+    R_ref, twist = flat(np.eye(3)), 0.0
+    for k in list(range(1, 101)) + list(range(99, -1, -1)):  # roll to 100 deg and back
+        R = rpy_to_rot(math.radians(k), 0.0, 0.0)
+        twist, R_ref = whole_twist(flat(R), R_ref, twist), flat(R)
+    assert abs(twist) < 1e-12
+
+
+@pytest.mark.parametrize("swing_deg", [0.0, 30.0, 90.0, 170.0])
+def test_the_ropes_torsion_acts_about_the_world_vertical_at_any_tilt(swing_deg) -> None:
+    """With the twist's reference at the current attitude (the plants' step start), the spring's torque is
+    -k_t theta about the world vertical whatever the tilt: a rope is twisted by turns about itself, not by
+    tilts. (From the attitude at attach instead, the gradient's horizontal part grows as tan(swing / 2), so
+    a twisted rope pushed the tilt: at 170 deg of swing, with 11 times its torque.)"""
+    from quadruped_control.sim.plants.tank_dynamics import rope_torsion_torque
+    R = rpy_to_rot(math.radians(swing_deg), 0.0, 0.8)
+    flat = R.ravel().tolist()
+    world = R @ np.array(rope_torsion_torque(flat, flat, (0.0, 0.0, 0.0), 0.1, 0.0, 2.0))
+    np.testing.assert_allclose(world, [0.0, 0.0, -0.2], atol=1e-12)
+    level = np.eye(3).ravel().tolist()
+    if swing_deg == 170.0:  # the earlier measure, from the level attitude the rope hung in
+        torque = R @ np.array(rope_torsion_torque(flat, level, (0.0, 0.0, 0.0), 0.1, 0.0, 0.0))
+        assert np.hypot(torque[0], torque[1]) == pytest.approx(0.1 * 0.8 * math.tan(math.radians(85.0)), rel=1e-9)
+
+
+def test_a_body_that_rolls_over_on_a_twisted_rope_keeps_its_energy_and_counts_the_turn() -> None:
+    """A body rolling at 3 rad/s on a rope wound 1.5 rad (hung at a heading 1.5 rad away), nothing but the
+    rope acting (its damping off): it rolls far over, the rope unwinding it about the vertical, the energy
+    (1/2 nu^T M nu + 1/2 k_t theta^2 + the rope's stretch) stays, and the carried twist is 1.5 rad plus the
+    integral of the rate about the world vertical."""
+    model = TankModel(ROBOT, BARE.with_values(suspension=True, rope_torsion_stiffness=0.1, rope_damping=0.0))
+    model.attach(RigidBodyState(rotation=rpy_to_rot(0.0, 0.0, -1.5)))
+    q = nominal_joint_angles(ROBOT)
+    state = RigidBodyState(omega=np.array([3.0, 0.0, 0.0]))
+    energy, swing, turned = [], [], 1.5
+    for _ in range(150):
+        start = state
+        state = model.step(state, q, np.zeros((4, 3)), DT)
+        energy.append(model.kinetic_energy(state, q) + model.potential_energy(state, q))
+        swing.append(math.degrees(math.acos(max(-1.0, min(1.0, state.rotation[2, 2])))))
+        # the integral of the rate about the world vertical, by the trapezoid rule
+        turned += 0.5 * DT * float((start.rotation @ start.omega)[2] + (state.rotation @ state.omega)[2])
+        assert model.twist == pytest.approx(turned, abs=1e-3)
+    assert max(swing) > 150.0  # rolled far over
+    assert np.ptp(energy) < 1e-4 * energy[0]
+    assert model.twist < 0.5  # and the rope has turned the body back about the vertical
 
 
 def test_a_rope_twisted_past_half_a_turn_turns_the_robot_back_and_keeps_the_energy() -> None:
@@ -1062,19 +1105,15 @@ def test_a_tie_that_holds_more_about_roll_keeps_a_rolled_robot_and_lets_a_pitche
 def test_the_wound_tether_grows_the_ties_friction_by_the_capstan_law() -> None:
     """wound_friction_limit: tau_c exp(mu_w |phi|) with phi the turn about the world vertical since the rope
     hung untwisted, either way round; a tilt is no turn; mu_w = 0 returns tau_c itself whatever the turn."""
-    from quadruped_control.sim.plants.tank_dynamics import unwrapped_twist, wound_friction_limit
+    from quadruped_control.sim.plants.tank_dynamics import whole_twist, wound_friction_limit
     untwisted = rpy_to_rot(0.3, -0.2, 0.4).ravel().tolist()
     for turn in (math.pi / 2.0, -2.1, 4.0):  # 4 rad: past half a turn the tether goes on winding
-        turned = (rpy_to_rot(0.0, 0.0, turn) @ rpy_to_rot(0.3, -0.2, 0.4)).ravel().tolist()
-        twist = unwrapped_twist(turned, untwisted, 0.9 * turn)  # the plant's count a step before
-        assert wound_friction_limit(0.004, 0.3, twist) == pytest.approx(0.004 * math.exp(0.3 * abs(turn)), rel=1e-12)
-        assert wound_friction_limit(0.004, 0.0, twist) == 0.004
-    assert wound_friction_limit(0.004, 0.3, unwrapped_twist(untwisted, untwisted, 0.0)) == pytest.approx(0.004,
-                                                                                                         rel=1e-15)
+        assert wound_friction_limit(0.004, 0.3, turn) == pytest.approx(0.004 * math.exp(0.3 * abs(turn)), rel=1e-12)
+        assert wound_friction_limit(0.004, 0.0, turn) == 0.004
+    assert wound_friction_limit(0.004, 0.3, whole_twist(untwisted, untwisted, 0.0)) == 0.004
     # a tilt about a horizontal world axis is no turn about the rope (the twist of the swing-twist is 0)
     tilted = (rpy_to_rot(0.5, 0.0, 0.0) @ rpy_to_rot(0.3, -0.2, 0.4)).ravel().tolist()
-    assert wound_friction_limit(0.004, 0.3, unwrapped_twist(tilted, untwisted, 0.0)) == pytest.approx(0.004,
-                                                                                                      rel=1e-12)
+    assert wound_friction_limit(0.004, 0.3, whole_twist(tilted, untwisted, 0.0)) == pytest.approx(0.004, rel=1e-12)
 
 
 def test_a_tie_whose_limit_falls_slips_down_to_what_it_now_holds_even_with_the_body_still() -> None:
