@@ -618,7 +618,8 @@ class TankModel(FloatingBaseModel):
         # tau_c of the hook friction (N m; 0: off) and the hook as the friction update takes it
         self._friction_limit = self.hook_friction_limit()
         self._hook = tuple(float(x) for x in tank.hook)
-        # Only the rope's spring and the wound tether read the whole twist: without them it is not counted.
+        # Only the rope's torsion (its spring reads the twist, spring and damper its reference attitude) and
+        # the wound tether read the whole twist: without them it is not counted.
         wound = self._friction_limit > 0.0 and tank.hook_friction_wrap > 0.0
         self._counts_twist = bool(tank.suspension) and (tank.rope_torsion_stiffness > 0.0
                                                         or tank.rope_torsion_damping > 0.0 or wound)
@@ -738,8 +739,8 @@ class TankModel(FloatingBaseModel):
         return M
 
     def constants(self) -> TankConstants:
-        """This plant's :data:`~.tank_dynamics.TankConstants` (anchor and twist of the last
-        :meth:`attach`)."""
+        """This plant's :data:`~.tank_dynamics.TankConstants` as they stand (the anchor and the rope's twist
+        set by :meth:`attach` and carried by each step)."""
         return self._constants
 
     def _build_constants(self) -> TankConstants:
