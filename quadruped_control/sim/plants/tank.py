@@ -620,11 +620,14 @@ class TankModel(FloatingBaseModel):
         self._hook = tuple(float(x) for x in tank.hook)
         # Only the rope's torsion (its spring reads the twist, spring and damper its reference attitude) and
         # the wound tether read the whole twist: without them it is not counted.
-        wound = self._friction_limit > 0.0 and tank.hook_friction_wrap > 0.0
-        self._counts_twist = bool(tank.suspension) and (tank.rope_torsion_stiffness > 0.0
-                                                        or tank.rope_torsion_damping > 0.0 or wound)
-        self.check_step_stability()
+        self._wound = self._friction_limit > 0.0 and tank.hook_friction_wrap > 0.0
+        #: Whether this plant carries :attr:`twist` (the batch reads it too, one source for both plants).
+        self.counts_twist = bool(tank.suspension) and (tank.rope_torsion_stiffness > 0.0
+                                                       or tank.rope_torsion_damping > 0.0 or self._wound)
+        # the step and the wound tether's turn check_step_stability has covered (s, rad)
         self._checked_step = _MAX_STEP
+        self.checked_turn = math.pi
+        self.check_step_stability()
 
     def check_step(self, dt: float) -> None:
         """:meth:`check_step_stability` for a step of ``dt`` longer than any checked so far (the control
@@ -633,7 +636,17 @@ class TankModel(FloatingBaseModel):
             self.check_step_stability(dt)
             self._checked_step = dt
 
-    def check_step_stability(self, dt: float = _MAX_STEP) -> None:
+    def check_turn(self, twist: float) -> None:
+        """:meth:`check_step_stability` for the wound tether's grip at a turn of ``twist`` rad past any turn
+        checked so far (half a turn at construction): the capstan law grows the tie's presliding stiffness
+        as exp(mu_w |phi|), and the whole twist counts every turn. Checked a quarter turn ahead, so that a
+        growing turn is checked once a quarter turn, not every step; :attr:`checked_turn` is the turn covered."""
+        if abs(twist) > self.checked_turn:
+            turn = abs(twist) + 0.5 * math.pi
+            self.check_step_stability(self._checked_step, turn)
+            self.checked_turn = turn
+
+    def check_step_stability(self, dt: float = _MAX_STEP, turn: Optional[float] = None) -> None:
         """ParameterError, naming the tank.yaml keys, unless a step of ``dt`` (default the 100 Hz control
         period) resolves every stiff term of these parameters. Each is a rate of the linearised plant
         against the body's own mass and inertia (the torso's, with added mass, without the paws': the
@@ -644,13 +657,15 @@ class TankModel(FloatingBaseModel):
           sqrt(k h^2 / I));
         - the hook friction's presliding spring, held over the step (:func:`~.tank_dynamics.hook_friction_update`
           takes the rate at the step's start, so body and tie advance as symplectic Euler, stable below 4):
-          K dt^2 / I <= 1 at its stiffest, K = tau_c max(1, tau_s / tau_c) max(1, m_x) exp(mu_w pi) / theta_p;
+          K dt^2 / I <= 1 at its stiffest, K = tau_c max(1, tau_s / tau_c) max(1, m_x) exp(mu_w phi) / theta_p,
+          phi the tether's turn (``turn``, default :attr:`checked_turn`: half a turn until :meth:`check_turn`);
         - the floating block: :func:`~.tank_dynamics.floating_block_update` keeps the rope's elastic pull
           explicit, stable while (k + k_g) dt^2 / m_b < 4;
         - the torso's buoyancy positive: a net weight at or above the torso's weight leaves none.
         Past these the plant rings or blows up without telling (a tie that pumps energy into the swing,
         a rope that chatters), so the set is refused instead."""
         tank, limit = self.tank, _RK4_LIMIT / dt
+        turn = self.checked_turn if turn is None else turn
         inertia = np.diag(self.body_mass_matrix[3:, 3:])
         tilt_inertia, heave_mass = float(min(inertia[0], inertia[1])), float(self.body_mass_matrix[2, 2])
         problems = []
@@ -676,15 +691,14 @@ class TankModel(FloatingBaseModel):
                 problems.append("suspension.stiffness = %g N/m > %.3g" % (tank.rope_stiffness, limit ** 2 * rope_mass))
             if self._friction_limit > 0.0:
                 stiffest = (self._friction_limit * max(1.0, tank.hook_friction_static_ratio)
-                            * max(1.0, tank.hook_friction_roll_ratio) * math.exp(tank.hook_friction_wrap * math.pi)
+                            * max(1.0, tank.hook_friction_roll_ratio) * math.exp(tank.hook_friction_wrap * turn)
                             / tank.hook_friction_angle)
                 if stiffest * dt * dt / tilt_inertia > 1.0:
                     problems.append("the hook friction's presliding stiffness %.3g N m/rad > %.3g (suspension."
                                     "friction_arm, friction_angle, friction_static_ratio, friction_roll_ratio, "
                                     "friction_wrap and the rope's tension)" % (stiffest, tilt_inertia / (dt * dt)))
-        if tank.suspension and tank.block_mass > 0.0 \
-                and (tank.rope_stiffness + tank.block_tie_stiffness) * dt * dt >= 4.0 * tank.block_mass:
-            pull = tank.rope_stiffness + tank.block_tie_stiffness
+        pull = tank.rope_stiffness + tank.block_tie_stiffness
+        if tank.suspension and tank.block_mass > 0.0 and pull * dt * dt >= 4.0 * tank.block_mass:
             problems.append("suspension.block_mass = %g kg <= (stiffness + block_tie_stiffness) * %g s^2 / 4 = %.3g"
                             % (tank.block_mass, dt * dt, pull * dt * dt / 4.0))
         if tank.hydrostatics and self.torso_buoyancy <= 0.0:
@@ -819,7 +833,7 @@ class TankModel(FloatingBaseModel):
     def _rk4_tank(self, state: RigidBodyState, dt: float, context: "_TankContext", q: Any = None) -> RigidBodyState:
         R0 = tuple(state.rotation.ravel().tolist())
         y0 = tuple(state.position.tolist() + state.velocity.tolist() + [0.0, 0.0, 0.0] + state.omega.tolist())
-        if self._counts_twist:
+        if self.counts_twist:
             self._count_twist(R0)  # the state handed in need not be the one this plant last stepped to
         try:
             loaded = self.tank.servo_stall_torque > 0.0 and q is not None
@@ -846,7 +860,7 @@ class TankModel(FloatingBaseModel):
         except (ValueError, OverflowError) as exc:  # math.sin(inf) etc. once the state has blown up
             raise diverged(dt, state, str(exc)) from None
         end = chart_step_end(R0, y[0:6], y[6:9], y[9:12], dt, state)
-        if self._counts_twist:
+        if self.counts_twist:
             self._count_twist(end.rotation.ravel().tolist())
         return end
 
@@ -856,6 +870,8 @@ class TankModel(FloatingBaseModel):
         start it adds exactly 0 when the state is the one the last step ended at."""
         self.twist = whole_twist(rotation, self.twist_rotation, self.twist)
         self.twist_rotation = tuple(rotation)
+        if self._wound and abs(self.twist) > self.checked_turn:
+            self.check_turn(self.twist)
         k = self._constants
         self._constants = k[:7] + ((k[7][0], k[7][1], self.twist), self.twist_rotation) + k[9:]
 

@@ -45,7 +45,7 @@ def tank_trial_step(i, frames, five_bar, net_paw_buoyancy, drag_constant, drag, 
                     rope, torsion, untwisted, linear, quadratic, body_m, paw_added_mass, wake_fraction,
                     wake_time_constant, wake_body_share, body_wake_fraction, body_wake_time_constant, restoring, wake,
                     water, p, v, R, w, q, q_dot, dt, feet, drag_feet, stall_torque, loads, block, block_rest, friction,
-                    hook_friction) -> bool:
+                    hook_friction, counts_twist) -> bool:
     """One held-input RK4 step of eq. (tank) for trial ``i`` in place (its paws' ``wake[i]``, the water
     turning with its body, ``water[i]``, its floating block, ``anchor[i]``, and its hook's friction,
     ``friction[i]``, too, with the body's state at the step's start, as
@@ -53,11 +53,9 @@ def tank_trial_step(i, frames, five_bar, net_paw_buoyancy, drag_constant, drag, 
     ok, lift, up, R0 = held_step_inputs(q, q_dot, i, frames, five_bar, net_paw_buoyancy[i], restoring, R, feet)
     if not ok:
         return False
-    # the rope's whole twist carried to the step's start and end where it is read, as TankModel._count_twist;
-    # ``untwisted`` holds the attitude it belongs to
-    counts_twist = suspension[i] and (torsion[i, 0] > 0.0 or torsion[i, 1] > 0.0
-                                      or (hook_friction[i, 0] > 0.0 and hook_friction[i, 5] > 0.0))
-    if counts_twist:
+    # the rope's whole twist carried to the step's start and end where it is read (``counts_twist``:
+    # TankModel.counts_twist), as TankModel._count_twist; ``untwisted`` holds the attitude it belongs to
+    if counts_twist[i]:
         _carry_twist(R0, untwisted[i], torsion[i])
     sums = leg_sums(feet)
     solver = mass_solver(body_m[i], paw_added_mass[i], sums[0], sums[2])
@@ -94,7 +92,7 @@ def tank_trial_step(i, frames, five_bar, net_paw_buoyancy, drag_constant, drag, 
     y = tank_rk4(constants, feet, rows, turning, held, lift, up, sums, solver, R0, y0, dt)
     if not store_step_end(y, R0, i, p, v, R, w):
         return False
-    if counts_twist:
+    if counts_twist[i]:
         _carry_twist((R[i, 0, 0], R[i, 0, 1], R[i, 0, 2], R[i, 1, 0], R[i, 1, 1], R[i, 1, 2], R[i, 2, 0], R[i, 2, 1],
                       R[i, 2, 2]), untwisted[i], torsion[i])
     return True
@@ -105,7 +103,7 @@ def tank_batch_step(frames, five_bar, net_paw_buoyancy, drag_constant, drag, ext
                     rope, torsion, untwisted, linear, quadratic, body_m, paw_added_mass, wake_fraction,
                     wake_time_constant, wake_body_share, body_wake_fraction, body_wake_time_constant, restoring, wake,
                     water, p, v, R, w, q, q_dot, dt, failed, stall_torque, loads, block, block_rest, friction,
-                    hook_friction):
+                    hook_friction, counts_twist):
     """One held-input RK4 step of eq. (tank) for every trial not yet ``failed``, in place on p, v, w
     (N, 3), R (N, 3, 3), the paws' ``wake`` (N, 4, 3), the water turning with each body, ``water``
     (N, 3), and each rope's upper end, ``anchor`` (N, 6). The constants are the fields of
@@ -114,7 +112,8 @@ def tank_batch_step(frames, five_bar, net_paw_buoyancy, drag_constant, drag, ext
     (N, 3) each floating block's mass, drag and tie stiffness (mass 0: a fixed anchor), ``block_rest``
     (N, 3) where it rests, ``friction`` (N, 3) each hook's friction torque (advanced in place) and
     ``hook_friction`` (N, 6) its Coulomb torque tau_c (0: off), presliding angle, static over sliding
-    friction, Stribeck rate, roll over pitch friction and the tether's capstan coefficient."""
+    friction, Stribeck rate, roll over pitch friction and the tether's capstan coefficient; ``counts_twist``
+    (N,) whether the trial carries the rope's twist (TankModel.counts_twist)."""
     feet = np.empty((4, 6))
     drag_feet = np.empty((4, 6))
     for i in range(p.shape[0]):
@@ -124,7 +123,7 @@ def tank_batch_step(frames, five_bar, net_paw_buoyancy, drag_constant, drag, ext
                                                  wake_time_constant, wake_body_share, body_wake_fraction,
                                                  body_wake_time_constant, restoring, wake, water, p, v, R, w, q,
                                                  q_dot, dt, feet, drag_feet, stall_torque, loads, block,
-                                                 block_rest, friction, hook_friction):
+                                                 block_rest, friction, hook_friction, counts_twist):
             failed[i] = True
 
 
@@ -166,6 +165,12 @@ class TankPlantBatch:
                                        for m, tank in zip(self.models, tanks)], dtype=float).reshape(self.n, 6)
         self.friction = np.zeros((self.n, 3))
         self._checked_step = min(model._checked_step for model in self.models) if self.models else 0.0  # noqa: SLF001
+        #: Each trial's TankModel.counts_twist (N,); the wound tethers' trials (N,) and the turn each has had
+        #: checked (N, rad; TankModel.check_turn)
+        self.counts_twist = np.array([m.counts_twist for m in self.models], dtype=bool)
+        self._wound = np.array([m._wound for m in self.models], dtype=bool)  # noqa: SLF001
+        self._checked_turns = np.array([m.checked_turn for m in self.models], dtype=float)
+        self._any_wound = bool(self._wound.any())
         self._load_constants()
 
     def _load_constants(self) -> None:
@@ -207,5 +212,11 @@ class TankPlantBatch:
                         c["wake_fraction"], c["wake_time_constant"], c["wake_body_share"], c["body_wake_fraction"],
                         c["body_wake_time_constant"], self.restoring, self.wake, self.water, p, v, R, w,
                         np.ascontiguousarray(q), np.ascontiguousarray(q_dot), float(dt), self.failed, self.stall_torque,
-                        self.loads, self.block, self.block_rest, self.friction, self.hook_friction)
+                        self.loads, self.block, self.block_rest, self.friction, self.hook_friction,
+                        self.counts_twist)
+        if self._any_wound:  # TankModel.check_turn where a wound tether has turned past its checked turn
+            turns = np.abs(c["torsion"][:, 2])
+            for i in np.flatnonzero(self._wound & (turns > self._checked_turns)):
+                self.models[i].check_turn(float(turns[i]))
+                self._checked_turns[i] = self.models[i].checked_turn
         return p, v, R, w

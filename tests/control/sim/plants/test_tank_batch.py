@@ -9,6 +9,7 @@ import numpy as np
 import pytest
 
 from quadruped_common.config import ParameterError
+from quadruped_common.so3 import rpy_to_rot
 from quadruped_control.model.params import load_robot_params
 from quadruped_control.sim.plants.rigid_body import RigidBodyState
 from quadruped_control.sim.plants.tank import TankModel, TankParams
@@ -85,3 +86,39 @@ def test_the_batch_counts_the_ropes_turns_as_the_per_trial_plant_does_to_the_bit
         assert batch.constants["torsion"][0, 2] == model.twist
     assert largest > math.pi  # the rope was wound past half a turn
     assert not batch.failed.any()
+
+
+#: A tie the 10 ms step resolves with the tether wound half a turn (presliding K dt^2 / I 0.41 there), not
+#: with it wound a whole turn (exp(mu_w phi) 4.8 times stiffer: 1.95).
+WOUND = TankParams(hook_friction_arm=0.05, hook_friction_angle=0.001, hook_friction_wrap=0.5)
+
+
+def test_a_tether_wound_past_the_turn_its_tie_was_checked_for_is_refused_by_name() -> None:
+    """The capstan law stiffens the tie as exp(mu_w |phi|) and the whole twist counts every turn: the check
+    at construction covers half a turn; TankModel.check_turn covers a further turn when the plant reaches
+    it, a quarter turn ahead. Turned by the states handed to it (0.3 rad a step), the per-trial plant and
+    the batch refuse the set at the same step, naming the tie."""
+    model = TankModel(ROBOT, WOUND)
+    assert model.checked_turn == pytest.approx(math.pi)
+    model.check_turn(0.9 * math.pi)  # covered: nothing to check
+    with pytest.raises(ParameterError, match="presliding stiffness"):
+        TankModel(ROBOT, WOUND).check_turn(2.0 * math.pi)
+    q, q_dot = _legs(1)
+    refused = []
+    for engine in ("per-trial", "batch"):
+        model = TankModel(ROBOT, WOUND)
+        model.attach(RigidBodyState())
+        batch = TankPlantBatch(ROBOT, [WOUND])
+        p, v, R, w = _states(1)
+        batch.attach(p, R)
+        with pytest.raises(ParameterError, match="presliding stiffness"):
+            for k in range(1, 40):
+                turned = rpy_to_rot(0.0, 0.0, 0.3 * k)
+                if engine == "per-trial":
+                    model.step(RigidBodyState(rotation=turned), q[0], q_dot[0], DT)
+                else:
+                    p, v, R, w = _states(1)
+                    R[0] = turned
+                    batch.step(p, v, R, w, q, q_dot, DT)
+        refused.append(k)
+    assert refused[0] == refused[1] and 0.3 * refused[0] > math.pi
