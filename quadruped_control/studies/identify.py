@@ -15,7 +15,9 @@ Objective (lower is better), summed over the experiments with the weights of :da
 reports) 1 if the settled / not-settled outcome differs, |ln(t_s ratio)| if both settled, |ln(t_r
 ratio)| (0.5 s floor; 1 if the simulation never rose), |e_ss difference| / 5 deg and |M_p difference|
 / 50 %; on yaw the same t_s and t_r terms (where the paper reports them) with weight 1/2: yaw has no
-restoring torque and starts from each experiment's own heading error, so it weighs less.
+restoring torque and starts from each experiment's own heading error, so it weighs less. An experiment
+whose trial cannot run to its end (a diverging plant) costs :data:`FAILED_CASE_COST` and the study goes on
+(:class:`Evaluator`).
 
 With ``--band F`` (F > 1; default 1, the terms as above) each timing term counts only what lies outside
 a factor F of the paper's, max(0, |ln ratio| - ln F): the issue's targets count the experiments within a
@@ -58,6 +60,7 @@ import math
 import os
 import re
 import time
+import warnings
 from typing import Any, Callable, Dict, List, Optional, Sequence, Tuple
 
 import numpy as np
@@ -70,9 +73,9 @@ from quadruped_control.studies.paper_experiments import experiment_specs
 from quadruped_control.studies.runner import code_fingerprint
 from quadruped_control.studies.trial import TrialSpec, run_batch, run_many
 
-__all__ = ["BOUNDS", "Evaluator", "GROUPS", "PARAMETERS", "STARTS", "WEIGHTS", "best_on", "case_cost", "fit",
-           "morris_sets", "nominal_values", "objective", "plot_report", "polish", "targets", "tank_overrides",
-           "timing_bias", "update_tank_yaml", "yaw_first_ratio"]
+__all__ = ["BOUNDS", "Evaluator", "FAILED_CASE_COST", "GROUPS", "PARAMETERS", "STARTS", "WEIGHTS", "best_on",
+           "case_cost", "fit", "morris_sets", "nominal_values", "objective", "plot_report", "polish", "targets",
+           "tank_overrides", "timing_bias", "update_tank_yaml", "yaw_first_ratio"]
 
 #: (name, low, high): bounds with their physical reason in docs/identification.md
 PARAMETERS: Tuple[Tuple[str, float, float], ...] = (
@@ -268,15 +271,19 @@ def _within_2x(a: Optional[float], b: Optional[float]) -> bool:
     return a is not None and b is not None and b > 0.0 and 0.5 <= a / b <= 2.0
 
 
-def targets(rows: Sequence[Dict[str, Any]]) -> Dict[str, int]:
+def targets(rows: Sequence[Dict[str, Any]], failed: Sequence[Dict[str, Any]] = ()) -> Dict[str, int]:
     """The issue's counts: same settled outcome; t_s, t_r and yaw t_s within a factor 2 of the paper's
-    (yaw over the cases where the paper reports one)."""
-    return {"cases": len(rows),
+    (yaw over the cases where the paper reports one). ``failed``: the Table-1 rows (``paper_experiments.PAPER_TABLE``
+    entries) of experiments whose trial could not run to its end, counted among the cases and missed in
+    every count."""
+    return {"cases": len(rows) + len(failed),
             "same_outcome": sum(r["settled_paper"] == r["settled_sim"] for r in rows),
             "t_s_within_2x": sum(_within_2x(r["sim"]["t_s"], r["paper"]["t_s"]) for r in rows),
             "t_r_within_2x": sum(_within_2x(r["sim"]["t_r"], r["paper"]["t_r"]) for r in rows),
             "yaw_t_s_within_2x": sum(_within_2x(r["sim"]["yaw"]["t_s"], r["paper"]["yaw"]["t_s"]) for r in rows),
-            "yaw_t_s_reported": sum(r["paper"]["yaw"]["t_s"] is not None for r in rows)}
+            "yaw_t_s_reported": (sum(r["paper"]["yaw"]["t_s"] is not None for r in rows)
+                                 + sum(r["yaw_t_s"] is not None for r in failed)),
+            "failed": len(failed)}
 
 
 #: The timing metrics of :func:`timing_bias`: (label, paper or simulation side -> value).
@@ -413,6 +420,14 @@ def update_tank_yaml(text: str, values: Dict[str, float], note: str) -> str:
 # The study
 # --------------------------------------------------------------------------------------------------
 
+#: The cost of an experiment (or slow-recovery check) whose trial could not run to its end: its plant
+#: diverged, or (batched engine) the robot's controller would have refused a measurement and held. The fits
+#: rank sets (CMA-ES by rank; the compass search keeps the lower), so it only has to exceed what an experiment
+#: that runs can cost: ln(160 s / 0.5 s) = 5.8 for the outcome or t_s, as much for t_r, 180 deg / 5 = 36 for
+#: e_ss, 2 x 2.9 for yaw: 53, and the overshoot's term reaches the rest only past 2,300 % of the command.
+FAILED_CASE_COST = 100.0
+
+
 def slow_recovery_cost(settled: bool, weights: Optional[Dict[str, float]] = None) -> float:
     """Cost of a slow-recovery check (:func:`paper_experiments.slow_recovery_specs`): the real robot did not
     settle with t_rec = 1.5 s, so a simulation that settles costs one outcome, weighted ``slow_recovery``."""
@@ -426,7 +441,10 @@ class Evaluator:
     observation adds the trials of :func:`paper_experiments.slow_recovery_specs` as 15, 16, ... (their
     costs: :func:`slow_recovery_cost`). Each result holds ``rows`` (the comparison rows of its Table-1
     experiments), ``slow_recovery`` (per check: its label and whether the simulation settled), and
-    ``cases`` with their ``costs`` (the objective is their sum)."""
+    ``cases`` with their ``costs`` (the objective is their sum), and ``failed``: the experiments whose trial
+    could not run to its end (case number, trial label, reason), each costing :data:`FAILED_CASE_COST`. A
+    diverging set thus scores badly instead of stopping the study (the twenty-ninth run's screening stopped
+    at one); :attr:`failed_sets` counts such sets."""
 
     def __init__(self, args: argparse.Namespace, duration: float, servo: str, slow_recovery: bool = False) -> None:
         self.args, self.duration, self.servo = args, duration, servo
@@ -437,8 +455,13 @@ class Evaluator:
         #: trial cache when the same command adds a search (a polish) between them
         self.count_of: Dict[str, int] = {}
         self.trials = 0
+        #: parameter sets with at least one experiment that could not run to its end, and the first few of
+        #: them (values and failures) for the report
+        self.failed_sets = 0
+        self.failed_examples: List[Dict[str, Any]] = []
         # the 15 specs once (their initial attitudes take a search); each set replaces label and overrides
-        self.base = experiment_specs(args, "tank", "experiment", servo, duration, keep_trace=False)[0]
+        self.base = [dataclasses.replace(spec, on_failure="record") for spec in
+                     experiment_specs(args, "tank", "experiment", servo, duration, keep_trace=False)[0]]
         #: check number (15, 16, ...) -> its Table-1 row
         self.check_row: Dict[int, int] = {}
         for row, spec in (pe.slow_recovery_specs(self.base) if slow_recovery else []):
@@ -459,20 +482,30 @@ class Evaluator:
         results = run_many(specs, self.args, "identify (%s)" % tag)
         out = []
         for i, values in enumerate(sets):
+            chunk = results[len(cases) * i:len(cases) * (i + 1)]
+            failed = [{"case": k, "label": r["label"], "reason": r["failed"]}
+                      for k, r in zip(cases, chunk) if r.get("failed")]
+            ran = [(k, r) for k, r in zip(cases, chunk) if not r.get("failed")]
             # a check compares with its Table-1 row (the paper's values); only its outcome counts
-            rows = pe.comparison_rows([pe.PAPER_TABLE[self.check_row.get(k, k)] for k in cases],
-                                      results[len(cases) * i:len(cases) * (i + 1)])
-            table = [row for k, row in zip(cases, rows) if k not in self.check_row]
-            checks = [{"case": "t_rec 1.5 " + row["case"], "settled_sim": bool(row["settled_sim"])}
-                      for k, row in zip(cases, rows) if k in self.check_row]
-            costs = [slow_recovery_cost(bool(row["settled_sim"])) if k in self.check_row
-                     else case_cost(row, band=self.band)
-                     for k, row in zip(cases, rows)]
-            counts = targets(table)
-            counts.update(slow_recovery_checks=len(checks),
+            row_of = dict(zip([k for k, _ in ran], pe.comparison_rows(
+                [pe.PAPER_TABLE[self.check_row.get(k, k)] for k, _ in ran], [r for _, r in ran])))
+            table = [row_of[k] for k in cases if k in row_of and k not in self.check_row]
+            checks = [{"case": "t_rec 1.5 " + row_of[k]["case"], "settled_sim": bool(row_of[k]["settled_sim"])}
+                      for k in cases if k in row_of and k in self.check_row]
+            costs = [FAILED_CASE_COST if k not in row_of
+                     else slow_recovery_cost(bool(row_of[k]["settled_sim"])) if k in self.check_row
+                     else case_cost(row_of[k], band=self.band)
+                     for k in cases]
+            counts = targets(table, [pe.PAPER_TABLE[f["case"]] for f in failed if f["case"] not in self.check_row])
+            counts.update(slow_recovery_checks=sum(k in self.check_row for k in cases),
                           slow_recovery_unsettled=sum(not c["settled_sim"] for c in checks))
             out.append({"values": dict(values), "objective": float(sum(costs)), "targets": counts, "rows": table,
-                        "slow_recovery": checks, "cases": list(cases), "costs": costs})
+                        "slow_recovery": checks, "cases": list(cases), "costs": costs, "failed": failed})
+            if failed:
+                self.failed_sets += 1
+                if len(self.failed_examples) < 5:
+                    self.failed_examples.append({"values": dict(values), "objective": out[-1]["objective"],
+                                                 "failed": failed})
         return out
 
     def cases(self, groups: Sequence[str]) -> List[int]:
@@ -516,10 +549,23 @@ def screen(evaluate: Callable, nominal: Dict[str, float], trajectories: int, see
     X = morris_sets(problem, trajectories, seed)
     sets = [dict(zip(names, map(float, row))) for row in X]
     results = evaluate(sets, cases, "scr")
-    Y = np.array([r["objective"] for r in results])
-    analysis = morris_analyze.analyze(problem, X, Y, num_levels=4, seed=seed)
-    finite = [float(v) if math.isfinite(v) else None for v in analysis["sigma"]]  # one trajectory: no spread
+    # A trajectory with a set that could not run every experiment is left out whole: its elementary effects
+    # would measure FAILED_CASE_COST, not the parameters' effect; the others are still a Morris design.
+    steps = len(names) + 1
+    kept = [j for j in range(len(results) // steps)
+            if not any(r.get("failed") for r in results[j * steps:(j + 1) * steps])]
+    if not kept:
+        raise StudyError("identify: every screening trajectory has a set that could not run every experiment")
+    rows = [j * steps + i for j in kept for i in range(steps)]
+    Y = np.array([results[k]["objective"] for k in rows])
+    with warnings.catch_warnings():
+        # one trajectory has no spread: numpy warns of its standard deviation, reported here as None
+        for message in ("Degrees of freedom", "invalid value encountered"):
+            warnings.filterwarnings("ignore", message, RuntimeWarning)
+        analysis = morris_analyze.analyze(problem, X[rows], Y, num_levels=4, seed=seed)
+    finite = [float(v) if math.isfinite(v) else None for v in analysis["sigma"]]
     return {"names": names, "mu_star": [float(v) for v in analysis["mu_star"]], "sigma": finite, "sets": len(sets),
+            "trajectories": len(results) // steps, "trajectories_dropped": len(results) // steps - len(kept),
             "best": min(results, key=lambda r: r["objective"]), "results": results}
 
 
@@ -716,7 +762,8 @@ def main_study(args: argparse.Namespace) -> int:
               "screening": {k: v for k, v in screening.items() if k not in ("best", "results")}, "identified": chosen,
               "fit": {"evaluations": len(full), "polish": full_polish, "search": full_search, "best": best,
                       "ensemble": [_without_rows(r) for r in ensemble]},
-              "cross_validation": folds, "trials": evaluate.trials, "wall_time": wall, "ensemble_files": paths}
+              "cross_validation": folds, "trials": evaluate.trials, "wall_time": wall, "ensemble_files": paths,
+              "failed_sets": evaluate.failed_sets, "failed_examples": evaluate.failed_examples}
     with open(os.path.join(args.out, "identify.json"), "w") as stream:
         json.dump(report, stream, indent=1, allow_nan=False)
     plot_report(report, os.path.join(args.out, "identify.png"))
@@ -774,6 +821,15 @@ def _report_text(report: Dict[str, Any], best: Dict[str, Any]) -> str:
         low, high = BOUNDS[name]
         lines.append("| %s | %g | %g | %.2f | %s | %.4g |" % (name, low, high, mu, "--" if sigma is None else
                                                                 "%.2f" % sigma, best["values"][name]))
+    dropped = screening.get("trajectories_dropped", 0)  # reports before failures were recorded have none
+    if dropped:
+        lines += ["", "%d of the screening's %d trajectories are left out of mu* and sigma: a set of theirs could "
+                  "not run every experiment." % (dropped, screening["trajectories"])]
+    if report.get("failed_sets"):
+        first = report["failed_examples"][0]["failed"][0]
+        lines += ["", "%d parameter set(s) could not run every experiment (each such experiment costs %g); the "
+                  "first: %s, %s. identify.json's failed_examples holds up to five with their values." % (
+                      report["failed_sets"], FAILED_CASE_COST, first["label"], first["reason"])]
     t = best["targets"]
     checks = report.get("slow_recovery_check", False)
 

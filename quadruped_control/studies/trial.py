@@ -23,7 +23,8 @@ from quadruped_control.model.params import load_robot_params
 from quadruped_control.sim.magnetic_heading import true_rotation
 from quadruped_control.sim.plants import load_tank_params, make_plant
 from quadruped_control.sim.servo_model import load_servo_params, make_servo_model, tank_servo_params
-from quadruped_control.sim.simulation import ClosedLoopSimulation, SimulationResult, load_simulation_settings
+from quadruped_control.sim.simulation import (ClosedLoopSimulation, SimulationError, SimulationResult,
+                                              load_simulation_settings)
 from quadruped_control.studies.runner import run_trial_batches, run_trials
 
 #: --gains spellings -> gain set of config/controller.yaml
@@ -34,7 +35,8 @@ AUTO_BATCH_MIN = 100
 
 GAIN_ALIASES = {"sim": "simulation", "simulation": "simulation", "experiment": "experiment", "exp": "experiment"}
 
-__all__ = ["AUTO_BATCH_MIN", "GAIN_ALIASES", "TrialSetup", "TrialSpec", "batch_unsupported", "format_metrics_table", "format_value",
+__all__ = ["AUTO_BATCH_MIN", "GAIN_ALIASES", "ON_FAILURE", "TrialSetup", "TrialSpec", "batch_unsupported",
+           "failed_summary", "format_metrics_table", "format_value",
            "run_batch", "run_many", "run_trial", "stroke_metrics", "trial_setup", "use_batch_engine", "without_trace",
            "write_trial"]
 
@@ -78,6 +80,11 @@ class TrialSpec:
     scheme: Optional[str] = None
     #: Also compute the stroke-scheme figures (torque delivered vs commanded, power fraction).
     scheme_metrics: bool = False
+    #: What a trial whose closed loop cannot go on does (the plant diverged, the kinematics cannot close, or, on
+    #: the batched engine, the controller would refuse a measurement): "raise" SimulationError, which stops a
+    #: study, or "record" it as a summary with ``failed`` (the reason) and no metrics (:func:`failed_summary`):
+    #: an identification scores such a parameter set and goes on.
+    on_failure: str = "raise"
 
 
 def _progress_printer(label: str, quiet: bool):
@@ -142,9 +149,28 @@ def trial_setup(spec: TrialSpec) -> TrialSetup:
     return TrialSetup(robot=robot, config=config, servo_params=servo_params, model=model, initial_R=initial_R)
 
 
+ON_FAILURE = ("raise", "record")
+
+
+def _check_on_failure(spec: TrialSpec) -> None:
+    if spec.on_failure not in ON_FAILURE:
+        raise ValueError("trial %r: on_failure must be 'raise' or 'record', got %r" % (spec.label, spec.on_failure))
+
+
+def failed_summary(spec: TrialSpec, reason: str, engine: str) -> Dict[str, Any]:
+    """The summary of a trial that could not run to its end (``spec.on_failure`` "record"): what identifies
+    it, ``failed`` (why) and ``metrics`` None."""
+    return {"label": spec.label, "setpoint_rpy_deg": list(spec.setpoint_rpy_deg),
+            "initial_rpy_deg": list(spec.initial_rpy_deg), "plant": spec.plant, "engine": engine,
+            "failed": reason, "metrics": None}
+
+
 def run_trial(spec: TrialSpec) -> Dict[str, Any]:
     """Run one trial; writes its files if ``spec.out_dir``; returns a summary with metrics and the
-    traces needed for figures (t, rpy, setpoint, geodesic as lists)."""
+    traces needed for figures (t, rpy, setpoint, geodesic as lists). A closed loop that cannot go on
+    raises :class:`~quadruped_control.sim.simulation.SimulationError`, or with ``spec.on_failure``
+    "record" returns :func:`failed_summary`."""
+    _check_on_failure(spec)
     setup = trial_setup(spec)
     robot, config, model = setup.robot, setup.config, setup.model
     servo = make_servo_model(spec.servo_model, setup.servo_params)
@@ -157,7 +183,12 @@ def run_trial(spec: TrialSpec) -> Dict[str, Any]:
         restoring_offset=spec.restoring_offset, seed=spec.seed,
         attitude_noise=math.radians(spec.attitude_noise_deg), gyro_noise=spec.gyro_noise,
         model=model, controller_enabled=spec.controller == "on")
-    result = sim.run(spec.duration, progress=_progress_printer(spec.label, spec.quiet))
+    try:
+        result = sim.run(spec.duration, progress=_progress_printer(spec.label, spec.quiet))
+    except SimulationError as exc:
+        if spec.on_failure == "record":
+            return failed_summary(spec, str(exc), "trial")
+        raise
     metrics = result.metrics()
     summary = _summary(spec, setup, metrics, result.info, result.wall_time, result.real_time_factor)
     if spec.scheme_metrics:
@@ -221,12 +252,13 @@ def run_batch(specs: Sequence[TrialSpec]) -> List[Dict[str, Any]]:
     batch knows, the group's aggregate ``real_time_factor``). ValueError names a spec the batch cannot
     run (:func:`batch_unsupported`). A trial whose plant failed (where :func:`run_trial` raises) or whose
     measurement the robot's controller would refuse (where the per-trial controller holds, which the
-    batch does not model) raises :class:`~quadruped_control.sim.simulation.SimulationError`: the batch
-    never returns a trial that differs from the per-trial engine's."""
+    batch does not model) raises :class:`~quadruped_control.sim.simulation.SimulationError`, or with
+    ``on_failure`` "record" returns :func:`failed_summary` (the other trials of its batch run on): the
+    batch never returns metrics that differ from the per-trial engine's."""
     from quadruped_control.sim.batch import BatchSimulation, BatchTrial
-    from quadruped_control.sim.simulation import SimulationError
 
     for spec in specs:
+        _check_on_failure(spec)
         reason = batch_unsupported(spec)
         if reason is not None:
             raise ValueError("trial %r cannot run batched: %s" % (spec.label, reason))
@@ -250,8 +282,12 @@ def run_batch(specs: Sequence[TrialSpec]) -> List[Dict[str, Any]]:
         for row, (i, setup) in enumerate(zip(indices, setups)):
             spec = specs[i]
             if not result.trusted(row):
-                raise SimulationError("trial %r: %s" % (spec.label, "plant step failed" if result.failed[row]
-                                                        else "the controller would refuse a measurement"))
+                reason = ("plant step failed (kinematics or a non-finite state)" if result.failed[row]
+                          else "the controller would refuse a measurement (the batch has no hold)")
+                if spec.on_failure == "record":
+                    summaries[i] = failed_summary(spec, reason, "batch")
+                    continue
+                raise SimulationError("trial %r: %s" % (spec.label, reason))
             metrics = result.metrics(row)
             config = setup.config
             info = {"dt": config.dt, "duration": spec.duration, "servo_model": spec.servo_model,

@@ -54,7 +54,11 @@ def test_targets_count_the_issue_figures() -> None:
     rows[1]["sim"]["yaw"]["t_s"] = None
     counts = idf.targets(rows)
     assert counts == {"cases": 4, "same_outcome": 3, "t_s_within_2x": 1, "t_r_within_2x": 4,
-                      "yaw_t_s_within_2x": 3, "yaw_t_s_reported": 4}
+                      "yaw_t_s_within_2x": 3, "yaw_t_s_reported": 4, "failed": 0}
+    # experiments whose trial failed: cases, and reported yaw settling times, that every count misses
+    failed = [pe.PAPER_TABLE[0], dict(pe.PAPER_TABLE[0], yaw_t_s=None)]
+    assert idf.targets(rows, failed) == dict(counts, cases=6, yaw_t_s_reported=4 + (pe.PAPER_TABLE[0]["yaw_t_s"]
+                                                                                     is not None), failed=2)
 
 
 def test_timing_bias_is_the_geometric_mean_of_paper_over_simulation_per_group() -> None:
@@ -497,3 +501,49 @@ def test_both_corners_of_the_identifications_bounds_are_plants_a_control_step_re
     for corner in (0, 1):
         values = {name: (low, high)[corner] for name, low, high in idf.PARAMETERS}
         TankModel(robot, base.with_values(**dict(idf.tank_overrides(values))))
+
+
+def test_a_set_whose_trial_diverges_scores_badly_and_the_study_goes_on(tmp_path, monkeypatch) -> None:
+    """The twenty-ninth run's screening stopped at one diverging trial. Here the first experiment of the
+    screening's third set and of the fit's first set diverge (through the real batch): the screening leaves
+    that set's trajectory out, the fit ranks the set behind the others, and the report says what failed."""
+    import dataclasses
+
+    from quadruped_control.studies import trial
+
+    real_batch = trial.run_batch
+
+    def breaking(specs):  # paws with ten thousand times their drag: the tank plant's step diverges at once
+        return real_batch([dataclasses.replace(s, tank_overrides=s.tank_overrides + (("paw_drag_scale", 1e4),))
+                           if s.label.startswith(("scr00003 roll 15", "fit00001 roll 15")) else s for s in specs])
+
+    monkeypatch.setattr(trial, "run_batch", breaking)
+    out = str(tmp_path / "failing")
+    report = _tiny_identify(out, 4, 1, "--parameters", "cob_z", "net_weight", "--engine", "batch")
+    screening = report["screening"]
+    assert screening["trajectories"] == 2 and screening["trajectories_dropped"] == 1
+    assert report["failed_sets"] == 2
+    failed = report["failed_examples"]
+    assert [[f["case"] for f in example["failed"]] for example in failed] == [[0], [0]]
+    assert all("plant step failed" in example["failed"][0]["reason"] for example in failed)
+    best = report["fit"]["best"]
+    assert best["failed"] == [] and best["targets"]["failed"] == 0
+    assert all(example["objective"] > best["objective"] + idf.FAILED_CASE_COST / 2 for example in failed)
+    with open(os.path.join(out, "identify.md")) as stream:
+        text = stream.read()
+    assert "1 of the screening's 2 trajectories are left out" in text
+    assert "2 parameter set(s) could not run every experiment" in text
+    # a failed experiment costs FAILED_CASE_COST and misses every count, and still counts as a case
+    evaluate = idf.Evaluator.__new__(idf.Evaluator)
+    evaluate.args, evaluate.band, evaluate.check_row, evaluate.count_of, evaluate.trials = None, 1.0, {}, {}, 0
+    evaluate.failed_sets, evaluate.failed_examples = 0, []
+    evaluate.base = [dataclasses.replace(s, duration=0.2) for s in idf.Evaluator(
+        simulate.build_parser().parse_args(["--study", "identify", "--out", out, "--quiet", "--jobs", "1"]), 0.2,
+        "rate-limited").base]
+    monkeypatch.setattr(idf, "run_many", lambda specs, args, desc: [
+        trial.failed_summary(s, "diverged", "batch") if s.label.startswith("x00001 roll 15") else
+        trial.run_batch([s])[0] for s in specs])
+    result = evaluate([{}], [0, 1], "x")[0]
+    assert result["costs"][0] == idf.FAILED_CASE_COST and len(result["rows"]) == 1
+    assert result["targets"]["cases"] == 2 and result["targets"]["failed"] == 1
+    assert result["targets"]["yaw_t_s_reported"] == sum(pe.PAPER_TABLE[k]["yaw_t_s"] is not None for k in (0, 1))

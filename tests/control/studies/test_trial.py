@@ -132,3 +132,30 @@ def test_a_trial_starts_where_the_imu_reports_the_specs_attitude_on_both_engines
     np.testing.assert_array_equal(per_trial["trace"]["rpy"], batched["trace"]["rpy"])
     plain = trial_setup(dataclasses.replace(spec, tank_overrides=()))
     np.testing.assert_array_equal(plain.initial_R, reported)
+
+
+#: an inertia a thousandth of the robot's: the paper plant's 10 ms step diverges within two steps
+_DIVERGING = (("inertia", ((1e-4, 0.0, 0.0), (0.0, 1e-4, 0.0), (0.0, 0.0, 1e-4))),)
+
+
+def test_a_trial_that_cannot_go_on_raises_or_is_recorded_as_its_spec_says():
+    base = dataclasses.replace(_specs()[0], duration=2.0, keep_trace=False)
+    diverging = dataclasses.replace(base, label="diverging", robot_overrides=_DIVERGING)
+    for run in (run_trial, lambda spec: run_batch([spec])[0]):
+        with pytest.raises(SimulationError, match="plant step"):
+            run(diverging)
+    recorded = dataclasses.replace(diverging, on_failure="record")
+    alone = run_batch([base])[0]
+    per_trial, (batched, beside) = run_trial(recorded), run_batch([recorded, base])
+    for summary, engine in ((per_trial, "trial"), (batched, "batch")):
+        assert summary["label"] == "diverging" and summary["engine"] == engine and summary["metrics"] is None
+        assert "plant step" in summary["failed"] and "non-finite" in summary["failed"]
+    # the other trials of the batch run on, as they would alone
+    assert "failed" not in beside and beside["metrics"] == alone["metrics"]
+    # a held measurement on the batch is recorded the same way, with its reason
+    held = dataclasses.replace(base, config_overrides=(("max_angular_rate", 1e-6),), on_failure="record")
+    assert "refuse" in run_batch([held])[0]["failed"]
+    for run in (run_trial, run_batch):
+        with pytest.raises(ValueError, match="on_failure"):
+            run(dataclasses.replace(base, on_failure="ignore") if run is run_trial
+                else [dataclasses.replace(base, on_failure="ignore")])
