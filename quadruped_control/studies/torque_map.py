@@ -43,7 +43,7 @@ from quadruped_common.so3 import rpy_to_rot
 from quadruped_control.control.controller_config import ControllerConfig, load_controller_config
 from quadruped_control.model.params import RobotParams, load_robot_params
 from quadruped_control.sim.plants.clamped import ClampedTank
-from quadruped_control.sim.plants.tank import TankModel, TankParams, load_tank_params
+from quadruped_control.sim.plants.tank import VALIDITY_NOTE, TankModel, TankParams, load_tank_params
 from quadruped_control.sim.servo_model import RateLimitedServo, ServoParams, load_servo_params, tank_servo_params
 from quadruped_control.sim.simulation import ClosedLoopSimulation, nominal_joint_angles
 
@@ -183,6 +183,7 @@ def main(argv: Optional[Sequence[str]] = None) -> int:
                 model[(axis, float(error))] = clamped_torque(robot, tank, config, servo, axis, float(error),
                                                              args.duration, args.settle)
         print(_report(points, args.measured, model))
+        print("\nNote: %s." % VALIDITY_NOTE)  # the map is the model's: what a bench reading is checked against
     except (ParameterError, ValueError, OSError) as exc:
         print("torque_map: %s" % exc, file=sys.stderr)
         return 1

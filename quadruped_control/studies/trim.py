@@ -31,7 +31,7 @@ import numpy as np
 from quadruped_common.config import ParameterError
 from quadruped_common.so3 import rpy_to_rot
 from quadruped_control.model.params import RobotParams, load_robot_params
-from quadruped_control.sim.plants.tank import TankModel, TankParams, load_tank_params
+from quadruped_control.sim.plants.tank import VALIDITY_NOTE, TankModel, TankParams, load_tank_params
 from quadruped_control.sim.simulation import nominal_joint_angles
 
 __all__ = ["AXES", "TILTS_DEG", "cob_z_for_pull", "main", "restoring_curve"]
@@ -121,6 +121,7 @@ def main(argv: Optional[Sequence[str]] = None) -> int:
     try:
         robot, tank = load_robot_params(args.robot_yaml), load_tank_params(args.tank_yaml)
         print(_report(robot, tank, args.pull))
+        print("\nNote: %s." % VALIDITY_NOTE)  # the curve is the model's: what a pull is checked against
     except (ParameterError, ValueError, OSError) as exc:
         print("trim: %s" % exc, file=sys.stderr)
         return 1

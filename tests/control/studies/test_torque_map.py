@@ -73,6 +73,7 @@ def test_cli_prints_the_map_and_a_measured_point(capsys) -> None:
     assert "| yaw | 1 |" in out and "| yaw | 3 |" in out
     assert "yaw: half of the largest delivered torque" in out
     assert "Measured yaw 2 deg: 0.004 N m held; the model delivers" in out
+    assert "Note: the tank plant is not yet a validated model" in out  # the map is the model's, not the robot's
 
 
 @pytest.mark.parametrize("argv", [["--errors", "0"], ["--errors", "95"], ["--duration", "5", "--settle", "5"],

@@ -58,6 +58,7 @@ def test_cli_prints_the_curve_and_the_matching_trim(capsys, tmp_path) -> None:
     assert trim.main(["--pull", "pitch", "90", "0.02"]) == 0
     out = capsys.readouterr().out
     assert "| roll |" in out and "| pitch |" in out and "center_of_buoyancy: [" in out
+    assert "Note: the tank plant is not yet a validated model" in out  # the curve is the model's, not the robot's
     for bad in (["--pull", "yaw", "30", "0.1"], ["--pull", "roll", "0", "0.1"], ["--pull", "roll", "30", "nan"],
                 ["--pull", "roll", "x", "0.1"]):
         with pytest.raises(SystemExit) as exit_info:
