@@ -534,12 +534,8 @@ def test_a_set_whose_trial_diverges_scores_badly_and_the_study_goes_on(tmp_path,
     assert "1 of the screening's 2 trajectories are left out" in text
     assert "2 parameter set(s) could not run every experiment" in text
     # a failed experiment costs FAILED_CASE_COST and misses every count, and still counts as a case
-    evaluate = idf.Evaluator.__new__(idf.Evaluator)
-    evaluate.args, evaluate.band, evaluate.check_row, evaluate.count_of, evaluate.trials = None, 1.0, {}, {}, 0
-    evaluate.failed_sets, evaluate.failed_examples = 0, []
-    evaluate.base = [dataclasses.replace(s, duration=0.2) for s in idf.Evaluator(
-        simulate.build_parser().parse_args(["--study", "identify", "--out", out, "--quiet", "--jobs", "1"]), 0.2,
-        "rate-limited").base]
+    evaluate = idf.Evaluator(simulate.build_parser().parse_args(["--study", "identify", "--out", out, "--quiet",
+                                                                  "--jobs", "1"]), 0.2, "rate-limited")
     monkeypatch.setattr(idf, "run_many", lambda specs, args, desc: [
         trial.failed_summary(s, "diverged", "batch") if s.label.startswith("x00001 roll 15") else
         trial.run_batch([s])[0] for s in specs])
