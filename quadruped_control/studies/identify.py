@@ -114,6 +114,10 @@ PARAMETERS: Tuple[Tuple[str, float, float], ...] = (
     ("imu_field_x", -0.5, 0.5),            # residual field at the IMU / the earth's horizontal field: 10 uT, a
     ("imu_field_y", -0.5, 0.5),            #    servo's motor magnet at 13 cm; a level calibration leaves z; the
     ("imu_field_z", -0.5, 0.5),            #    norm stays below the horizontal field (sim/magnetic_heading.py)
+    ("tether_stiffness", 0.0, 0.05),       # N m/rad: the bend that never relaxes; past 0.05 the strokes' 0.04 N m
+    #                                        could not hold Table 1's 45 deg (0.79 rad) tilts, which the robot did
+    ("tether_relaxing_stiffness", 0.0, 0.5),  # N m/rad: EI / L of a 6-8 mm jacketed cable, 0.004-0.5
+    ("tether_relaxation_time", 1.0, 120.0),  # s: the cable re-hanging in the water (seconds) to its jacket's creep
 )
 
 #: Each parameter's (low, high): :data:`PARAMETERS` by name.
@@ -182,6 +186,9 @@ _PLACES: Dict[str, _Place] = {
     "imu_field_x": _Place("imu_field_residual", (0,), "imu", "field_residual"),
     "imu_field_y": _Place("imu_field_residual", (1,), "imu", "field_residual"),
     "imu_field_z": _Place("imu_field_residual", (2,), "imu", "field_residual"),
+    "tether_stiffness": _Place("tether_stiffness", (), "tether", "stiffness"),
+    "tether_relaxing_stiffness": _Place("tether_relaxing_stiffness", (), "tether", "relaxing_stiffness"),
+    "tether_relaxation_time": _Place("tether_relaxation_time", (), "tether", "relaxation_time"),
 }
 
 

@@ -143,6 +143,23 @@ Candidate effects of the identification against Table 1, each zero (today's mode
   unwound tie exactly). It grows with the turn already made, so it is largest where Table 1's roll group
   ends its long heading changes, and falls as the tether unwinds: what the tie stored beyond its new
   limit then slips at once. arm = 0 (the default) is today's model exactly.
+- ``tether bend`` (``tether_stiffness``, ``tether_relaxing_stiffness``, ``tether_relaxation_time``,
+  :func:`~.tank_dynamics.tether_bend_torque`): the robot's tether (power and data, the paper's section
+  "Robot Design") leaves the enclosure's top through a gland and hangs to the surface. Bent there by the
+  body's tilt it resists at once; then the cable, dragged through the water under its own weight, re-hangs,
+  and its jacket creeps (PVC and PU relax over seconds to minutes), so the resistance fades while the body
+  holds its tilt. A standard linear solid (Zener) on the tilt theta (:func:`~.tank_dynamics.tilt_vector`,
+  world axes, horizontal): the torque -k_e theta - k (theta - s), the relaxed tilt s following theta with
+  the relaxation time tau, ds/dt = (theta - s) / tau, s = theta at :meth:`TankModel.attach` (the cable
+  hangs relaxed at the trial's start). A 6-8 mm jacketed cable's bending stiffness EI of about
+  0.002-0.05 N m^2 (soft PVC alone to copper cores) over a bending length of 0.1-0.5 m gives EI / L of
+  about 0.004-0.5 N m/rad: large next to the strokes' net torque (0.01-0.04 N m), so even a tenth of it
+  holds a tilt back for seconds. The controller's integral, built against the bend, then carries the body
+  past its setpoint as the bend lets go: slow settling and overshoot together, the two ways the fitted
+  plants miss the robot. A pure torque about the horizontal axes (the cable's weight and drag at the gland
+  are left in the net weight and the body's drag); the tilt's own yaw is untouched. The spring inside the
+  step's RK4, s held over the step and carried exactly after it (:func:`~.tank_dynamics.tether_relaxation_update`,
+  tau >= 0.1 s, ten steps). Both stiffnesses 0 (the default) is today's model exactly.
 
 - **The heading the IMU reports** (not a force: what the robot's VN-100 told its controller and the
   paper's Table 1). A magnetic field that rides with the body and is not calibrated out (motor magnets
@@ -178,7 +195,8 @@ from quadruped_control.sim.plants.tank_dynamics import (TankConstants, appendage
                                                         floating_block_update, hook_friction_update, leg_sums,
                                                         mass_solver, paw_joint_loads, paw_wake_update, rope_force,
                                                         rope_torsion_torque, rope_twist, tank_forces, tank_rk4,
-                                                        whole_twist, wound_friction_limit)
+                                                        tether_relaxation_update, tilt_vector, whole_twist,
+                                                        wound_friction_limit)
 
 __all__ = ["TankModel", "TankParams", "VALIDITY_NOTE", "appendage_damping_torque", "hydrostatic_wrench",
            "load_tank_params", "rope_force", "rope_torsion_torque", "rope_twist", "torso_ellipsoid"]
@@ -248,6 +266,14 @@ HOOK_FRICTION_STRIBECK_RATE_RANGE = (1e-4, 1.0)
 #: The tie's roll over pitch friction ratios tank.yaml accepts: 0.1 to 10, past a screw eye's ring radius over
 #: its wire's radius (2-5) either way round; a larger one is a tie that holds about one axis only.
 HOOK_FRICTION_ROLL_RATIO_RANGE = (0.1, 10.0)
+#: The stiffest tether bend tank.yaml accepts (N m/rad, either branch): four times the stiffest jacketed
+#: cable's EI / L (0.05 N m^2 over 0.1 m); a larger one is a unit slip (N mm for N m), not a cable.
+MAX_TETHER_STIFFNESS = 2.0
+
+#: The tether's relaxation times tank.yaml accepts (s): from ten 10 ms steps (its relaxation is carried
+#: exactly, but a faster one is a viscous damper, not a bend) to nearly three hours (a cable that never relaxes).
+TETHER_RELAXATION_TIME_RANGE = (0.1, 10000.0)
+
 #: Largest residual field at the IMU (its norm), in units of the earth's horizontal field: at 1 the levelled
 #: field's horizontal part can vanish, the reported heading is undefined and some headings have no true one.
 MAX_IMU_FIELD_RESIDUAL = 0.95
@@ -323,6 +349,11 @@ class TankParams:
     #: the residual magnetic field at the VN-100 in body axes (FLU), in units of the earth's horizontal field:
     #: the heading the IMU reports (:mod:`quadruped_control.sim.magnetic_heading`); 0 the true heading
     imu_field_residual: Vec3 = (0.0, 0.0, 0.0)
+    #: the tether bent where it leaves the body (:func:`~.tank_dynamics.tether_bend_torque`): its elastic
+    #: stiffness k_e and relaxing stiffness k (N m/rad; both 0: off) and the relaxation time tau (s)
+    tether_stiffness: float = 0.0
+    tether_relaxing_stiffness: float = 0.0
+    tether_relaxation_time: float = 10.0
 
     def __post_init__(self) -> None:
         for name in ("rope_length", "rope_stiffness"):
@@ -358,6 +389,15 @@ class TankParams:
                                  % (self.body_wake_time_constant,))
         if not (math.isfinite(self.block_mass) and (self.block_mass == 0.0 or self.block_mass >= 0.01)):
             raise ParameterError("tank block_mass must be 0 (fixed anchor) or >= 0.01 kg, got %r" % (self.block_mass,))
+        for name in ("tether_stiffness", "tether_relaxing_stiffness"):
+            value = getattr(self, name)
+            if not (math.isfinite(value) and 0.0 <= value <= MAX_TETHER_STIFFNESS):
+                raise ParameterError("tank %s must be in [0, %g] N m/rad (0: off), got %r"
+                                     % (name, MAX_TETHER_STIFFNESS, value))
+        low, high = TETHER_RELAXATION_TIME_RANGE
+        if not (math.isfinite(self.tether_relaxation_time) and low <= self.tether_relaxation_time <= high):
+            raise ParameterError("tank tether_relaxation_time must be in [%g, %g] s, got %r"
+                                 % (low, high, self.tether_relaxation_time))
         if not (math.isfinite(self.block_drag) and self.block_drag >= 0.0):
             raise ParameterError("tank block_drag must be finite and >= 0, got %r" % (self.block_drag,))
         if not (math.isfinite(self.block_tie_stiffness) and 0.0 <= self.block_tie_stiffness <= 1000.0):
@@ -426,7 +466,7 @@ def tank_params_from_dict(data: Mapping[str, Any]) -> TankParams:
     wider than the identification's plausible bounds) into :class:`TankParams`; ParameterError naming
     the key otherwise."""
     check_keys(data, "", ("effects", "suspension", "hydrostatics", "added_mass", "paw_drag", "servos",
-                          "appendage_damping", "paw_wake", "imu"),
+                          "appendage_damping", "paw_wake", "imu", "tether"),
                required=("suspension", "hydrostatics", "added_mass"))
     effects = check_keys(_optional_section(data, "effects"), "effects",
                          ("suspension", "hydrostatics", "torso_added_mass", "paw_added_mass", "drag"))
@@ -446,6 +486,8 @@ def tank_params_from_dict(data: Mapping[str, Any]) -> TankParams:
                            ("linear", "quadratic", "wake_fraction", "wake_time_constant"))
     wake = check_keys(_optional_section(data, "paw_wake"), "paw_wake", ("fraction", "time_constant", "body_share"))
     imu = check_keys(_optional_section(data, "imu"), "imu", ("field_residual",))
+    tether = check_keys(_optional_section(data, "tether"), "tether",
+                        ("stiffness", "relaxing_stiffness", "relaxation_time"))
 
     def axes(section: Mapping[str, Any], key: str, high: float) -> Vec3:
         return tuple(vector(section.get(key, [0.0, 0.0, 0.0]), "appendage_damping." + key, 3,
@@ -500,7 +542,12 @@ def tank_params_from_dict(data: Mapping[str, Any]) -> TankParams:
         body_wake_time_constant=number(appendage.get("wake_time_constant", 5.0), "appendage_damping.wake_time_constant",
                                        0.05, 1000.0),
         imu_field_residual=tuple(vector(imu.get("field_residual", [0.0, 0.0, 0.0]), "imu.field_residual", 3,
-                                        -MAX_IMU_FIELD_RESIDUAL, MAX_IMU_FIELD_RESIDUAL)))  # type: ignore[arg-type]
+                                        -MAX_IMU_FIELD_RESIDUAL, MAX_IMU_FIELD_RESIDUAL)),  # type: ignore[arg-type]
+        tether_stiffness=number(tether.get("stiffness", 0.0), "tether.stiffness", 0.0, MAX_TETHER_STIFFNESS),
+        tether_relaxing_stiffness=number(tether.get("relaxing_stiffness", 0.0), "tether.relaxing_stiffness", 0.0,
+                                         MAX_TETHER_STIFFNESS),
+        tether_relaxation_time=number(tether.get("relaxation_time", 10.0), "tether.relaxation_time",
+                                      *TETHER_RELAXATION_TIME_RANGE))
 
 
 def load_tank_params(path: Optional[str] = None, tree: Optional[Mapping[str, Any]] = None) -> TankParams:
@@ -602,6 +649,11 @@ class TankModel(FloatingBaseModel):
         #: The friction torque the hook's tie exerts on the rope (body axes, N m; the body feels its opposite;
         #: :func:`~.tank_dynamics.hook_friction_update`): plant state, zero at :meth:`attach`.
         self.hook_friction = np.zeros(3)
+        #: The tether's relaxed tilt s (world axes, rad; :func:`~.tank_dynamics.tether_relaxation_update`): plant
+        #: state, the tilt of the attitude of :meth:`attach`, carried to each step's end.
+        self.tether_relaxed: Tuple[float, float, float] = (0.0, 0.0, 0.0)
+        #: Whether this plant's tether bends (either stiffness above 0; the batch reads it too).
+        self.bends_tether = tank.tether_stiffness > 0.0 or tank.tether_relaxing_stiffness > 0.0
         self._drag_feet = np.zeros((4, 6))
         #: The torque each joint felt from its paw's drag at the last step's start (4 x 3, N m;
         #: :func:`~.tank_dynamics.paw_joint_loads`) when the loaded-servo effect is on, else None; the
@@ -662,6 +714,8 @@ class TankModel(FloatingBaseModel):
         - the floating block: :func:`~.tank_dynamics.floating_block_update` keeps the rope's elastic pull
           explicit, stable while (k + k_g) dt^2 / m_b < 4;
         - the torso's buoyancy positive: a net weight at or above the torso's weight leaves none.
+        The tether's bend needs no check: at its largest (2 N m/rad per branch, MAX_TETHER_STIFFNESS) its
+        sqrt(4 / I) dt is under 0.1 at 10 ms (0.4 at 50 ms), far inside RK4's stability.
         Past these the plant rings or blows up without telling (a tie that pumps energy into the swing,
         a rope that chatters), so the set is refused instead."""
         tank, limit = self.tank, _RK4_LIMIT / dt
@@ -736,6 +790,7 @@ class TankModel(FloatingBaseModel):
         self.wake[:] = 0.0  # still water
         self.body_wake[:] = 0.0
         self.hook_friction[:] = 0.0  # the tie unloaded
+        self.tether_relaxed = tilt_vector(self.untwisted.ravel().tolist())  # the tether hangs relaxed
         self._constants = self._build_constants()
 
     @property
@@ -768,7 +823,9 @@ class TankModel(FloatingBaseModel):
                 tuple(float(x) for x in tank.appendage_damping_linear),
                 tuple(float(x) for x in tank.appendage_damping_quadratic), self._body_m, float(self.paw_added_mass),
                 float(tank.paw_wake_fraction), float(tank.paw_wake_time_constant), float(tank.paw_wake_body_share),
-                float(tank.body_wake_fraction), float(tank.body_wake_time_constant))
+                float(tank.body_wake_fraction), float(tank.body_wake_time_constant),
+                (float(tank.tether_stiffness), float(tank.tether_relaxing_stiffness),
+                 float(tank.tether_relaxation_time)) + tuple(self.tether_relaxed))
 
     def _mass_solver(self, sr: Sequence[float], S: Sequence[float]) -> Tuple[Tuple[float, ...], ...]:
         """:func:`~.tank_dynamics.mass_solver` of this plant (ValueError if the matrix is singular)."""
@@ -862,7 +919,16 @@ class TankModel(FloatingBaseModel):
         end = chart_step_end(R0, y[0:6], y[6:9], y[9:12], dt, state)
         if self.counts_twist:
             self._count_twist(end.rotation.ravel().tolist())
+        if self.bends_tether:
+            self._relax_tether(end.rotation.ravel().tolist(), dt)
         return end
+
+    def _relax_tether(self, rotation: Sequence[float], dt: float) -> None:
+        """:func:`~.tank_dynamics.tether_relaxation_update` over a step that ended at ``rotation`` (row-major):
+        the relaxed tilt moves, and the constants carry it."""
+        k = self._constants
+        self.tether_relaxed = tether_relaxation_update(rotation, k[18], dt)
+        self._constants = k[:18] + (k[18][:3] + tuple(self.tether_relaxed),)
 
     def _count_twist(self, rotation: Sequence[float]) -> None:
         """Carry :attr:`twist` to ``rotation`` (row-major; a step's start or end: the batch counts at the same
@@ -946,8 +1012,9 @@ class TankModel(FloatingBaseModel):
         return 0.5 * float(nu @ self.mass_matrix(legs.foot_positions.tolist()) @ nu)
 
     def potential_energy(self, state: RigidBodyState, q: Any) -> float:
-        """Paw buoyancy + torso weight and buoyancy + elastic rope energy, J. The rope's twist is counted
-        from :attr:`twist`: call it on the state the plant last stepped to (or one within half a turn)."""
+        """Paw buoyancy + torso weight and buoyancy + elastic rope energy + the tether's bend (both branches,
+        against the relaxed tilt as it stands), J. The rope's twist is counted from :attr:`twist`: call it on
+        the state the plant last stepped to (or one within half a turn)."""
         energy = super().potential_energy(state, q)
         R, p = state.rotation, state.position
         if self.tank.hydrostatics:
@@ -958,4 +1025,9 @@ class TankModel(FloatingBaseModel):
                 energy += 0.5 * self.tank.rope_stiffness * stretch * stretch
             twist = whole_twist(R.ravel().tolist(), self.twist_rotation, self.twist)
             energy += 0.5 * self.tank.rope_torsion_stiffness * twist * twist
+        if self.bends_tether:
+            theta = np.array(tilt_vector(R.ravel().tolist()))
+            bent = theta - np.array(self.tether_relaxed)
+            energy += 0.5 * (self.tank.tether_stiffness * float(theta @ theta)
+                             + self.tank.tether_relaxing_stiffness * float(bent @ bent))
         return energy

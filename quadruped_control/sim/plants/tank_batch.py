@@ -26,7 +26,8 @@ from quadruped_control.sim.plants.rigid_body import RigidBodyState
 from quadruped_control.sim.plants.tank import TankModel, TankParams
 from quadruped_control.sim.plants.tank_dynamics import (body_wake_update, floating_block_update, hook_friction_update,
                                                         leg_sums, mass_solver, paw_joint_loads, paw_wake_update,
-                                                        tank_rk4, whole_twist, wound_friction_limit)
+                                                        tank_rk4, tether_relaxation_update, whole_twist,
+                                                        wound_friction_limit)
 
 __all__ = ["TankPlantBatch", "tank_batch_step", "tank_trial_step"]
 
@@ -43,9 +44,9 @@ def _carry_twist(rotation, reference, torsion) -> None:
 @trial_step
 def tank_trial_step(i, frames, five_bar, net_paw_buoyancy, drag_constant, drag, extra_lift, suspension, hook, anchor,
                     rope, torsion, untwisted, linear, quadratic, body_m, paw_added_mass, wake_fraction,
-                    wake_time_constant, wake_body_share, body_wake_fraction, body_wake_time_constant, restoring, wake,
-                    water, p, v, R, w, q, q_dot, dt, feet, drag_feet, stall_torque, loads, block, block_rest, friction,
-                    hook_friction, counts_twist) -> bool:
+                    wake_time_constant, wake_body_share, body_wake_fraction, body_wake_time_constant, tether,
+                    restoring, wake, water, p, v, R, w, q, q_dot, dt, feet, drag_feet, stall_torque, loads, block,
+                    block_rest, friction, hook_friction, counts_twist, bends_tether) -> bool:
     """One held-input RK4 step of eq. (tank) for trial ``i`` in place (its paws' ``wake[i]``, the water
     turning with its body, ``water[i]``, its floating block, ``anchor[i]``, and its hook's friction,
     ``friction[i]``, too, with the body's state at the step's start, as
@@ -61,7 +62,8 @@ def tank_trial_step(i, frames, five_bar, net_paw_buoyancy, drag_constant, drag, 
     solver = mass_solver(body_m[i], paw_added_mass[i], sums[0], sums[2])
     constants = (drag_constant[i], drag[i], extra_lift[i], suspension[i], hook[i], anchor[i], rope[i],
                  torsion[i], untwisted[i], linear[i], quadratic[i], body_m[i], paw_added_mass[i], wake_fraction[i],
-                 wake_time_constant[i], wake_body_share[i], body_wake_fraction[i], body_wake_time_constant[i])
+                 wake_time_constant[i], wake_body_share[i], body_wake_fraction[i], body_wake_time_constant[i],
+                 tether[i])
     rows = feet
     if wake_fraction[i] > 0.0 or stall_torque[i] > 0.0:
         vx, vy, vz = v[i, 0], v[i, 1], v[i, 2]  # b = R^T v at the step's start, as TankModel._body_motion
@@ -95,15 +97,19 @@ def tank_trial_step(i, frames, five_bar, net_paw_buoyancy, drag_constant, drag, 
     if counts_twist[i]:
         _carry_twist((R[i, 0, 0], R[i, 0, 1], R[i, 0, 2], R[i, 1, 0], R[i, 1, 1], R[i, 1, 2], R[i, 2, 0], R[i, 2, 1],
                       R[i, 2, 2]), untwisted[i], torsion[i])
+    if bends_tether[i]:  # the tether's relaxed tilt carried to the step's end, as TankModel._relax_tether
+        sx, sy, sz = tether_relaxation_update((R[i, 0, 0], R[i, 0, 1], R[i, 0, 2], R[i, 1, 0], R[i, 1, 1], R[i, 1, 2],
+                                               R[i, 2, 0], R[i, 2, 1], R[i, 2, 2]), tether[i], dt)
+        tether[i, 3], tether[i, 4], tether[i, 5] = sx, sy, sz
     return True
 
 
 @kernel
 def tank_batch_step(frames, five_bar, net_paw_buoyancy, drag_constant, drag, extra_lift, suspension, hook, anchor,
                     rope, torsion, untwisted, linear, quadratic, body_m, paw_added_mass, wake_fraction,
-                    wake_time_constant, wake_body_share, body_wake_fraction, body_wake_time_constant, restoring, wake,
-                    water, p, v, R, w, q, q_dot, dt, failed, stall_torque, loads, block, block_rest, friction,
-                    hook_friction, counts_twist):
+                    wake_time_constant, wake_body_share, body_wake_fraction, body_wake_time_constant, tether,
+                    restoring, wake, water, p, v, R, w, q, q_dot, dt, failed, stall_torque, loads, block, block_rest,
+                    friction, hook_friction, counts_twist, bends_tether):
     """One held-input RK4 step of eq. (tank) for every trial not yet ``failed``, in place on p, v, w
     (N, 3), R (N, 3, 3), the paws' ``wake`` (N, 4, 3), the water turning with each body, ``water``
     (N, 3), and each rope's upper end, ``anchor`` (N, 6). The constants are the fields of
@@ -113,7 +119,9 @@ def tank_batch_step(frames, five_bar, net_paw_buoyancy, drag_constant, drag, ext
     (N, 3) where it rests, ``friction`` (N, 3) each hook's friction torque (advanced in place) and
     ``hook_friction`` (N, 6) its Coulomb torque tau_c (0: off), presliding angle, static over sliding
     friction, Stribeck rate, roll over pitch friction and the tether's capstan coefficient; ``counts_twist``
-    (N,) whether the trial carries the rope's twist (TankModel.counts_twist)."""
+    (N,) whether the trial carries the rope's twist (TankModel.counts_twist); ``tether`` (N, 6) the tether's
+    stiffnesses, relaxation time and relaxed tilt (advanced in place where ``bends_tether``, (N,):
+    TankModel.bends_tether)."""
     feet = np.empty((4, 6))
     drag_feet = np.empty((4, 6))
     for i in range(p.shape[0]):
@@ -121,9 +129,9 @@ def tank_batch_step(frames, five_bar, net_paw_buoyancy, drag_constant, drag, ext
                                                  extra_lift, suspension, hook, anchor, rope, torsion, untwisted,
                                                  linear, quadratic, body_m, paw_added_mass, wake_fraction,
                                                  wake_time_constant, wake_body_share, body_wake_fraction,
-                                                 body_wake_time_constant, restoring, wake, water, p, v, R, w, q,
-                                                 q_dot, dt, feet, drag_feet, stall_torque, loads, block,
-                                                 block_rest, friction, hook_friction, counts_twist):
+                                                 body_wake_time_constant, tether, restoring, wake, water, p, v, R,
+                                                 w, q, q_dot, dt, feet, drag_feet, stall_torque, loads, block,
+                                                 block_rest, friction, hook_friction, counts_twist, bends_tether):
             failed[i] = True
 
 
@@ -168,6 +176,8 @@ class TankPlantBatch:
         #: Each trial's TankModel.counts_twist (N,); the wound tethers' trials (N,) and the turn each has had
         #: checked (N, rad; TankModel.check_turn)
         self.counts_twist = np.array([m.counts_twist for m in self.models], dtype=bool)
+        #: Each trial's TankModel.bends_tether (N,): whether its tether's relaxed tilt is carried.
+        self.bends_tether = np.array([m.bends_tether for m in self.models], dtype=bool)
         self._wound = np.array([m._wound for m in self.models], dtype=bool)  # noqa: SLF001
         self._checked_turns = np.array([m.checked_turn for m in self.models], dtype=float)
         self._any_wound = bool(self._wound.any())
@@ -178,7 +188,7 @@ class TankPlantBatch:
         columns = list(zip(*(m.constants() for m in self.models)))
         names = ("drag_constant", "drag", "extra_lift", "suspension", "hook", "anchor", "rope", "torsion",
                  "untwisted", "linear", "quadratic", "body_m", "paw_added_mass", "wake_fraction", "wake_time_constant",
-                 "wake_body_share", "body_wake_fraction", "body_wake_time_constant")
+                 "wake_body_share", "body_wake_fraction", "body_wake_time_constant", "tether")
         self.constants = {name: np.array(column, dtype=bool if name == "suspension" else float)
                           for name, column in zip(names, columns)}
 
@@ -210,10 +220,10 @@ class TankPlantBatch:
                         c["extra_lift"], c["suspension"], c["hook"], c["anchor"], c["rope"], c["torsion"],
                         c["untwisted"], c["linear"], c["quadratic"], c["body_m"], c["paw_added_mass"],
                         c["wake_fraction"], c["wake_time_constant"], c["wake_body_share"], c["body_wake_fraction"],
-                        c["body_wake_time_constant"], self.restoring, self.wake, self.water, p, v, R, w,
+                        c["body_wake_time_constant"], c["tether"], self.restoring, self.wake, self.water, p, v, R, w,
                         np.ascontiguousarray(q), np.ascontiguousarray(q_dot), float(dt), self.failed, self.stall_torque,
                         self.loads, self.block, self.block_rest, self.friction, self.hook_friction,
-                        self.counts_twist)
+                        self.counts_twist, self.bends_tether)
         if self._any_wound:  # TankModel.check_turn where a wound tether has turned past its checked turn
             turns = np.abs(c["torsion"][:, 2])
             for i in np.flatnonzero(self._wound & (turns > self._checked_turns)):

@@ -9,6 +9,8 @@ when it is installed, :mod:`quadruped_common.jit`).
   the water the body's appendages set turning, the floating block the rope hangs from and the friction
   where the rope is tied to the hook, with the tether wound round it (physics and sources in
   :mod:`.tank`'s docstring);
+- :func:`tilt_vector`, :func:`tether_bend_torque`, :func:`tether_relaxation_update`: the tether bent where it
+  leaves the body, a standard linear solid on the body's tilt;
 - :func:`leg_sums`, :func:`mass_solver`, :func:`solve_mass`: the mass matrix
   M = M_RB + M_A + sum_i M_paw(r_i) of a held step and its solution by the Schur complement;
 - :func:`tank_forces`: the right-hand side of eq. (tank), the paper's forces
@@ -36,8 +38,8 @@ from quadruped_control.sim.plants.rigid_body import Mat3, chart_point
 __all__ = ["TankConstants", "appendage_damping_torque", "body_wake_update", "floating_block_update",
            "hook_friction_update", "leg_sums",
            "mass_solver", "paw_joint_loads", "paw_wake_update", "rope_force", "rope_torsion_torque", "rope_twist",
-           "solve_mass", "tank_chart_derivative", "tank_forces", "tank_rk4", "whole_twist",
-           "wound_friction_limit"]
+           "solve_mass", "tank_chart_derivative", "tank_forces", "tank_rk4", "tether_bend_torque",
+           "tether_relaxation_update", "tilt_vector", "whole_twist", "wound_friction_limit"]
 
 Vec3 = Tuple[float, float, float]
 
@@ -46,7 +48,9 @@ Vec3 = Tuple[float, float, float]
 #: stiffness, damping), torsion (stiffness, damping, the rope's whole twist at the step's start, rad:
 #: :func:`whole_twist`), the attitude at the step's start that twist belongs to (9), appendage damping linear (3),
 #: quadratic (3), M_RB + M_A (36), paw added mass m_a, paw wake (fraction kappa, time constant tau_w in s,
-#: body share s_b), body wake (fraction kappa_b, time constant tau_b in s))
+#: body share s_b), body wake (fraction kappa_b, time constant tau_b in s), tether (6: its elastic stiffness k_e
+#: and relaxing stiffness k in N m/rad, relaxation time tau in s, and the relaxed tilt s at the step's start,
+#: world axes, rad: :func:`tether_bend_torque`))
 TankConstants = Tuple[Any, ...]
 
 
@@ -158,6 +162,47 @@ def rope_torsion_torque(R: Sequence[float], R0: Sequence[float], omega: Sequence
     twist_rate = bx * omega[0] + by * omega[1] + bz * omega[2]
     torque = -(stiffness * whole_twist(R, R0, reference) + damping * twist_rate)
     return (torque * bx, torque * by, torque * bz)
+
+
+@jitable
+def tilt_vector(R: Sequence[float]) -> Vec3:
+    """The body's tilt theta (rad, world axes): the rotation vector of the shortest rotation that takes the
+    world's up z_hat to the body's z axis R z_hat = (R_02, R_12, R_22), about the horizontal axis
+    z_hat x R z_hat, by the angle between them. Its vertical component is 0: a turn about the vertical
+    does not tilt. Exactly upside down (no horizontal axis) it is taken as 0. ``R`` row-major (9 floats)."""
+    ax, ay = -R[5], R[2]
+    sine = math.sqrt(ax * ax + ay * ay)
+    scale = math.atan2(sine, R[8]) / sine if sine > 1e-12 else 1.0
+    return ax * scale, ay * scale, 0.0
+
+
+@jitable
+def tether_bend_torque(R: Sequence[float], tether: Sequence[float]) -> Vec3:
+    """Body-axes torque (N m) of the tether bent where it leaves the body, a standard linear solid on the
+    tilt theta = :func:`tilt_vector` (R): R^T (-k_e theta - k (theta - s)), with ``tether`` = (k_e, k, tau,
+    s_x, s_y, s_z) (:data:`TankConstants`): the elastic branch k_e (a cable that always springs back to
+    hanging straight), the Maxwell branch k (the bend's resistance that fades as the cable re-hangs and its
+    jacket creeps) and its relaxed tilt s, held over a step (:func:`tether_relaxation_update`). The elastic
+    branch is the gradient of k_e |theta|^2 / 2: d|theta| = (theta / |theta|) . delta_phi for a rotation
+    delta_phi about a horizontal world axis, and a turn about the vertical leaves |theta| as it is. Physics
+    and sources in :mod:`.tank` ("tether bend")."""
+    elastic, relaxing = tether[0], tether[1]
+    tx, ty, tz = tilt_vector(R)
+    mx = -elastic * tx - relaxing * (tx - tether[3])
+    my = -elastic * ty - relaxing * (ty - tether[4])
+    mz = -elastic * tz - relaxing * (tz - tether[5])
+    return (R[0] * mx + R[3] * my + R[6] * mz, R[1] * mx + R[4] * my + R[7] * mz,
+            R[2] * mx + R[5] * my + R[8] * mz)
+
+
+@jitable
+def tether_relaxation_update(R: Sequence[float], tether: Sequence[float], dt: float) -> Vec3:
+    """The tether's relaxed tilt s after a step of ``dt`` s that ended at the attitude ``R`` (row-major):
+    ds/dt = (theta - s) / tau with theta = :func:`tilt_vector` (R) held over the step, exactly,
+    s + (1 - exp(-dt / tau)) (theta - s). ``tether`` as :func:`tether_bend_torque` (s at the step's start)."""
+    tx, ty, tz = tilt_vector(R)
+    a = 1.0 - math.exp(-dt / tether[2])
+    return (tether[3] + a * (tx - tether[3]), tether[4] + a * (ty - tether[4]), tether[5] + a * (tz - tether[5]))
 
 
 @jitable
@@ -521,7 +566,7 @@ def tank_forces(k: TankConstants, feet: Sequence[Sequence[float]], drag_feet: Se
     :func:`hook_friction_update`, zeros without it) and the state p, v (world), R (row-major), omega (body)."""
     (drag_constant, drag, extra_lift, suspension, hook, anchor, rope, torsion, untwisted, linear, quadratic,
      body_m, ma, _wake_fraction, _wake_time_constant, _wake_body_share, _body_wake_fraction,
-     _body_wake_time_constant) = k
+     _body_wake_time_constant, tether) = k
     r0, r1, r2, r3, r4, r5, r6, r7, r8 = R
     bx, by, bz = r0 * vx + r3 * vy + r6 * vz, r1 * vx + r4 * vy + r7 * vz, r2 * vx + r5 * vy + r8 * vz
     fx, fy, fz, tx, ty, tz = body_wrench_f(drag_feet, drag_constant, drag, up_torque, bx, by, bz, R, wx, wy, wz)
@@ -542,6 +587,9 @@ def tank_forces(k: TankConstants, feet: Sequence[Sequence[float]], drag_feet: Se
             tx, ty, tz = tx + mx, ty + my, tz + mz
         # the hook's friction (exactly today's torque without it: x + 0.0 == x)
         tx, ty, tz = tx + held_torque[0], ty + held_torque[1], tz + held_torque[2]
+    if tether[0] > 0.0 or tether[1] > 0.0:
+        mx, my, mz = tether_bend_torque(R, tether)
+        tx, ty, tz = tx + mx, ty + my, tz + mz
     if linear[0] > 0.0 or linear[1] > 0.0 or linear[2] > 0.0 or quadratic[0] > 0.0 or quadratic[1] > 0.0 \
             or quadratic[2] > 0.0:
         # against the water the appendages set turning (exactly omega without it: x - 0.0 == x)

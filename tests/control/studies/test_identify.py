@@ -139,7 +139,8 @@ def _values():
             "block_drag": 4.0, "block_tie_stiffness": 6.0, "paw_buoyancy_offset": 0.04,
             "servo_dead_band": 0.008, "hook_friction_arm": 0.0025, "hook_friction_static_ratio": 1.4,
             "hook_friction_stribeck_rate": 0.05, "hook_friction_roll_ratio": 2.5, "hook_friction_wrap": 0.35,
-            "imu_field_x": 0.1, "imu_field_y": -0.35, "imu_field_z": 0.45}
+            "imu_field_x": 0.1, "imu_field_y": -0.35, "imu_field_z": 0.45, "tether_stiffness": 0.015,
+            "tether_relaxing_stiffness": 0.12, "tether_relaxation_time": 25.0}
 
 
 def test_every_parameter_reaches_the_tank_plant_and_its_yaml_round_trips(tmp_path) -> None:
@@ -161,11 +162,12 @@ def test_every_parameter_reaches_the_tank_plant_and_its_yaml_round_trips(tmp_pat
     assert tank.hook_friction_static_ratio == 1.4 and tank.hook_friction_stribeck_rate == 0.05
     assert tank.hook_friction_roll_ratio == 2.5 and tank.imu_field_residual == (0.1, -0.35, 0.45)
     assert tank.hook_friction_wrap == 0.35
+    assert (tank.tether_stiffness, tank.tether_relaxing_stiffness, tank.tether_relaxation_time) == (0.015, 0.12, 25.0)
     assert idf.nominal_values(tank) == pytest.approx(values)
     assert tank.center_of_buoyancy == (0.0007, -0.0003, -0.0012)
     # the centre of buoyancy's and the IMU field's lines carry three parameters each, the two appendage
     # lines four
-    assert text.count("[identified] test") == 29
+    assert text.count("[identified] test") == 32
     with pytest.raises(ValueError, match="no line for net_weight"):
         idf.update_tank_yaml("hydrostatics:\n  center_of_buoyancy: [0, 0, 0]\n", {"net_weight": 1.0}, "x")
 

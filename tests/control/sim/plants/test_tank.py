@@ -1280,3 +1280,111 @@ def test_the_imu_field_residual_key_is_checked(tmp_path, value, message: str) ->
     params = load_tank_params(str(path))
     assert params.imu_field_residual == (0.1, -0.4, 0.5) and params.heading_disturbed
     np.testing.assert_array_equal(TankModel(load_robot_params(), params).imu_field_residual, [0.1, -0.4, 0.5])
+
+
+# ---- the tether bent where it leaves the body --------------------------------------------------------------
+
+def test_the_tether_is_off_unless_configured_and_no_stiffness_is_todays_model_to_the_bit() -> None:
+    """tank.yaml ships the tether off; both stiffnesses 0 with any relaxation time steps as without it, and a
+    vanishing bend tends to it."""
+    assert TANK.tether_stiffness == TANK.tether_relaxing_stiffness == 0.0
+    assert not TankModel(ROBOT, TANK).bends_tether
+    _, today = _hang(TankModel(ROBOT, TANK), 30.0, 3.0)
+    _, timed = _hang(TankModel(ROBOT, TANK.with_values(tether_relaxation_time=0.5)), 30.0, 3.0)
+    _, faint = _hang(TankModel(ROBOT, TANK.with_values(tether_relaxing_stiffness=1e-9, tether_stiffness=1e-9)), 30.0,
+                     3.0)
+    for a, b, c in zip(today, timed, faint):
+        np.testing.assert_array_equal(a.rotation, b.rotation)
+        np.testing.assert_array_equal(a.omega, b.omega)
+        np.testing.assert_allclose(c.rotation, a.rotation, atol=1e-8)
+
+
+@pytest.mark.parametrize("values", [{"tether_stiffness": 0.05}, {"tether_relaxing_stiffness": 0.05,
+                                                                  "tether_relaxation_time": 1e4}])
+def test_a_bent_tether_swings_the_robot_back_with_its_period_and_keeps_the_energy(values) -> None:
+    """Small roll, nothing else acting: theta'' = -(k / I_xx) theta, period 2 pi sqrt(I_xx / k), for the
+    elastic branch and for a relaxing one that relaxes far slower than it swings; the energy (1/2 I w^2 plus
+    the bend's) stays. The paws are made neutral, so that their buoyancy's moment does not swing the body too."""
+    model = TankModel(ROBOT, BARE.with_values(paw_buoyancy_offset=-float(ROBOT.paw_net_buoyancy), **values))
+    model.attach(RigidBodyState())
+    start = RigidBodyState(rotation=rpy_to_rot(math.radians(10.0), 0.0, 0.0))
+    period = 2.0 * math.pi * math.sqrt(float(model.body_mass_matrix[3, 3]) / 0.05)
+    states = _spin(model, start, 0.75 * period)
+    roll = np.array([math.atan2(s.rotation[2, 1], s.rotation[2, 2]) for s in states])
+    crossing = np.flatnonzero(np.diff(np.sign(roll)) != 0)[0]
+    t_cross = DT * (crossing + roll[crossing] / (roll[crossing] - roll[crossing + 1]))
+    assert t_cross == pytest.approx(0.25 * period, rel=2e-3)
+    assert np.min(roll) == pytest.approx(-math.radians(10.0), rel=2e-3)
+    if "tether_stiffness" in values:
+        q = nominal_joint_angles(ROBOT)
+        energy = [model.kinetic_energy(s, q) + model.potential_energy(s, q) for s in states]
+        assert np.ptp(energy) < 1e-6 * 0.5 * 0.05 * math.radians(10.0) ** 2
+
+
+def test_a_relaxing_tether_takes_energy_out_of_the_swing() -> None:
+    """The relaxing branch with a relaxation time near the swing's period is a damper (the standard linear
+    solid's loss peak): the swing's energy, the relaxing bend's included, only falls."""
+    model = TankModel(ROBOT, BARE.with_values(paw_buoyancy_offset=-float(ROBOT.paw_net_buoyancy), tether_stiffness=0.02,
+                                              tether_relaxing_stiffness=0.05, tether_relaxation_time=1.0))
+    model.attach(RigidBodyState())
+    q = nominal_joint_angles(ROBOT)
+    state, energy = RigidBodyState(rotation=rpy_to_rot(math.radians(10.0), 0.0, 0.0)), []
+    for _ in range(1000):
+        state = model.step(state, q, np.zeros((4, 3)), DT)
+        energy.append(model.kinetic_energy(state, q) + model.potential_energy(state, q))
+    assert np.all(np.diff(energy) < 1e-12)
+    assert energy[-1] < 0.5 * energy[0]
+
+
+def test_the_tether_holds_a_tilt_back_then_lets_it_go_and_attach_relaxes_it() -> None:
+    """On the tank plant at rest at a 20 deg roll: attached there, the tether is relaxed and only the elastic
+    branch pulls; attached upright, both branches pull back; held at the tilt, the relaxing branch fades
+    with its relaxation time."""
+    roll = math.radians(20.0)
+    R = rpy_to_rot(roll, 0.0, 0.0)
+    q = nominal_joint_angles(ROBOT)
+    plain = TankModel(ROBOT, TANK)
+    model = TankModel(ROBOT, TANK.with_values(tether_stiffness=0.02, tether_relaxing_stiffness=0.1,
+                                              tether_relaxation_time=4.0))
+    np.testing.assert_allclose(model.restoring_torque(R, q) - plain.restoring_torque(R, q), (-0.02 * roll, 0.0, 0.0),
+                               atol=1e-12)
+    held = RigidBodyState(rotation=R)
+    for plant in (plain, model):
+        plant.attach(RigidBodyState())  # the rope and the tether hang from the upright body
+    bare = plain.held_wrench(held, q, np.zeros((4, 3)))[3:]
+    np.testing.assert_allclose(model.held_wrench(held, q, np.zeros((4, 3)))[3:] - bare, (-0.12 * roll, 0.0, 0.0),
+                               atol=1e-12)
+    for _ in range(400):  # 4 s held at the tilt: one relaxation time
+        model._relax_tether(tuple(R.ravel().tolist()), DT)  # noqa: SLF001 -- the plant's own carry of s
+    np.testing.assert_allclose(model.held_wrench(held, q, np.zeros((4, 3)))[3:] - bare,
+                               (-(0.02 + 0.1 * math.exp(-1.0)) * roll, 0.0, 0.0), atol=1e-12)
+
+
+@pytest.mark.parametrize("key, value, message", [("stiffness", -0.01, "tether.stiffness"),
+                                                 ("stiffness", 2.5, "tether.stiffness"),
+                                                 ("relaxing_stiffness", "x", "tether.relaxing_stiffness"),
+                                                 ("relaxing_stiffness", 3.0, "tether.relaxing_stiffness"),
+                                                 ("relaxation_time", 0.05, "tether.relaxation_time"),
+                                                 ("relaxation_time", 2e4, "tether.relaxation_time"),
+                                                 ("bend", 0.1, "bend")])
+def test_the_tether_keys_are_checked(tmp_path, key: str, value, message: str) -> None:
+    """tank.yaml's tether section: off by default; a value out of its bounds (a unit slip, a relaxation
+    faster than ten steps) or an unknown key is refused by name, good values reach TankParams."""
+    import yaml
+    with open(config_path("tank.yaml")) as stream:
+        tree = yaml.safe_load(stream)
+    assert tree["tether"] == {"stiffness": 0.0, "relaxing_stiffness": 0.0, "relaxation_time": 10.0}
+    tree["tether"][key] = value
+    path = tmp_path / "tank.yaml"
+    path.write_text(yaml.safe_dump(tree))
+    with pytest.raises(ParameterError, match=message):
+        load_tank_params(str(path))
+    tree["tether"] = {"stiffness": 0.01, "relaxing_stiffness": 0.2, "relaxation_time": 30.0}
+    path.write_text(yaml.safe_dump(tree))
+    params = load_tank_params(str(path))
+    assert params.tether_stiffness == 0.01 and params.tether_relaxing_stiffness == 0.2
+    assert params.tether_relaxation_time == 30.0
+    for field, bad in (("tether_stiffness", float("nan")), ("tether_relaxing_stiffness", -1.0),
+                       ("tether_relaxation_time", float("inf"))):
+        with pytest.raises(ParameterError, match=field):
+            TankParams(**{field: bad})

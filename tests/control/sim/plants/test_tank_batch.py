@@ -88,6 +88,40 @@ def test_the_batch_counts_the_ropes_turns_as_the_per_trial_plant_does_to_the_bit
     assert not batch.failed.any()
 
 
+def test_the_batch_carries_the_tethers_relaxed_tilt_as_the_per_trial_plant_does_to_the_bit() -> None:
+    """A body released at a 25 deg roll and 10 deg pitch on the tank plant with a bent tether that relaxes in
+    2 s, beside one without it: each trial's states, step by step, are its per-trial plant's, and so is the
+    relaxed tilt the batch carries; attach relaxes it at the new attitude."""
+    base = TankParams()
+    tanks = [base.with_values(tether_stiffness=0.01, tether_relaxing_stiffness=0.08, tether_relaxation_time=2.0), base]
+    batch = TankPlantBatch(ROBOT, tanks)
+    models = [TankModel(ROBOT, tank) for tank in tanks]
+    p, v, R, w = _states(2)
+    start = rpy_to_rot(math.radians(25.0), math.radians(10.0), 0.0)
+    batch.attach(p, R)
+    states = [RigidBodyState() for _ in models]
+    for model, state in zip(models, states):
+        model.attach(state)
+    R[:] = start
+    states = [RigidBodyState(rotation=start) for _ in models]
+    q, q_dot = _legs(2)
+    for _ in range(300):
+        batch.step(p, v, R, w, q, q_dot, DT)
+        states = [model.step(state, q[i], q_dot[i], DT) for i, (model, state) in enumerate(zip(models, states))]
+        for i, state in enumerate(states):
+            for mine, theirs in ((p[i], state.position), (v[i], state.velocity), (R[i], state.rotation),
+                                 (w[i], state.omega)):
+                np.testing.assert_array_equal(mine, theirs)
+        assert tuple(batch.constants["tether"][0, 3:]) == models[0].tether_relaxed
+    assert np.linalg.norm(batch.constants["tether"][0, 3:]) > 1e-3  # relaxed towards the tilts it swung through
+    assert tuple(batch.constants["tether"][1, 3:]) == (0.0, 0.0, 0.0) and not batch.bends_tether[1]
+    assert not np.array_equal(R[0], R[1])  # the tether moved the body
+    batch.attach(p, R)
+    models[0].attach(RigidBodyState(position=p[0], rotation=R[0]))
+    assert tuple(batch.constants["tether"][0, 3:]) == models[0].tether_relaxed != (0.0, 0.0, 0.0)
+    assert not batch.failed.any()
+
+
 #: A tie the 10 ms step resolves with the tether wound half a turn (presliding K dt^2 / I 0.41 there), not
 #: with it wound a whole turn (exp(mu_w phi) 4.8 times stiffer: 1.95).
 WOUND = TankParams(hook_friction_arm=0.05, hook_friction_angle=0.001, hook_friction_wrap=0.5)
