@@ -81,10 +81,11 @@ class BatchResult:
     reports (the true one unless a tank trial's IMU turns the heading), ``setpoint_rpy``
     (N, 3) rad; ``failed`` (N,) trials whose plant step failed (kinematics or a non-finite state) and
     ``refused`` (N,) trials whose measurement the robot's controller would have refused (it would hold),
-    both untrustworthy from then on; ``states``: the first steps' (p, v, R, omega, joint positions, and the
-    joint targets the controller computed at the sample, held to the next: one fewer at the run's end) per
-    trial when recorded; ``ik_fallbacks`` (N,); ``stroke_metrics``: per trial, when asked for
-    (:class:`~quadruped_control.sim.stroke_metrics.StrokeTorqueMetrics`)."""
+    both untrustworthy from then on; ``failure_reasons``: why a failed trial failed, where the plant says
+    (row -> reason: ``TankPlantBatch.failure_reasons``); ``states``: the first steps' (p, v, R, omega,
+    joint positions, and the joint targets the controller computed at the sample, held to the next: one
+    fewer at the run's end) per trial when recorded; ``ik_fallbacks`` (N,); ``stroke_metrics``: per trial,
+    when asked for (:class:`~quadruped_control.sim.stroke_metrics.StrokeTorqueMetrics`)."""
 
     t: np.ndarray
     rpy: np.ndarray
@@ -96,6 +97,7 @@ class BatchResult:
     wall_time: float
     states: Optional[Dict[str, np.ndarray]] = None
     stroke_metrics: Optional[List[Dict[str, float]]] = None
+    failure_reasons: Dict[int, str] = field(default_factory=dict)
 
     @property
     def n(self) -> int:
@@ -268,7 +270,8 @@ class BatchSimulation:
         return BatchResult(t=times, rpy=rpy, geodesic=geodesic, setpoint_rpy=rotations_to_rpy(setpoints),
                            failed=self.plant.failed.copy(), refused=self.controller.refused.copy(),
                            ik_fallbacks=self.controller.ik_fallbacks.copy(), wall_time=wall, states=recorded,
-                           stroke_metrics=metrics.results() if metrics is not None else None)
+                           stroke_metrics=metrics.results() if metrics is not None else None,
+                           failure_reasons=dict(getattr(self.plant, "failure_reasons", {})))
 
     def _record_loop(self, samples: int, steps: int, kept: int, times: np.ndarray, rpy: np.ndarray,
                      geodesic: np.ndarray, states: Dict[str, List[np.ndarray]], setpoints: np.ndarray,

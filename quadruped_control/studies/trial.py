@@ -282,8 +282,9 @@ def run_batch(specs: Sequence[TrialSpec]) -> List[Dict[str, Any]]:
         for row, (i, setup) in enumerate(zip(indices, setups)):
             spec = specs[i]
             if not result.trusted(row):
-                reason = ("plant step failed (kinematics or a non-finite state)" if result.failed[row]
-                          else "the controller would refuse a measurement (the batch has no hold)")
+                reason = "the controller would refuse a measurement (the batch has no hold)"
+                if result.failed[row]:
+                    reason = result.failure_reasons.get(row, "plant step failed (kinematics or a non-finite state)")
                 if spec.on_failure == "record":
                     summaries[i] = failed_summary(spec, reason, "batch")
                     continue

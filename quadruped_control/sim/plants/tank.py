@@ -198,8 +198,9 @@ from quadruped_control.sim.plants.tank_dynamics import (TankConstants, appendage
                                                         tether_relaxation_update, tilt_vector, whole_twist,
                                                         wound_friction_limit)
 
-__all__ = ["TankModel", "TankParams", "VALIDITY_NOTE", "appendage_damping_torque", "hydrostatic_wrench",
-           "load_tank_params", "rope_force", "rope_torsion_torque", "rope_twist", "torso_ellipsoid"]
+__all__ = ["TankModel", "TankParams", "TurnUnresolved", "VALIDITY_NOTE", "appendage_damping_torque",
+           "hydrostatic_wrench", "load_tank_params", "rope_force", "rope_torsion_torque", "rope_twist",
+           "torso_ellipsoid"]
 
 #: What the tank plant can tell a roboticist today, said wherever a user runs it (the simulate command and its
 #: paper-sim, robustness and schemes studies with --plant tank, the Table-1 study's report, sim.launch
@@ -215,6 +216,14 @@ VALIDITY_NOTE = ("the tank plant is not yet a validated model of the robot. conf
                  "(docs/identification.md, \"Where it stands\")")
 
 Vec3 = Tuple[float, float, float]
+
+
+class TurnUnresolved(ParameterError, RuntimeError):
+    """:meth:`TankModel.check_turn`'s refusal, found mid-run: a ParameterError (naming the keys of a set the
+    plant cannot step at the turn it has reached) that is also a RuntimeError, as a diverged step is
+    (:class:`~.rigid_body.DynamicsError`), so that the closed loop reports it as a failed plant step and a
+    study that records failed trials records it (the batch marks the trial failed with this reason)."""
+
 
 #: The plant step TankModel checks its parameters for at construction (s; TankModel.check_step_stability):
 #: the 100 Hz control period. A longer step is checked again when it is asked for (TankModel.check_step).
@@ -692,10 +701,14 @@ class TankModel(FloatingBaseModel):
         """:meth:`check_step_stability` for the wound tether's grip at a turn of ``twist`` rad past any turn
         checked so far (half a turn at construction): the capstan law grows the tie's presliding stiffness
         as exp(mu_w |phi|), and the whole twist counts every turn. Checked a quarter turn ahead, so that a
-        growing turn is checked once a quarter turn, not every step; :attr:`checked_turn` is the turn covered."""
+        growing turn is checked once a quarter turn, not every step; :attr:`checked_turn` is the turn covered.
+        Its refusal is a :class:`TurnUnresolved`."""
         if abs(twist) > self.checked_turn:
             turn = abs(twist) + 0.5 * math.pi
-            self.check_step_stability(self._checked_step, turn)
+            try:
+                self.check_step_stability(self._checked_step, turn)
+            except ParameterError as exc:
+                raise TurnUnresolved(str(exc)) from None
             self.checked_turn = turn
 
     def check_step_stability(self, dt: float = _MAX_STEP, turn: Optional[float] = None) -> None:

@@ -15,7 +15,7 @@ A trial whose kinematics fail or whose state stops being finite is marked in ``f
 """
 from __future__ import annotations
 
-from typing import Sequence
+from typing import Dict, Sequence
 
 import numpy as np
 
@@ -23,7 +23,7 @@ from quadruped_common.jit import jitable, kernel, trial_step
 from quadruped_control.model.params import RobotParams
 from quadruped_control.sim.plants.paper_batch import held_step_inputs, leg_geometry, store_step_end
 from quadruped_control.sim.plants.rigid_body import RigidBodyState
-from quadruped_control.sim.plants.tank import TankModel, TankParams
+from quadruped_control.sim.plants.tank import TankModel, TankParams, TurnUnresolved
 from quadruped_control.sim.plants.tank_dynamics import (body_wake_update, floating_block_update, hook_friction_update,
                                                         leg_sums, mass_solver, paw_joint_loads, paw_wake_update,
                                                         tank_rk4, tether_relaxation_update, whole_twist,
@@ -149,6 +149,9 @@ class TankPlantBatch:
         self.net_paw_buoyancy = np.array([m.net_paw_buoyancy for m in self.models], dtype=float)
         self.restoring = np.array([m._restoring_matrix for m in self.models], dtype=float)  # noqa: SLF001
         self.failed = np.zeros(self.n, dtype=bool)
+        #: Why a trial marked in ``failed`` failed, where the plant knows better than "a non-finite state": a
+        #: wound tether past the turn its set can be stepped at (:class:`~.tank.TurnUnresolved`), by trial.
+        self.failure_reasons: Dict[int, str] = {}
         #: Each trial's paws' wake velocity (N, 4, 3), body axes: TankModel.wake for N trials.
         self.wake = np.zeros((self.n, 4, 3))
         #: The rate of the water turning with each trial's body (N, 3), world axes: TankModel.body_wake for N
@@ -199,6 +202,7 @@ class TankPlantBatch:
             model.attach(RigidBodyState(np.array(position[i], dtype=float), np.zeros(3),
                                         np.array(rotation[i], dtype=float), np.zeros(3)))
         self.failed[:] = False
+        self.failure_reasons = {}
         self.wake[:] = 0.0
         self.water[:] = 0.0
         self.friction[:] = 0.0
@@ -210,7 +214,9 @@ class TankPlantBatch:
              dt: float):
         """(p, v, R, omega) after ``dt`` s with joints q, q_dot (N, 4, 3) held: the tank's RK4 in the chart.
         The arrays passed in are advanced in place (and returned). ParameterError if a trial's parameters
-        cannot take a step of ``dt`` (:meth:`TankModel.check_step_stability`)."""
+        cannot take a step of ``dt`` (:meth:`TankModel.check_step_stability`); a trial whose wound tether has
+        turned past what its parameters can be stepped at (:meth:`TankModel.check_turn`) is marked in
+        ``failed`` instead, with the refusal in ``failure_reasons``, and the others run on."""
         if dt > self._checked_step:  # once per new step length, not per step: a loop over N models
             for model in self.models:
                 model.check_step(dt)
@@ -226,7 +232,12 @@ class TankPlantBatch:
                         self.counts_twist, self.bends_tether)
         if self._any_wound:  # TankModel.check_turn where a wound tether has turned past its checked turn
             turns = np.abs(c["torsion"][:, 2])
-            for i in np.flatnonzero(self._wound & (turns > self._checked_turns)):
-                self.models[i].check_turn(float(turns[i]))
+            for i in np.flatnonzero(self._wound & ~self.failed & (turns > self._checked_turns)):
+                try:
+                    self.models[i].check_turn(float(turns[i]))
+                except TurnUnresolved as exc:  # frozen from here, like a trial that diverged
+                    self.failed[i] = True
+                    self.failure_reasons[int(i)] = str(exc)
+                    continue
                 self._checked_turns[i] = self.models[i].checked_turn
         return p, v, R, w

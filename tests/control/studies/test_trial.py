@@ -159,3 +159,27 @@ def test_a_trial_that_cannot_go_on_raises_or_is_recorded_as_its_spec_says():
         with pytest.raises(ValueError, match="on_failure"):
             run(dataclasses.replace(base, on_failure="ignore") if run is run_trial
                 else [dataclasses.replace(base, on_failure="ignore")])
+
+
+def test_a_batch_trial_the_plant_refuses_mid_run_is_recorded_with_the_plants_reason(monkeypatch):
+    """Where the tank plant says why a trial failed (TankPlantBatch.failure_reasons: a wound tether past the
+    turn its set can be stepped at, tests/control/sim/plants/test_tank_batch.py), the batch's summary gives
+    that reason, not the generic one; the trial beside it runs on. The plant's refusal is stood in for at
+    its own interface, after a real step: reaching it for real takes a body turned past half a turn."""
+    from quadruped_control.sim.plants.tank_batch import TankPlantBatch
+
+    tank = dataclasses.replace(_specs()[2], duration=1.0)
+    step = TankPlantBatch.step
+
+    def refusing(self, *args):
+        out = step(self, *args)
+        self.failed[0] = True
+        self.failure_reasons[0] = "tank parameters a 0.01 s step cannot resolve: the hook friction's test"
+        return out
+
+    monkeypatch.setattr(TankPlantBatch, "step", refusing)
+    refused, beside = run_batch([dataclasses.replace(tank, label="refused", on_failure="record"), tank])
+    assert refused["failed"] == "tank parameters a 0.01 s step cannot resolve: the hook friction's test"
+    assert refused["metrics"] is None and beside["metrics"] is not None
+    with pytest.raises(SimulationError, match="hook friction's test"):
+        run_batch([tank])

@@ -12,7 +12,7 @@ from quadruped_common.config import ParameterError
 from quadruped_common.so3 import rpy_to_rot
 from quadruped_control.model.params import load_robot_params
 from quadruped_control.sim.plants.rigid_body import RigidBodyState
-from quadruped_control.sim.plants.tank import TankModel, TankParams
+from quadruped_control.sim.plants.tank import TankModel, TankParams, TurnUnresolved
 from quadruped_control.sim.plants.tank_batch import TankPlantBatch
 from quadruped_control.sim.simulation import nominal_joint_angles
 
@@ -131,28 +131,31 @@ def test_a_tether_wound_past_the_turn_its_tie_was_checked_for_is_refused_by_name
     """The capstan law stiffens the tie as exp(mu_w |phi|) and the whole twist counts every turn: the check
     at construction covers half a turn; TankModel.check_turn covers a further turn when the plant reaches
     it, a quarter turn ahead. Turned by the states handed to it (0.3 rad a step), the per-trial plant and
-    the batch refuse the set at the same step, naming the tie."""
+    the batch refuse the set at the same step, naming the tie: the per-trial plant raises (a ParameterError
+    that the closed loop reports as a failed step), the batch marks the trial failed with the same reason and
+    steps the others on."""
     model = TankModel(ROBOT, WOUND)
     assert model.checked_turn == pytest.approx(math.pi)
     model.check_turn(0.9 * math.pi)  # covered: nothing to check
     with pytest.raises(ParameterError, match="presliding stiffness"):
         TankModel(ROBOT, WOUND).check_turn(2.0 * math.pi)
     q, q_dot = _legs(1)
-    refused = []
-    for engine in ("per-trial", "batch"):
-        model = TankModel(ROBOT, WOUND)
-        model.attach(RigidBodyState())
-        batch = TankPlantBatch(ROBOT, [WOUND])
-        p, v, R, w = _states(1)
-        batch.attach(p, R)
-        with pytest.raises(ParameterError, match="presliding stiffness"):
-            for k in range(1, 40):
-                turned = rpy_to_rot(0.0, 0.0, 0.3 * k)
-                if engine == "per-trial":
-                    model.step(RigidBodyState(rotation=turned), q[0], q_dot[0], DT)
-                else:
-                    p, v, R, w = _states(1)
-                    R[0] = turned
-                    batch.step(p, v, R, w, q, q_dot, DT)
-        refused.append(k)
-    assert refused[0] == refused[1] and 0.3 * refused[0] > math.pi
+    model = TankModel(ROBOT, WOUND)
+    model.attach(RigidBodyState())
+    with pytest.raises(TurnUnresolved, match="presliding stiffness") as raised:
+        for k in range(1, 40):
+            model.step(RigidBodyState(rotation=rpy_to_rot(0.0, 0.0, 0.3 * k)), q[0], q_dot[0], DT)
+    assert isinstance(raised.value, ParameterError) and isinstance(raised.value, RuntimeError)
+    refused = k
+    batch = TankPlantBatch(ROBOT, [WOUND, TankParams()])
+    q, q_dot = _legs(2)
+    for k in range(1, 40):
+        p, v, R, w = _states(2)
+        R[:] = rpy_to_rot(0.0, 0.0, 0.3 * k)
+        batch.step(p, v, R, w, q, q_dot, DT)
+        if batch.failed[0]:
+            break
+    assert k == refused and 0.3 * refused > math.pi
+    assert batch.failure_reasons == {0: str(raised.value)} and not batch.failed[1]
+    batch.attach(p, R)
+    assert not batch.failed.any() and batch.failure_reasons == {}
