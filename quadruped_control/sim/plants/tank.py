@@ -661,7 +661,7 @@ class TankModel(FloatingBaseModel):
         #: The tether's relaxed tilt s (world axes, rad; :func:`~.tank_dynamics.tether_relaxation_update`): plant
         #: state, the tilt of the attitude of :meth:`attach`, carried to each step's end.
         self.tether_relaxed: Tuple[float, float, float] = (0.0, 0.0, 0.0)
-        #: Whether this plant's tether bends (either stiffness above 0; the batch reads it too).
+        #: Whether this plant's tether bends (either stiffness above 0; the batch asks its constants the same).
         self.bends_tether = tank.tether_stiffness > 0.0 or tank.tether_relaxing_stiffness > 0.0
         self._drag_feet = np.zeros((4, 6))
         #: The torque each joint felt from its paw's drag at the last step's start (4 x 3, N m;

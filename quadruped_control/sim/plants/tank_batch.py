@@ -46,7 +46,7 @@ def tank_trial_step(i, frames, five_bar, net_paw_buoyancy, drag_constant, drag, 
                     rope, torsion, untwisted, linear, quadratic, body_m, paw_added_mass, wake_fraction,
                     wake_time_constant, wake_body_share, body_wake_fraction, body_wake_time_constant, tether,
                     restoring, wake, water, p, v, R, w, q, q_dot, dt, feet, drag_feet, stall_torque, loads, block,
-                    block_rest, friction, hook_friction, counts_twist, bends_tether) -> bool:
+                    block_rest, friction, hook_friction, counts_twist) -> bool:
     """One held-input RK4 step of eq. (tank) for trial ``i`` in place (its paws' ``wake[i]``, the water
     turning with its body, ``water[i]``, its floating block, ``anchor[i]``, and its hook's friction,
     ``friction[i]``, too, with the body's state at the step's start, as
@@ -94,13 +94,14 @@ def tank_trial_step(i, frames, five_bar, net_paw_buoyancy, drag_constant, drag, 
     y = tank_rk4(constants, feet, rows, turning, held, lift, up, sums, solver, R0, y0, dt)
     if not store_step_end(y, R0, i, p, v, R, w):
         return False
-    if counts_twist[i]:
-        _carry_twist((R[i, 0, 0], R[i, 0, 1], R[i, 0, 2], R[i, 1, 0], R[i, 1, 1], R[i, 1, 2], R[i, 2, 0], R[i, 2, 1],
-                      R[i, 2, 2]), untwisted[i], torsion[i])
-    if bends_tether[i]:  # the tether's relaxed tilt carried to the step's end, as TankModel._relax_tether
-        sx, sy, sz = tether_relaxation_update((R[i, 0, 0], R[i, 0, 1], R[i, 0, 2], R[i, 1, 0], R[i, 1, 1], R[i, 1, 2],
-                                               R[i, 2, 0], R[i, 2, 1], R[i, 2, 2]), tether[i], dt)
-        tether[i, 3], tether[i, 4], tether[i, 5] = sx, sy, sz
+    bends_tether = tether[i, 0] > 0.0 or tether[i, 1] > 0.0  # TankModel.bends_tether
+    if counts_twist[i] or bends_tether:
+        end = (R[i, 0, 0], R[i, 0, 1], R[i, 0, 2], R[i, 1, 0], R[i, 1, 1], R[i, 1, 2], R[i, 2, 0], R[i, 2, 1],
+               R[i, 2, 2])
+        if counts_twist[i]:
+            _carry_twist(end, untwisted[i], torsion[i])
+        if bends_tether:  # the tether's relaxed tilt carried to the step's end, as TankModel._relax_tether
+            tether[i, 3], tether[i, 4], tether[i, 5] = tether_relaxation_update(end, tether[i], dt)
     return True
 
 
@@ -109,7 +110,7 @@ def tank_batch_step(frames, five_bar, net_paw_buoyancy, drag_constant, drag, ext
                     rope, torsion, untwisted, linear, quadratic, body_m, paw_added_mass, wake_fraction,
                     wake_time_constant, wake_body_share, body_wake_fraction, body_wake_time_constant, tether,
                     restoring, wake, water, p, v, R, w, q, q_dot, dt, failed, stall_torque, loads, block, block_rest,
-                    friction, hook_friction, counts_twist, bends_tether):
+                    friction, hook_friction, counts_twist):
     """One held-input RK4 step of eq. (tank) for every trial not yet ``failed``, in place on p, v, w
     (N, 3), R (N, 3, 3), the paws' ``wake`` (N, 4, 3), the water turning with each body, ``water``
     (N, 3), and each rope's upper end, ``anchor`` (N, 6). The constants are the fields of
@@ -120,8 +121,7 @@ def tank_batch_step(frames, five_bar, net_paw_buoyancy, drag_constant, drag, ext
     ``hook_friction`` (N, 6) its Coulomb torque tau_c (0: off), presliding angle, static over sliding
     friction, Stribeck rate, roll over pitch friction and the tether's capstan coefficient; ``counts_twist``
     (N,) whether the trial carries the rope's twist (TankModel.counts_twist); ``tether`` (N, 6) the tether's
-    stiffnesses, relaxation time and relaxed tilt (advanced in place where ``bends_tether``, (N,):
-    TankModel.bends_tether)."""
+    stiffnesses, relaxation time and relaxed tilt (advanced in place where either stiffness is above 0)."""
     feet = np.empty((4, 6))
     drag_feet = np.empty((4, 6))
     for i in range(p.shape[0]):
@@ -131,7 +131,7 @@ def tank_batch_step(frames, five_bar, net_paw_buoyancy, drag_constant, drag, ext
                                                  wake_time_constant, wake_body_share, body_wake_fraction,
                                                  body_wake_time_constant, tether, restoring, wake, water, p, v, R,
                                                  w, q, q_dot, dt, feet, drag_feet, stall_torque, loads, block,
-                                                 block_rest, friction, hook_friction, counts_twist, bends_tether):
+                                                 block_rest, friction, hook_friction, counts_twist):
             failed[i] = True
 
 
@@ -179,8 +179,6 @@ class TankPlantBatch:
         #: Each trial's TankModel.counts_twist (N,); the wound tethers' trials (N,) and the turn each has had
         #: checked (N, rad; TankModel.check_turn)
         self.counts_twist = np.array([m.counts_twist for m in self.models], dtype=bool)
-        #: Each trial's TankModel.bends_tether (N,): whether its tether's relaxed tilt is carried.
-        self.bends_tether = np.array([m.bends_tether for m in self.models], dtype=bool)
         self._wound = np.array([m._wound for m in self.models], dtype=bool)  # noqa: SLF001
         self._checked_turns = np.array([m.checked_turn for m in self.models], dtype=float)
         self._any_wound = bool(self._wound.any())
@@ -229,7 +227,7 @@ class TankPlantBatch:
                         c["body_wake_time_constant"], c["tether"], self.restoring, self.wake, self.water, p, v, R, w,
                         np.ascontiguousarray(q), np.ascontiguousarray(q_dot), float(dt), self.failed, self.stall_torque,
                         self.loads, self.block, self.block_rest, self.friction, self.hook_friction,
-                        self.counts_twist, self.bends_tether)
+                        self.counts_twist)
         if self._any_wound:  # TankModel.check_turn where a wound tether has turned past its checked turn
             turns = np.abs(c["torsion"][:, 2])
             for i in np.flatnonzero(self._wound & ~self.failed & (turns > self._checked_turns)):

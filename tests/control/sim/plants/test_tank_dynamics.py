@@ -24,9 +24,9 @@ def _flat(R: np.ndarray) -> tuple:
 @settings(max_examples=200, deadline=None)
 @given(st.floats(-3.0, 3.0), st.floats(-1.5, 1.5), ANGLE)
 def test_the_tilt_is_the_swing_that_takes_up_to_the_bodys_z_axis(roll: float, pitch: float, yaw: float) -> None:
-    """Short of upside down (the next test), theta is horizontal, its length is the angle between the world's up and the body's z axis, and the
-    rotation it names takes the one to the other; a turn about the body's z axis leaves it, a turn about
-    the world's vertical turns it with the body."""
+    """Short of upside down (the next test), theta is horizontal, its length is the angle between the world's
+    up and the body's z axis, and the rotation it names takes the one to the other; a turn about the body's
+    z axis leaves it, a turn about the world's vertical turns it with the body."""
     R = rpy_to_rot(roll, pitch, yaw)
     theta = np.array(tilt_vector(_flat(R)))
     z = R[:, 2]
