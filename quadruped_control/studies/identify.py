@@ -758,9 +758,11 @@ def main_study(args: argparse.Namespace) -> int:
     paths = []
     for i, result in enumerate(ensemble):
         path = os.path.join(args.out, "tank_ensemble_%02d.yaml" % i)
+        # only the fitted parameters are marked [identified]: the others keep the template's line, which is
+        # the value the fit held them at (nominal_values reads it from the same file)
         with open(path, "w") as stream:
-            stream.write(update_tank_yaml(template, result["values"], "%s, ensemble member %d, objective %.2f"
-                                          % (note, i, result["objective"])))
+            stream.write(update_tank_yaml(template, {name: result["values"][name] for name in chosen},
+                                          "%s, ensemble member %d, objective %.2f" % (note, i, result["objective"])))
         paths.append(path)
     report = {"study": "identify", "command": getattr(args, "command", None), "code": code,
               "duration": duration, "servo_model": servo, "seed": args.seed, "start": start_from,

@@ -268,10 +268,18 @@ def test_identify_cli_tiny_run(tmp_path) -> None:
     assert "--include" in report["command"] and report["code"] == code_fingerprint()
     with open(os.path.join(out, "identify.md")) as stream:
         assert "Code %s." % report["code"] in stream.read()
+    best = report["fit"]["ensemble"][0]["values"]
     for path in report["ensemble_files"]:
-        load_tank_params(path)  # a valid tank.yaml
+        # a valid tank.yaml, holding the set it was written from (the parameters the fit held, at the values
+        # it held them), and only the fitted parameters' lines are marked identified
+        assert idf.nominal_values(load_tank_params(path)).keys() == best.keys()
         with open(path) as stream:
-            assert "code %s)" % report["code"][:12] in stream.read()
+            text = stream.read()
+        assert "code %s)" % report["code"][:12] in text
+        assert text.count("[identified] simulate --study identify") == len(
+            {(idf._PLACES[n].section, idf._PLACES[n].key) for n in report["identified"]})
+    written = idf.nominal_values(load_tank_params(report["ensemble_files"][0]))
+    assert all(written[n] == pytest.approx(best[n], rel=1e-12, abs=1e-15) for n in best)
     assert report["weights"] == idf.WEIGHTS
     with pytest.raises(SystemExit):  # a parameter the study does not know is refused by name
         simulate.main(["--study", "identify", "--include", "wake_speed", "--out", out])
