@@ -30,7 +30,8 @@ Publishes (ground truth, for tests and reports; nothing in the control path subs
 Parameters
   ~robot_yaml ~hardware_yaml ~calibration_yaml ~simulation_yaml (package config/)
   ~servo_model (rate-limited | ideal)  ~initial_rpy_deg ([0, 0, 0])  ~restoring_offset ([]: off)
-  ~plant (paper | tank: the robot on its rope in the test tank, ~tank_yaml default config/tank.yaml)
+  ~plant (paper | tank: the robot on its rope in the test tank, ~tank_yaml default config/tank.yaml;
+    a ~tank_yaml with ~plant paper is refused)
   ~physics_rate (100 Hz)  ~bus_socket (/tmp/uq_sim_i2c.sock)  ~imu_port (/tmp/uq_sim_vn100)
   ~imu_pump_period (0.05 s: longest sleep of the fake VN-100's pty pump; it wakes when the next packet
   is due, when the driver writes, or when the simulated clock moves)
@@ -106,8 +107,11 @@ class SimNode:
         plant = str(rospy.get_param("~plant", "paper"))
         model = None
         servo_params = settings.servo
+        tank_yaml = optional("~tank_yaml")
+        if plant == "paper" and tank_yaml:  # a fitted tank asked for, the paper's model about to run: say so
+            raise ParameterError("~tank_yaml %r is for ~plant tank; ~plant is 'paper'" % tank_yaml)
         if plant != "paper":
-            tank = load_tank_params(optional("~tank_yaml"))
+            tank = load_tank_params(tank_yaml)
             model = make_plant(plant, self.robot, tank)
             servo_params = tank_servo_params(servo_params, tank)  # the tank's servos, as the offline trials
             rospy.logwarn("sim_node: %s", VALIDITY_NOTE)
