@@ -1,7 +1,5 @@
 """config/diagnostics_analyzers.yaml: valid for diagnostic_aggregator, and every node's diagnostic_updater
 status lands in exactly one analyzer, with or without a namespace."""
-import os
-import shutil
 import subprocess
 
 import pytest
@@ -45,17 +43,10 @@ def test_bad_analyzer_files_are_refused(tree, message):
         validate_analyzers(tree)
 
 
-def test_monitor_launch_starts_the_tether_tools():
+def test_monitor_launch_starts_the_tether_tools(launch_file):
     """launch/monitor.launch parses and names its nodes (the GUI packages are Noetic's, not Debian's, so
     only the launch file is checked here, not the programs)."""
-    rospkg = pytest.importorskip("rospkg")
-    try:
-        share = rospkg.RosPack().get_path("underwater_quadruped")
-    except rospkg.ResourceNotFound:
-        pytest.skip("the workspace's devel/setup.bash is not sourced")
-    if shutil.which("roslaunch") is None:
-        pytest.skip("roslaunch not installed")
-    launch = os.path.join(share, "launch", "monitor.launch")
+    launch = launch_file("monitor.launch")
 
     def nodes(*args):
         out = subprocess.run(["roslaunch", "--nodes", launch] + list(args), stdout=subprocess.PIPE,
