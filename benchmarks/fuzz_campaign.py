@@ -309,7 +309,7 @@ def run_config(files: int, seed: int) -> Dict[str, Any]:
             name = names[number % len(names)]
             text = open(config_path(name)).read()
             data, kind, key, must_reject = _mutate(rng, text)
-            path = os.path.join(folder, "%04d_%s" % (number, name))
+            path = os.path.join(folder, "%04d_%s" % (number, name.replace("/", "_")))  # tank_ensemble/...
             with open(path, "wb") as stream:
                 stream.write(data)
             counts["files"] += 1
