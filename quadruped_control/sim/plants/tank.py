@@ -210,10 +210,10 @@ __all__ = ["TankModel", "TankParams", "TurnUnresolved", "VALIDITY_NOTE", "append
 #: model's other draws did not).
 VALIDITY_NOTE = ("the tank plant is not yet a validated model of the robot. config/tank.yaml (the default) holds "
                  "a priori estimates and cannot hold a tilt past about 16 deg; the sets fitted to the paper's "
-                 "Table 1 (config/tank_identified.yaml, --tank-yaml) predict experiments held out of their fit with "
-                 "the right outcomes and rise times, but settle sooner than the robot did (most in roll, 2-3x) and "
-                 "overshoot less. Check gains and stroke schemes chosen on it in the water "
-                 "(docs/identification.md, \"Where it stands\")")
+                 "Table 1 (config/tank_ensemble/member_NN.yaml, config/tank_identified.yaml; --tank-yaml) predict "
+                 "experiments held out of their fit with the right outcomes and rise times, but settle sooner "
+                 "than the robot did (most in roll, 2-3x) and overshoot less. Check gains and stroke schemes "
+                 "chosen on it in the water (docs/identification.md, \"Where it stands\")")
 
 Vec3 = Tuple[float, float, float]
 
