@@ -44,13 +44,13 @@ from quadruped_control.control.strokes import SCHEMES
 from quadruped_control.model.params import load_robot_params
 from quadruped_control.sim.plants import PLANTS, VALIDITY_NOTE
 from quadruped_control.sim.simulation import SimulationError, load_simulation_settings
-from quadruped_control.studies import StudyError, identify, paper_experiments, paper_sim, robustness, schemes
+from quadruped_control.studies import StudyError, ensemble, identify, paper_experiments, paper_sim, robustness, schemes
 from quadruped_control.studies.runner import command_line
 from quadruped_control.studies.trial import AUTO_BATCH_MIN, GAIN_ALIASES, TrialSpec, format_metrics_table, run_trial
 
 #: --study NAME -> its module (each has ``main_study(args) -> exit status``)
 STUDIES = {"paper-sim": paper_sim, "robustness": robustness, "schemes": schemes,
-           "paper-experiments": paper_experiments, "identify": identify}
+           "paper-experiments": paper_experiments, "identify": identify, "ensemble": ensemble}
 
 #: The studies after which ``--plant tank`` prints :data:`VALIDITY_NOTE`: those that run on the plant
 #: ``--plant`` names. paper-experiments (on the tank by default) writes the note into its own report;
@@ -88,6 +88,9 @@ def build_parser() -> argparse.ArgumentParser:
                              "its rope in the test tank, config/tank.yaml)")
     parser.add_argument("--tank-yaml", default=None, metavar="PATH",
                         help="tank parameters for --plant tank (default: the package's config/tank.yaml)")
+    parser.add_argument("--tank-ensemble", default=None, metavar="DIR",
+                        help="ensemble study: a folder of tank.yaml files, Table 1 on each (default: the package's "
+                             "config/tank_ensemble, the sets fitted to Table 1)")
     parser.add_argument("--controller", choices=("on", "off"), default="on",
                         help="off holds the legs at the nominal pose (passive dynamics, ballast checks)")
     parser.add_argument("--robot-yaml", default=None, metavar="PATH",
@@ -127,7 +130,8 @@ def build_parser() -> argparse.ArgumentParser:
     parser.add_argument("--study", choices=tuple(STUDIES),
                         default=None,
                         help="run a study (paper-experiments: Table 1's 15 experiments, default on the tank plant "
-                             "with the experiment gains and rate-limited servos)")
+                             "with the experiment gains and rate-limited servos; ensemble: Table 1 on each "
+                             "member of --tank-ensemble)")
     parser.add_argument("--perturbed", type=int, default=1,
                         help="schemes study: perturbed (+-0.5 deg) starts per case besides the nominal one (default 1)")
     parser.add_argument("--scheme-groups", default="paper-sim,table1,random",
@@ -206,6 +210,8 @@ def main(argv: Optional[Sequence[str]] = None) -> int:
                 parser.error("--include adds to the screening's choice, --parameters replaces it: give one")
             if len(set(args.parameters)) == 1:  # pycma: "optimization in 1-D is not supported" (pycma issue 86)
                 parser.error("--parameters: CMA-ES fits two or more parameters; name a second one")
+        if args.tank_ensemble is not None and args.study != "ensemble":
+            parser.error("--tank-ensemble is the ensemble study's (--study ensemble)")
         if args.study is not None:
             status = STUDIES[args.study].main_study(args)
             if args.plant == "tank" and args.study in NOTE_AFTER_STUDIES:
