@@ -175,9 +175,10 @@ class SimNode:
         self.diagnostics = Updater()
         self.diagnostics.setHardwareID("none")  # no hardware (diagnostic_updater convention)
         self.diagnostics.add("simulation", self._diagnose)
-        rospy.loginfo("sim_node: fake I2C bus on %s, fake VN-100 on %s, %.0f Hz physics, %s servos",
+        rospy.loginfo("sim_node: fake I2C bus on %s, fake VN-100 on %s, %.0f Hz physics, %s servos, %s plant%s",
                       self.bridge.path, self.imu_pty.path, rate,
-                      rospy.get_param("~servo_model", "rate-limited"))
+                      rospy.get_param("~servo_model", "rate-limited"), plant,
+                      "" if plant == "paper" else " (%s)" % (tank_yaml or "config/tank.yaml"))
 
     def run(self) -> None:
         if self.lockstep:

@@ -5,7 +5,8 @@ Listens to /controller_state (geodesic error of every control step) and /sim/ser
 widths the fake PCA9685 really produces). Passes when the geodesic error, smoothed with the paper's
 centred 3 s moving average, enters the 6 degree band and stays in it for ~hold_duration seconds before
 ~settle_timeout; and no pulse width ever left its channel's limits; with ~expected_scheme, that the
-controller runs that stroke scheme (sim_coordinated.test).
+controller runs that stroke scheme (sim_coordinated.test); with ~expected_plant and ~expected_tank_yaml,
+that sim_node runs that plant and tank (sim_tank.test).
 
 With ~trajectory_file set, the simulated trajectory (/sim/pose stamps and quaternions) up to the
 sensor-stall part is saved there (numpy .npz) for scripts/check_lockstep_determinism.sh.
@@ -111,6 +112,10 @@ class ClosedLoopTest(unittest.TestCase):
         scheme = rospy.get_param("~expected_scheme", "")
         if scheme:
             self.assertEqual(rospy.get_param("attitude_controller/stroke_scheme"), scheme)
+        for name in ("plant", "tank_yaml"):  # the simulated robot is the one the launch asked for
+            expected = rospy.get_param("~expected_" + name, "")
+            if expected:
+                self.assertEqual(rospy.get_param("sim_node/" + name), expected)
         self.save_trajectory()
 
         # The sensor stalls (fake VN-100 silent behind its pty): the controller must hold the safe pose
