@@ -69,10 +69,10 @@ def test_study_cli_runs_table_1_on_every_member(tmp_path, capsys) -> None:
     assert len(report["rows"]) == 2 and all(len(rows) == len(PAPER_TABLE) for rows in report["rows"])
     assert [e["case"] for e in report["spread"]] == report["cases"] and len(report["counts"]) == 2
     assert all(e["members"] == 2 for e in report["spread"])
-    # each member's rows are its own trials: the same member twice gives the same rows
     assert report["command"][:4] == ["python", "-m", "quadruped_control.simulate", "--study"]
     printed = capsys.readouterr().out
     assert "member_00.yaml" in printed and "30 trials" in printed
+    # each member's rows are its own trials: the same member twice gives the same rows, and member_00's
     twice = tmp_path / "twice"
     twice.mkdir()
     for name in ("a.yaml", "b.yaml"):
