@@ -45,7 +45,7 @@ from quadruped_control.model.params import load_robot_params
 from quadruped_control.sim.plants import PLANTS, VALIDITY_NOTE
 from quadruped_control.sim.simulation import SimulationError, load_simulation_settings
 from quadruped_control.studies import StudyError, ensemble, identify, paper_experiments, paper_sim, robustness, schemes
-from quadruped_control.studies.runner import command_line
+from quadruped_control.studies.runner import command_line, warn_uncommitted
 from quadruped_control.studies.trial import AUTO_BATCH_MIN, GAIN_ALIASES, TrialSpec, format_metrics_table, run_trial
 
 #: --study NAME -> its module (each has ``main_study(args) -> exit status``)
@@ -213,6 +213,7 @@ def main(argv: Optional[Sequence[str]] = None) -> int:
         if args.tank_ensemble is not None and args.study != "ensemble":
             parser.error("--tank-ensemble is the ensemble study's (--study ensemble)")
         if args.study is not None:
+            warn_uncommitted()  # before any trial runs: a dirty tree's figures name no commit
             status = STUDIES[args.study].main_study(args)
             if args.plant == "tank" and args.study in NOTE_AFTER_STUDIES:
                 print("note: %s" % VALIDITY_NOTE)

@@ -70,7 +70,7 @@ from quadruped_control.sim.plants.tank import TankParams, load_tank_params
 from quadruped_control.studies import StudyError
 from quadruped_control.studies import paper_experiments as pe
 from quadruped_control.studies.paper_experiments import experiment_specs
-from quadruped_control.studies.runner import code_fingerprint
+from quadruped_control.studies.runner import code_fingerprint, code_source, describe_source
 from quadruped_control.studies.trial import TrialSpec, run_batch, run_many
 
 __all__ = ["BOUNDS", "Evaluator", "FAILED_CASE_COST", "GROUPS", "PARAMETERS", "STARTS", "WEIGHTS", "best_on",
@@ -765,7 +765,8 @@ def main_study(args: argparse.Namespace) -> int:
                                           "%s, ensemble member %d, objective %.2f" % (note, i, result["objective"])))
         paths.append(path)
     report = {"study": "identify", "command": getattr(args, "command", None), "code": code,
-              "duration": duration, "servo_model": servo, "seed": args.seed, "start": start_from,
+              "code_source": code_source(), "duration": duration, "servo_model": servo, "seed": args.seed,
+              "start": start_from,
               "slow_recovery_check": bool(evaluate.check_row), "band": evaluate.band,
               "weights": WEIGHTS, "parameters": [list(p) for p in PARAMETERS], "nominal": nominal,
               "screening": {k: v for k, v in screening.items() if k not in ("best", "results")}, "identified": chosen,
@@ -822,7 +823,8 @@ def _report_text(report: Dict[str, Any], best: Dict[str, Any]) -> str:
     screening = report["screening"]
     lines = ["## Identification: %d trials, %.0f s wall" % (report["trials"], report["wall_time"]), ""]
     if report.get("command"):  # reports before the command and code were recorded have neither
-        lines += ["    " + " ".join(report["command"]), "", "Code %s." % report["code"], ""]
+        source = " (%s)" % describe_source(report["code_source"]) if "code_source" in report else ""
+        lines += ["    " + " ".join(report["command"]), "", "Code %s%s." % (report["code"], source), ""]
     lines += ["Screening (Morris, %d sets): mu* (sigma) of each parameter; identified: %s." % (
         screening["sets"], ", ".join(report["identified"])), "",
         "| parameter | low | high | mu* | sigma | best (full fit) |", "|---|---|---|---|---|---|"]

@@ -34,14 +34,15 @@ import hashlib
 import json
 import os
 import re
+import subprocess
 import sys
 from concurrent.futures import Executor, Future, ProcessPoolExecutor, as_completed
 from typing import Any, Callable, Dict, Iterator, List, Optional, Sequence, Tuple
 
 import numpy as np
 
-__all__ = ["CODE_ROOTS", "StudyError", "code_fingerprint", "command_line", "config_fingerprint", "run_trial_batches",
-           "run_trials", "spec_key", "trial_path"]
+__all__ = ["CODE_ROOTS", "StudyError", "code_fingerprint", "code_source", "command_line", "config_fingerprint",
+           "describe_source", "run_trial_batches", "run_trials", "spec_key", "trial_path", "warn_uncommitted"]
 
 TrialFn = Callable[[Any], Dict[str, Any]]
 #: ``fn(specs) -> [result, ...]``: many trials at once (the batched simulator), one result per spec, in order.
@@ -105,6 +106,68 @@ def code_fingerprint(root: Optional[str] = None) -> str:
             dirs[:] = sorted(d for d in dirs if d != "__pycache__")
             paths += [os.path.join(folder, name) for name in files if name.endswith(".py")]
     return _hash_files(paths, root)
+
+
+def _git(root: str, *arguments: str) -> Optional[str]:
+    """``git -C root ARGUMENTS``' output, or None where git is missing or fails (an install space, a tarball)."""
+    try:
+        done = subprocess.run(["git", "-C", root] + list(arguments), stdout=subprocess.PIPE,
+                              stderr=subprocess.DEVNULL, timeout=30, check=False)
+    except (OSError, subprocess.SubprocessError):
+        return None
+    return done.stdout.decode("utf-8", "replace") if done.returncode == 0 else None
+
+
+@functools.lru_cache(maxsize=8)
+def code_source(root: Optional[str] = None) -> Dict[str, Any]:
+    """Which commit the code of :data:`CODE_ROOTS` under ``root`` (default: this installation) came from:
+    ``{"commit": sha, "modified": [paths]}``, the Python sources (relative to ``root``) under
+    :data:`CODE_ROOTS` that differ from that commit, untracked ones included. Both are None where ``root``
+    is not the top of a git checkout (an install space, an unpacked release): then only
+    :func:`code_fingerprint` says what ran.
+
+    Why: the fingerprint hashes the sources as they are when the study starts. A study started with
+    uncommitted changes records a fingerprint that no commit has, and its figures cannot be reproduced
+    from the history; the reports record this beside the fingerprint and :func:`warn_uncommitted` says
+    so before the study runs. Computed once per process, like the fingerprint."""
+    root = os.path.realpath(root or _tree_root())
+    unknown: Dict[str, Any] = {"commit": None, "modified": None}
+    top = _git(root, "rev-parse", "--show-toplevel")
+    # a tree inside someone else's checkout (an install space under a workspace that is a repository)
+    # is not that checkout's code
+    if top is None or os.path.realpath(top.strip()) != root:
+        return unknown
+    commit = _git(root, "rev-parse", "--verify", "HEAD")
+    status = _git(root, "status", "--porcelain", "--untracked-files=all", "--", *CODE_ROOTS)
+    if commit is None or status is None:
+        return unknown
+    # porcelain lines are "XY path" or, for a rename, "XY old -> new"; only the sources the fingerprint hashes
+    paths = (line[3:].split(" -> ")[-1].strip().strip('"') for line in status.splitlines() if line.strip())
+    modified = sorted(path for path in paths if path.endswith(".py"))
+    return {"commit": commit.strip(), "modified": modified}
+
+
+def describe_source(source: Dict[str, Any]) -> str:
+    """:func:`code_source` in words, for a report: "commit X", "commit X with N uncommitted file(s)", or
+    "not a git checkout"."""
+    if not source or source.get("commit") is None:
+        return "not a git checkout"
+    modified = source.get("modified") or []
+    return "commit %s%s" % (source["commit"][:12], " with %d uncommitted file(s): %s" % (
+        len(modified), ", ".join(modified)) if modified else "")
+
+
+def warn_uncommitted(stream: Any = None, root: Optional[str] = None) -> Dict[str, Any]:
+    """:func:`code_source`, with a warning on ``stream`` (default stderr) when the code has uncommitted
+    changes: the study's figures would then come from code that no commit holds."""
+    source = code_source(root)
+    if source["modified"]:
+        shown = ", ".join(source["modified"][:5]) + (", ..." if len(source["modified"]) > 5 else "")
+        (stream or sys.stderr).write(
+            "warning: %d file(s) of the study's code differ from commit %s (%s): the results' code "
+            "fingerprint names no commit; commit first so that the study can be reproduced\n"
+            % (len(source["modified"]), source["commit"][:12], shown))
+    return source
 
 
 def config_fingerprint(spec: Any, config_folder: Optional[str] = None) -> str:

@@ -13,6 +13,7 @@ from quadruped_control.sim.config_files import TANK_ENSEMBLE
 from quadruped_control.sim.plants import VALIDITY_NOTE
 from quadruped_control.studies import StudyError
 from quadruped_control.studies import ensemble as ens
+from quadruped_control.studies.runner import code_source
 from quadruped_control.studies.paper_experiments import PAPER_TABLE
 
 
@@ -70,6 +71,7 @@ def test_study_cli_runs_table_1_on_every_member(tmp_path, capsys) -> None:
     assert [e["case"] for e in report["spread"]] == report["cases"] and len(report["counts"]) == 2
     assert all(e["members"] == 2 for e in report["spread"])
     assert report["command"][:4] == ["python", "-m", "quadruped_control.simulate", "--study"]
+    assert report["code_source"] == code_source()
     printed = capsys.readouterr().out
     assert "member_00.yaml" in printed and "30 trials" in printed
     # each member's rows are its own trials: the same member twice gives the same rows, and member_00's

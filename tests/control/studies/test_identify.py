@@ -14,7 +14,7 @@ from quadruped_control.sim.plants import TankParams, load_tank_params
 from quadruped_control.studies import StudyError
 from quadruped_control.studies import identify as idf
 from quadruped_control.studies import paper_experiments as pe
-from quadruped_control.studies.runner import code_fingerprint
+from quadruped_control.studies.runner import code_fingerprint, code_source, describe_source
 
 
 def _row(paper_ts=50.0, sim_ts=50.0, yaw=True):
@@ -266,8 +266,9 @@ def test_identify_cli_tiny_run(tmp_path) -> None:
     # what produced the report: the command as given and the code's fingerprint, in the report and each set
     assert report["command"][:4] == ["python", "-m", "quadruped_control.simulate", "--study"]
     assert "--include" in report["command"] and report["code"] == code_fingerprint()
+    assert report["code_source"] == code_source()  # the commit, and any file that differs from it
     with open(os.path.join(out, "identify.md")) as stream:
-        assert "Code %s." % report["code"] in stream.read()
+        assert "Code %s (%s)." % (report["code"], describe_source(report["code_source"])) in stream.read()
     best = report["fit"]["ensemble"][0]["values"]
     for path in report["ensemble_files"]:
         # a valid tank.yaml, holding the set it was written from (the parameters the fit held, at the values

@@ -19,6 +19,7 @@ from quadruped_control.sim.plants import load_tank_params
 from quadruped_control.sim.replay import Record
 from quadruped_control.studies import StudyError
 from quadruped_control.studies import identify_bags as ib
+from quadruped_control.studies.runner import code_source
 from quadruped_control.studies.identify import nominal_values, update_tank_yaml
 from tests.repo import REPO_ROOT
 
@@ -256,6 +257,7 @@ def test_the_fit_recovers_what_a_simulated_run_was_made_with(tmp_path) -> None:
         assert s["windows"] == 7  # from 5 s (after the default lead-in) to 20 s
         assert s["fitted"] < 1.5 * s["truth"] and s["fitted"] < 0.2 * s["base"] and s["fitted"] < 0.2 * s["still"]
     assert report["truth"]["values"]["cob_z"] == truth["cob_z"]
+    assert report["code_source"] == code_source()
     fitted = load_tank_params(os.path.join(out, "tank_fitted.yaml"))
     assert fitted.center_of_buoyancy[2] == pytest.approx(report["fitted"]["cob_z"], abs=1e-12)
     for name in ("identify_bags.md", "identify_bags.png"):

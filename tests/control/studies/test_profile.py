@@ -14,6 +14,7 @@ from quadruped_control import simulate
 from quadruped_control.studies import StudyError
 from quadruped_control.studies import identify as idf
 from quadruped_control.studies import profile as pro
+from quadruped_control.studies.runner import code_source
 
 
 @pytest.fixture(scope="module")
@@ -58,6 +59,7 @@ def test_a_profile_holds_the_parameter_refits_the_others_and_predicts_every_grou
     assert free["objective"] == pytest.approx(report["fit"]["best"]["objective"], abs=1e-9)
     assert free["held_out_objective"] == pytest.approx(free["report_held_out_objective"], abs=1e-9)
     assert result["command"][-1] == "--quiet" and len(result["report_sha256"]) == 64 and result["code"]
+    assert result["code_source"] == code_source()
     with open(os.path.join(out, "profile.md")) as stream:
         text = stream.read()
     assert 0 < text.index("| -0.001 |") < text.index("| 0.002 |")  # the table by value

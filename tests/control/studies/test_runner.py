@@ -238,3 +238,58 @@ def test_unused_result_files_are_reported_once_per_folder(tmp_path, capsys):
     assert runner._report_stale(str(tmp_path), [], True) == 1
     assert runner._report_stale(str(tmp_path), [], True) == 1  # counted again, said once
     assert capsys.readouterr().err.count("not reused") == 1
+
+
+def _git(repo, *arguments: str) -> None:
+    import subprocess
+    subprocess.run(["git", "-C", str(repo), "-c", "user.name=test", "-c", "user.email=test@example.com"]
+                   + list(arguments), check=True, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+
+
+def test_code_source_names_the_commit_and_every_source_that_differs_from_it(tmp_path, capsys) -> None:
+    source = runner.code_source.__wrapped__  # uncached
+    for top in runner.CODE_ROOTS:
+        os.makedirs(tmp_path / top, exist_ok=True)
+        (tmp_path / top / "m.py").write_text("x = 1\n")
+    (tmp_path / "README.md").write_text("read me\n")
+    # not a checkout (an install space): nothing is known but the fingerprint
+    assert source(str(tmp_path)) == {"commit": None, "modified": None}
+    assert runner.describe_source(source(str(tmp_path))) == "not a git checkout"
+    _git(tmp_path, "init", "-q")
+    _git(tmp_path, "add", "-A")
+    _git(tmp_path, "commit", "-q", "-m", "first")
+    clean = source(str(tmp_path))
+    assert len(clean["commit"]) == 40 and clean["modified"] == []
+    assert runner.describe_source(clean) == "commit %s" % clean["commit"][:12]
+    # what the fingerprint hashes, changed or new, is named; other files are not
+    (tmp_path / "quadruped_control" / "model" / "m.py").write_text("x = 2\n")
+    (tmp_path / "quadruped_control" / "sim" / "new.py").write_text("y = 1\n")
+    (tmp_path / "README.md").write_text("changed\n")
+    (tmp_path / "quadruped_control" / "sim" / "notes.txt").write_text("not code\n")
+    dirty = source(str(tmp_path))
+    assert dirty == {"commit": clean["commit"],
+                     "modified": ["quadruped_control/model/m.py", "quadruped_control/sim/new.py"]}
+    assert runner.describe_source(dirty).endswith(
+        "with 2 uncommitted file(s): quadruped_control/model/m.py, quadruped_control/sim/new.py")
+    # a tree inside another checkout's folder is not that checkout's code
+    inner = tmp_path / "install" / "lib"
+    for top in runner.CODE_ROOTS:
+        os.makedirs(inner / top, exist_ok=True)
+    assert source(str(inner)) == {"commit": None, "modified": None}
+
+
+def test_warn_uncommitted_says_so_only_for_a_dirty_tree(tmp_path, monkeypatch, capsys) -> None:
+    import io
+    monkeypatch.setattr(runner, "code_source", lambda root=None: {"commit": "a" * 40, "modified": []})
+    stream = io.StringIO()
+    assert runner.warn_uncommitted(stream)["modified"] == [] and stream.getvalue() == ""
+    modified = ["quadruped_control/sim/m%d.py" % i for i in range(7)]
+    monkeypatch.setattr(runner, "code_source", lambda root=None: {"commit": "b" * 40, "modified": modified})
+    runner.warn_uncommitted(stream)
+    text = stream.getvalue()
+    assert text.startswith("warning: 7 file(s) of the study's code differ from commit bbbbbbbbbbbb")
+    assert "m4.py, ..." in text and "m5.py" not in text and "commit first" in text
+    # a study run from the command line warns before any trial runs
+    assert simulate.main(["--study", "paper-sim", "--duration", "0.05", "--jobs", "1", "--quiet",
+                          "--out", str(tmp_path / "s")]) in (0, 2)
+    assert "warning: 7 file(s) of the study's code differ" in capsys.readouterr().err

@@ -6,7 +6,7 @@ import math
 import os
 
 from quadruped_control import simulate
-from quadruped_control.studies.runner import code_fingerprint
+from quadruped_control.studies.runner import code_fingerprint, code_source
 
 
 def test_schemes_study_runs_both_schemes_and_writes_the_comparison(tmp_path) -> None:
@@ -27,6 +27,7 @@ def test_schemes_study_runs_both_schemes_and_writes_the_comparison(tmp_path) -> 
     assert set(result["groups"]["all"]) >= {"paper", "coordinated"}
     assert result["all_met"] == all(result["targets"].values()) and code == (0 if result["all_met"] else 2)
     assert result["command"][3:5] == ["--study", "schemes"] and result["code"] == code_fingerprint()
+    assert result["code_source"] == code_source()
     assert result["plant"] == "paper" and result["tank_yaml"] is None
     assert os.path.getsize(os.path.join(out, "schemes.png")) > 0
     assert "| group |" in open(os.path.join(out, "schemes.md")).read()
