@@ -191,6 +191,7 @@ from quadruped_control.sim.plants.added_mass import ellipsoid_added_mass, point_
 from quadruped_control.sim.plants.paper import FloatingBaseModel
 from quadruped_control.sim.plants.rigid_body import (Mat3, RigidBodyState, StepContext, as_mat3, chart_step_end,
                                                      check_dt, diverged, joint_array)
+from quadruped_control.sim.plants.tank_dynamics import TANK_CONSTANT_AT as _AT
 from quadruped_control.sim.plants.tank_dynamics import (TankConstants, appendage_damping_torque, body_wake_update,
                                                         floating_block_update, hook_friction_update, leg_sums,
                                                         mass_solver, paw_joint_loads, paw_wake_update, rope_force,
@@ -897,7 +898,7 @@ class TankModel(FloatingBaseModel):
         held joints), the paws seen through the rows ``drag_feet`` that the step's drag sees."""
         loads = np.zeros((4, 3))
         paw_joint_loads(np.asarray(q, dtype=float), self._frames, self._five_bar,
-                        np.asarray(drag_feet, dtype=float), self._constants[0], *motion, loads)
+                        np.asarray(drag_feet, dtype=float), self._constants[_AT["drag_constant"]], *motion, loads)
         self.joint_loads = loads
 
     def _rk4_tank(self, state: RigidBodyState, dt: float, context: "_TankContext", q: Any = None) -> RigidBodyState:
@@ -940,8 +941,9 @@ class TankModel(FloatingBaseModel):
         """:func:`~.tank_dynamics.tether_relaxation_update` over a step that ended at ``rotation`` (row-major):
         the relaxed tilt moves, and the constants carry it."""
         k = self._constants
-        self.tether_relaxed = tether_relaxation_update(rotation, k[18], dt)
-        self._constants = k[:18] + (k[18][:3] + tuple(self.tether_relaxed),)
+        at = _AT["tether"]
+        self.tether_relaxed = tether_relaxation_update(rotation, k[at], dt)
+        self._constants = k[:at] + (k[at][:3] + tuple(self.tether_relaxed),) + k[at + 1:]
 
     def _count_twist(self, rotation: Sequence[float]) -> None:
         """Carry :attr:`twist` to ``rotation`` (row-major; a step's start or end: the batch counts at the same
@@ -952,7 +954,8 @@ class TankModel(FloatingBaseModel):
         if self._wound and abs(self.twist) > self.checked_turn:
             self.check_turn(self.twist)
         k = self._constants
-        self._constants = k[:7] + ((k[7][0], k[7][1], self.twist), self.twist_rotation) + k[9:]
+        at = _AT["torsion"]  # the torsion's (stiffness, damping, twist), then the attitude the twist belongs to
+        self._constants = k[:at] + ((k[at][0], k[at][1], self.twist), self.twist_rotation) + k[at + 2:]
 
     def _advance_block(self, state: RigidBodyState, R0: Tuple[float, ...], dt: float) -> None:
         """:func:`~.tank_dynamics.floating_block_update` over this step (the body state of its start):

@@ -24,10 +24,10 @@ from quadruped_control.model.params import RobotParams
 from quadruped_control.sim.plants.paper_batch import held_step_inputs, leg_geometry, store_step_end
 from quadruped_control.sim.plants.rigid_body import RigidBodyState
 from quadruped_control.sim.plants.tank import TankModel, TankParams, TurnUnresolved
-from quadruped_control.sim.plants.tank_dynamics import (body_wake_update, floating_block_update, hook_friction_update,
-                                                        leg_sums, mass_solver, paw_joint_loads, paw_wake_update,
-                                                        tank_rk4, tether_relaxation_update, whole_twist,
-                                                        wound_friction_limit)
+from quadruped_control.sim.plants.tank_dynamics import (TANK_CONSTANT_FIELDS, body_wake_update, floating_block_update,
+                                                        hook_friction_update, leg_sums, mass_solver, paw_joint_loads,
+                                                        paw_wake_update, tank_rk4, tether_relaxation_update,
+                                                        whole_twist, wound_friction_limit)
 
 __all__ = ["TankPlantBatch", "tank_batch_step", "tank_trial_step"]
 
@@ -187,11 +187,8 @@ class TankPlantBatch:
     def _load_constants(self) -> None:
         """The per-trial fields of TankConstants as arrays (one row per trial)."""
         columns = list(zip(*(m.constants() for m in self.models)))
-        names = ("drag_constant", "drag", "extra_lift", "suspension", "hook", "anchor", "rope", "torsion",
-                 "untwisted", "linear", "quadratic", "body_m", "paw_added_mass", "wake_fraction", "wake_time_constant",
-                 "wake_body_share", "body_wake_fraction", "body_wake_time_constant", "tether")
         self.constants = {name: np.array(column, dtype=bool if name == "suspension" else float)
-                          for name, column in zip(names, columns)}
+                          for name, column in zip(TANK_CONSTANT_FIELDS, columns)}
 
     def attach(self, position: np.ndarray, rotation: np.ndarray) -> None:
         """:meth:`TankModel.attach` of every trial: anchor above the hook, rope untwisted at this attitude, every

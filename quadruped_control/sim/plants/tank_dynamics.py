@@ -35,8 +35,8 @@ from quadruped_control.model.kinematics import leg_jacobian_row
 from quadruped_control.sim.plants.paper import body_wrench_f
 from quadruped_control.sim.plants.rigid_body import Mat3, chart_point
 
-__all__ = ["TankConstants", "appendage_damping_torque", "body_wake_update", "floating_block_update",
-           "hook_friction_update", "leg_sums",
+__all__ = ["TANK_CONSTANT_AT", "TANK_CONSTANT_FIELDS", "TankConstants", "appendage_damping_torque", "body_wake_update",
+           "floating_block_update", "hook_friction_update", "leg_sums",
            "mass_solver", "paw_joint_loads", "paw_wake_update", "rope_force", "rope_torsion_torque", "rope_twist",
            "solve_mass", "tank_chart_derivative", "tank_forces", "tank_rk4", "tether_bend_torque",
            "tether_relaxation_update", "tilt_vector", "whole_twist", "wound_friction_limit"]
@@ -52,6 +52,16 @@ Vec3 = Tuple[float, float, float]
 #: and relaxing stiffness k in N m/rad, relaxation time tau in s, and the relaxed tilt s at the step's start,
 #: world axes, rad: :func:`tether_bend_torque`))
 TankConstants = Tuple[Any, ...]
+
+#: The names of :data:`TankConstants`' fields, in order: the one list that the per-trial plant (which replaces
+#: the fields it carries from step to step by position, :data:`TANK_CONSTANT_AT`) and the batch (which keeps one
+#: array per field) read. The tuple itself stays positional because the compiled kernels type it field by field.
+TANK_CONSTANT_FIELDS = ("drag_constant", "drag", "extra_lift", "suspension", "hook", "anchor", "rope", "torsion",
+                        "untwisted", "linear", "quadratic", "body_m", "paw_added_mass", "wake_fraction",
+                        "wake_time_constant", "wake_body_share", "body_wake_fraction", "body_wake_time_constant",
+                        "tether")
+#: Each field's position in :data:`TankConstants` by name.
+TANK_CONSTANT_AT = {name: position for position, name in enumerate(TANK_CONSTANT_FIELDS)}
 
 
 @jitable

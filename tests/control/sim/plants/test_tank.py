@@ -1388,3 +1388,37 @@ def test_the_tether_keys_are_checked(tmp_path, key: str, value, message: str) ->
                        ("tether_relaxation_time", float("inf"))):
         with pytest.raises(ParameterError, match=field):
             TankParams(**{field: bad})
+
+
+# ---- the constants the compiled kernels read ----------------------------------------------------------------
+
+def test_the_constants_are_the_named_fields_and_a_step_carries_the_twist_and_the_relaxed_tilt_in_theirs() -> None:
+    """TANK_CONSTANT_FIELDS names every field of the constants in order (the batch's arrays and the per-trial
+    plant's replacements read it), tank_forces unpacks exactly that many, and a step writes the rope's twist
+    and the tether's relaxed tilt into their named fields, leaving every other field as it was."""
+    import inspect
+    from quadruped_control.sim.plants import tank_dynamics
+    from quadruped_control.sim.plants.tank_dynamics import TANK_CONSTANT_AT, TANK_CONSTANT_FIELDS
+
+    sizes = {"drag": 8, "hook": 3, "anchor": 6, "rope": 3, "torsion": 3, "untwisted": 9, "linear": 3, "quadratic": 3,
+             "body_m": 36, "tether": 6}
+    model = TankModel(ROBOT, TANK.with_values(rope_torsion_stiffness=0.01, tether_relaxing_stiffness=0.05,
+                                              tether_relaxation_time=2.0))
+    assert model.counts_twist and model.bends_tether
+    model.attach(RigidBodyState())
+    before = model.constants()
+    assert len(before) == len(TANK_CONSTANT_FIELDS) == len(set(TANK_CONSTANT_FIELDS))
+    for name, size in sizes.items():
+        assert len(before[TANK_CONSTANT_AT[name]]) == size, name
+    source = inspect.getsource(tank_dynamics.tank_forces)
+    unpacked = source[source.index("    (drag_constant,"):source.index(") = k")]
+    assert unpacked.count(",") + 1 == len(TANK_CONSTANT_FIELDS)
+    q = nominal_joint_angles(ROBOT)
+    state = RigidBodyState(rotation=rpy_to_rot(0.3, 0.0, 0.0), omega=np.array([0.0, 0.0, 0.5]))
+    model.step(state, q, np.zeros_like(q), DT)
+    after = model.constants()
+    changed = {name for name, a, b in zip(TANK_CONSTANT_FIELDS, before, after) if a != b}
+    assert changed == {"torsion", "untwisted", "tether"}
+    assert after[TANK_CONSTANT_AT["torsion"]] == before[TANK_CONSTANT_AT["torsion"]][:2] + (model.twist,)
+    assert model.twist != 0.0 and after[TANK_CONSTANT_AT["untwisted"]] == model.twist_rotation
+    assert after[TANK_CONSTANT_AT["tether"]] == before[TANK_CONSTANT_AT["tether"]][:3] + tuple(model.tether_relaxed)
