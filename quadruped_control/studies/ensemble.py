@@ -143,9 +143,8 @@ def main_study(args: argparse.Namespace) -> int:
         stream.write(text)
     report = {"study": "ensemble", "command": getattr(args, "command", None), "code": code_fingerprint(),
               "code_source": code_source(), "folder": folder, "members": [os.path.basename(p) for p in members],
-              "duration": duration,
-              "wall_time": wall, "counts": counts, "cases": [case_label(row) for row in PAPER_TABLE],
-              "spread": spread, "rows": rows_by_member}
+              "duration": duration, "wall_time": wall, "counts": counts,
+              "cases": [case_label(row) for row in PAPER_TABLE], "spread": spread, "rows": rows_by_member}
     with open(os.path.join(args.out, "ensemble.json"), "w") as stream:
         json.dump(report, stream, indent=1, allow_nan=False)
     print(text)

@@ -766,8 +766,7 @@ def main_study(args: argparse.Namespace) -> int:
         paths.append(path)
     report = {"study": "identify", "command": getattr(args, "command", None), "code": code,
               "code_source": code_source(), "duration": duration, "servo_model": servo, "seed": args.seed,
-              "start": start_from,
-              "slow_recovery_check": bool(evaluate.check_row), "band": evaluate.band,
+              "start": start_from, "slow_recovery_check": bool(evaluate.check_row), "band": evaluate.band,
               "weights": WEIGHTS, "parameters": [list(p) for p in PARAMETERS], "nominal": nominal,
               "screening": {k: v for k, v in screening.items() if k not in ("best", "results")}, "identified": chosen,
               "fit": {"evaluations": len(full), "polish": full_polish, "search": full_search, "best": best,
