@@ -466,6 +466,9 @@ class Evaluator:
         #: them (values and failures) for the report
         self.failed_sets = 0
         self.failed_examples: List[Dict[str, Any]] = []
+        #: every set run, in order: its trials' label prefix (``set``: tag and number), values, objective and
+        #: counts, so that an analysis of the kept trials can join each one to the set that produced it
+        self.sets: List[Dict[str, Any]] = []
         # the 15 specs once (their initial attitudes take a search); each set replaces label and overrides
         self.base = [dataclasses.replace(spec, on_failure="record") for spec in
                      experiment_specs(args, "tank", "experiment", servo, duration, keep_trace=False)[0]]
@@ -480,10 +483,12 @@ class Evaluator:
 
     def __call__(self, sets: Sequence[Dict[str, float]], cases: Sequence[int], tag: str) -> List[Dict[str, Any]]:
         specs: List[TrialSpec] = []
+        prefixes = []
         for values in sets:
             self.count_of[tag] = number = self.count_of.get(tag, 0) + 1
+            prefixes.append("%s%05d" % (tag, number))
             overrides = tank_overrides(values)
-            specs += [dataclasses.replace(self.base[k], label="%s%05d %s" % (tag, number, self.base[k].label),
+            specs += [dataclasses.replace(self.base[k], label="%s %s" % (prefixes[-1], self.base[k].label),
                                           tank_overrides=overrides) for k in cases]
         self.trials += len(specs)
         results = run_many(specs, self.args, "identify (%s)" % tag)
@@ -508,6 +513,8 @@ class Evaluator:
                           slow_recovery_unsettled=sum(not c["settled_sim"] for c in checks))
             out.append({"values": dict(values), "objective": float(sum(costs)), "targets": counts, "rows": table,
                         "slow_recovery": checks, "cases": list(cases), "costs": costs, "failed": failed})
+            self.sets.append({"set": prefixes[i], "values": dict(values), "objective": out[-1]["objective"],
+                              "cases": list(cases), "targets": counts, "failed": len(failed)})
             if failed:
                 self.failed_sets += 1
                 if len(self.failed_examples) < 5:
@@ -775,6 +782,9 @@ def main_study(args: argparse.Namespace) -> int:
               "failed_sets": evaluate.failed_sets, "failed_examples": evaluate.failed_examples}
     with open(os.path.join(args.out, "identify.json"), "w") as stream:
         json.dump(report, stream, indent=1, allow_nan=False)
+    with open(os.path.join(args.out, "sets.json"), "w") as stream:
+        json.dump({"code": code, "code_source": report["code_source"], "sets": evaluate.sets}, stream,
+                  allow_nan=False)
     plot_report(report, os.path.join(args.out, "identify.png"))
     text = _report_text(report, best)
     with open(os.path.join(args.out, "identify.md"), "w") as stream:

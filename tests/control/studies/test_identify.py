@@ -2,6 +2,7 @@
 (screening, CMA-ES fit, cross-validation with the baseline, ensemble files)."""
 from __future__ import annotations
 
+import glob
 import json
 import math
 import os
@@ -269,6 +270,20 @@ def test_identify_cli_tiny_run(tmp_path) -> None:
     assert report["code_source"] == code_source()  # the commit, and any file that differs from it
     with open(os.path.join(out, "identify.md")) as stream:
         assert "Code %s (%s)." % (report["code"], describe_source(report["code_source"])) in stream.read()
+    # every set the run tried, joined to its trials by their label prefix
+    with open(os.path.join(out, "sets.json")) as stream:
+        tried = json.load(stream)
+    assert tried["code"] == report["code"] and tried["code_source"] == report["code_source"]
+    prefixes = [s["set"] for s in tried["sets"]]
+    assert len(prefixes) == len(set(prefixes)) and sum(len(s["cases"]) for s in tried["sets"]) == report["trials"]
+    labels = set()
+    for path in glob.glob(os.path.join(out, "trials", "*.json")):
+        with open(path) as stream:
+            labels.add(json.load(stream)["label"].split(" ", 1)[0])
+    assert set(prefixes) <= labels
+    assert report["fit"]["best"]["values"] in [s["values"] for s in tried["sets"]]
+    assert min(s["objective"] for s in tried["sets"] if s["cases"] == list(range(15))) <= \
+        report["fit"]["best"]["objective"] + 1e-9
     best = report["fit"]["ensemble"][0]["values"]
     for path in report["ensemble_files"]:
         # a valid tank.yaml, holding the set it was written from (the parameters the fit held, at the values
