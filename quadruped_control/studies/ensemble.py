@@ -31,7 +31,7 @@ from quadruped_control.studies import StudyError
 from quadruped_control.studies.identify import targets
 from quadruped_control.studies.paper_experiments import (DURATION, PAPER_TABLE, case_label, comparison_rows,
                                                          experiment_specs)
-from quadruped_control.studies.runner import code_fingerprint, code_source
+from quadruped_control.studies.runner import code_record
 from quadruped_control.studies.trial import run_many
 
 __all__ = ["DEFAULT_FOLDER", "case_spread", "format_report", "main_study", "member_files"]
@@ -141,10 +141,10 @@ def main_study(args: argparse.Namespace) -> int:
     text = format_report(folder, members, counts, spread, title)
     with open(os.path.join(args.out, "ensemble.md"), "w") as stream:
         stream.write(text)
-    report = {"study": "ensemble", "command": getattr(args, "command", None), "code": code_fingerprint(),
-              "code_source": code_source(), "folder": folder, "members": [os.path.basename(p) for p in members],
-              "duration": duration, "wall_time": wall, "counts": counts,
-              "cases": [case_label(row) for row in PAPER_TABLE], "spread": spread, "rows": rows_by_member}
+    report = {"study": "ensemble", "command": getattr(args, "command", None), **code_record(), "folder": folder,
+              "members": [os.path.basename(p) for p in members], "duration": duration, "wall_time": wall,
+              "counts": counts, "cases": [case_label(row) for row in PAPER_TABLE], "spread": spread,
+              "rows": rows_by_member}
     with open(os.path.join(args.out, "ensemble.json"), "w") as stream:
         json.dump(report, stream, indent=1, allow_nan=False)
     print(text)

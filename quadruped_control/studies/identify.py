@@ -70,7 +70,7 @@ from quadruped_control.sim.plants.tank import TankParams, load_tank_params
 from quadruped_control.studies import StudyError
 from quadruped_control.studies import paper_experiments as pe
 from quadruped_control.studies.paper_experiments import experiment_specs
-from quadruped_control.studies.runner import code_fingerprint, code_source, describe_source
+from quadruped_control.studies.runner import code_record, describe_source
 from quadruped_control.studies.trial import TrialSpec, run_batch, run_many
 
 __all__ = ["BOUNDS", "Evaluator", "FAILED_CASE_COST", "GROUPS", "PARAMETERS", "STARTS", "WEIGHTS", "best_on",
@@ -758,8 +758,8 @@ def main_study(args: argparse.Namespace) -> int:
         if len(ensemble) >= args.ensemble:
             break
     wall = time.perf_counter() - start_time
-    code = code_fingerprint()
-    note = "simulate --study identify (%d trials, code %s)" % (evaluate.trials, code[:12])
+    provenance = code_record()
+    note = "simulate --study identify (%d trials, code %s)" % (evaluate.trials, provenance["code"][:12])
     with open(args.tank_yaml or config_path("tank.yaml")) as stream:
         template = stream.read()
     paths = []
@@ -771,9 +771,9 @@ def main_study(args: argparse.Namespace) -> int:
             stream.write(update_tank_yaml(template, {name: result["values"][name] for name in chosen},
                                           "%s, ensemble member %d, objective %.2f" % (note, i, result["objective"])))
         paths.append(path)
-    report = {"study": "identify", "command": getattr(args, "command", None), "code": code,
-              "code_source": code_source(), "duration": duration, "servo_model": servo, "seed": args.seed,
-              "start": start_from, "slow_recovery_check": bool(evaluate.check_row), "band": evaluate.band,
+    report = {"study": "identify", "command": getattr(args, "command", None), **provenance, "duration": duration,
+              "servo_model": servo, "seed": args.seed, "start": start_from,
+              "slow_recovery_check": bool(evaluate.check_row), "band": evaluate.band,
               "weights": WEIGHTS, "parameters": [list(p) for p in PARAMETERS], "nominal": nominal,
               "screening": {k: v for k, v in screening.items() if k not in ("best", "results")}, "identified": chosen,
               "fit": {"evaluations": len(full), "polish": full_polish, "search": full_search, "best": best,
@@ -783,8 +783,7 @@ def main_study(args: argparse.Namespace) -> int:
     with open(os.path.join(args.out, "identify.json"), "w") as stream:
         json.dump(report, stream, indent=1, allow_nan=False)
     with open(os.path.join(args.out, "sets.json"), "w") as stream:
-        json.dump({"code": code, "code_source": report["code_source"], "sets": evaluate.sets}, stream,
-                  allow_nan=False)
+        json.dump(dict(provenance, sets=evaluate.sets), stream, allow_nan=False)
     plot_report(report, os.path.join(args.out, "identify.png"))
     text = _report_text(report, best)
     with open(os.path.join(args.out, "identify.md"), "w") as stream:

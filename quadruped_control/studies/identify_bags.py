@@ -82,7 +82,7 @@ from quadruped_control.sim.servo_model import ServoParams, load_servo_params
 from quadruped_control.studies import StudyError
 from quadruped_control.studies.identify import (BOUNDS, PARAMETERS, fit, nominal_values, tank_overrides,
                                                 update_tank_yaml)
-from quadruped_control.studies.runner import code_fingerprint, command_line, describe_source, warn_uncommitted
+from quadruped_control.studies.runner import code_record, command_line, describe_source, warn_uncommitted
 
 __all__ = ["PLANT_PARAMETERS", "SERVO_FITTED", "SERVO_GRID", "SERVO_PARAMETERS", "ReplayObjective", "ServoObjective",
            "fit_servos", "main", "read_run", "record_from_bag", "simulated_record", "smoothed"]
@@ -598,7 +598,7 @@ def main(argv: Optional[Sequence[str]] = None) -> int:
     parser.add_argument("--joint-noise-deg", type=float, default=0.3, help="--simulated: joint feedback noise")
     parser.add_argument("--out", default="out/identify_bags", help="output folder (default %(default)s)")
     args = parser.parse_args(argv)
-    source = warn_uncommitted()  # before any trial runs: a dirty tree's figures name no commit
+    warn_uncommitted()  # before any trial runs: a dirty tree's figures name no commit
     positive = {"--window": args.window, "--stride": args.stride, "--max-gap": args.max_gap,
                 "--duration": args.duration}
     for flag, value in positive.items():
@@ -664,7 +664,7 @@ def main(argv: Optional[Sequence[str]] = None) -> int:
     os.makedirs(args.out, exist_ok=True)
     report: Dict[str, Any] = {
         "study": "identify_bags", "command": command_line("quadruped_control.studies.identify_bags", argv),
-        "code": code_fingerprint(), "code_source": source,
+        **code_record(),
         "tank_yaml": os.path.abspath(args.tank_yaml or config_path("tank.yaml")), "parameters": names,
         "window": args.window, "stride": args.stride, "lead_in": args.lead_in, "every": args.every, "seed": args.seed,
         "joint_filter_hz": args.joint_filter_hz,

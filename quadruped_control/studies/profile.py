@@ -46,7 +46,7 @@ from quadruped_common.config import ParameterError
 from quadruped_control.sim.plants.tank import load_tank_params
 from quadruped_control.studies import StudyError
 from quadruped_control.studies.identify import BOUNDS, GROUPS, Evaluator, fit, nominal_values
-from quadruped_control.studies.runner import code_fingerprint, command_line, warn_uncommitted
+from quadruped_control.studies.runner import code_record, command_line, warn_uncommitted
 
 __all__ = ["COUNTS", "check_base", "check_values", "load_report", "main", "plot_profile", "profile", "profile_point",
            "summed_targets"]
@@ -211,7 +211,7 @@ def main(argv: Optional[Sequence[str]] = None) -> int:
         parser.error("--evaluations and --cv-evaluations must be >= 1, --popsize >= 2, --jobs >= 1")
     if not (math.isfinite(args.sigma) and 0.0 < args.sigma <= 0.5):
         parser.error("--sigma must lie in (0, 0.5], a step of the scaled [0, 1] range; got %r" % args.sigma)
-    source = warn_uncommitted()  # before any trial runs: a dirty tree's figures name no commit
+    warn_uncommitted()  # before any trial runs: a dirty tree's figures name no commit
     try:
         report = load_report(args.report)
         check_values(args.parameter, args.values)  # before any trial runs
@@ -239,8 +239,8 @@ def main(argv: Optional[Sequence[str]] = None) -> int:
     with open(args.report, "rb") as stream:
         report_sha = hashlib.sha256(stream.read()).hexdigest()
     result = {"study": "profile", "command": command_line("quadruped_control.studies.profile", argv),
-              "report": os.path.abspath(args.report), "report_sha256": report_sha, "code": code_fingerprint(),
-              "code_source": source, "parameter": args.parameter, "identified": list(report["identified"]),
+              "report": os.path.abspath(args.report), "report_sha256": report_sha, **code_record(),
+              "parameter": args.parameter, "identified": list(report["identified"]),
               "evaluations": args.evaluations, "cv_evaluations": args.cv_evaluations, "sigma": args.sigma,
               "popsize": args.popsize,
               "free": {"value": float(free_best[args.parameter]), "objective": free["objective"],

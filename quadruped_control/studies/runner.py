@@ -41,8 +41,9 @@ from typing import Any, Callable, Dict, Iterator, List, Optional, Sequence, Tupl
 
 import numpy as np
 
-__all__ = ["CODE_ROOTS", "StudyError", "code_fingerprint", "code_source", "command_line", "config_fingerprint",
-           "describe_source", "run_trial_batches", "run_trials", "spec_key", "trial_path", "warn_uncommitted"]
+__all__ = ["CODE_ROOTS", "StudyError", "code_fingerprint", "code_record", "code_source", "command_line",
+           "config_fingerprint", "describe_source", "run_trial_batches", "run_trials", "spec_key", "trial_path",
+           "warn_uncommitted"]
 
 TrialFn = Callable[[Any], Dict[str, Any]]
 #: ``fn(specs) -> [result, ...]``: many trials at once (the batched simulator), one result per spec, in order.
@@ -145,6 +146,12 @@ def code_source(root: Optional[str] = None) -> Dict[str, Any]:
     paths = (line[3:].split(" -> ")[-1].strip().strip('"') for line in status.splitlines() if line.strip())
     modified = sorted(path for path in paths if path.endswith(".py"))
     return {"commit": commit.strip(), "modified": modified}
+
+
+def code_record() -> Dict[str, Any]:
+    """What every study's report records of the code that produced it: ``code``
+    (:func:`code_fingerprint`) and ``code_source`` (:func:`code_source`)."""
+    return {"code": code_fingerprint(), "code_source": code_source()}
 
 
 def describe_source(source: Dict[str, Any]) -> str:

@@ -23,7 +23,7 @@ from typing import Any, Dict, List, Optional, Sequence, Tuple
 import numpy as np
 
 from quadruped_control.studies.cases import paper_sim_cases, random_cases, table1_cases
-from quadruped_control.studies.runner import code_fingerprint, code_source
+from quadruped_control.studies.runner import code_record
 from quadruped_control.studies.trial import TrialSpec, run_many
 
 __all__ = ["build_specs", "compare", "main_study", "trial_row"]
@@ -208,9 +208,8 @@ def main_study(args: Any) -> int:
     result = compare(rows)
     # what produced it: the command, the code's fingerprint and, on the tank plant, which tank.yaml (as
     # given, so that a result kept in the repository names no path of the machine that ran it)
-    result.update(study="schemes", command=getattr(args, "command", None), code=code_fingerprint(),
-                  code_source=code_source(), wall_time=wall, trials=len(rows), perturbed_starts=args.perturbed,
-                  perturbation_deg=PERTURBATION_DEG, plant=plant,
+    result.update(study="schemes", command=getattr(args, "command", None), **code_record(), wall_time=wall,
+                  trials=len(rows), perturbed_starts=args.perturbed, perturbation_deg=PERTURBATION_DEG, plant=plant,
                   tank_yaml=(args.tank_yaml or "config/tank.yaml") if plant == "tank" else None, rows=rows)
     with open(os.path.join(out, "schemes.json"), "w") as stream:
         json.dump(result, stream, indent=1, allow_nan=False)
