@@ -45,7 +45,11 @@ Design (:func:`main_study`):
    two groups (``--cv-evaluations`` sets) predicts the held-out group; the baseline is config/tank.yaml
    with one factor that slows everything, the paw drag scale (the stroke's thrust), fitted by a grid on
    the same training groups.
-4. Ensemble: the best distinct sets of the full fit (``--ensemble``), written as tank.yaml files.
+4. Ensemble: the best distinct sets of the full fit (``--ensemble``, :func:`distinct_best`), written as
+   tank.yaml files. Each fold forms its own ensemble the same way from its fit and runs every member on
+   its held-out group: the ensemble's prediction (:func:`ensemble_rows`, the members' median per
+   experiment) is scored like the fold's best set, and :func:`coverage` counts the experiments whose
+   robot value lies within the members' spread.
 
 The report adds, per group, what the misses have in common (:func:`timing_bias`): how much slower the
 robot is than the model in each timing metric, the median overshoots, and how much sooner yaw rises than
@@ -74,8 +78,9 @@ from quadruped_control.studies.runner import code_record, describe_source
 from quadruped_control.studies.trial import TrialSpec, run_batch, run_many
 
 __all__ = ["BOUNDS", "Evaluator", "FAILED_CASE_COST", "GROUPS", "PARAMETERS", "STARTS", "WEIGHTS", "best_on",
-           "case_cost", "fit", "morris_sets", "nominal_values", "objective", "plot_report", "polish", "targets",
-           "tank_overrides", "timing_bias", "update_tank_yaml", "yaw_first_ratio"]
+           "case_cost", "coverage", "distinct_best", "ensemble_prediction", "ensemble_rows", "fit", "morris_sets",
+           "nominal_values", "objective", "plot_report", "polish", "targets", "tank_overrides", "timing_bias",
+           "update_tank_yaml", "yaw_first_ratio"]
 
 #: (name, low, high): bounds with their physical reason in docs/identification.md
 PARAMETERS: Tuple[Tuple[str, float, float], ...] = (
@@ -680,6 +685,92 @@ def baseline(evaluate: Callable, nominal: Dict[str, float], cases: Sequence[int]
     return min(evaluate(sets, cases, tag), key=lambda r: r["objective"])
 
 
+def distinct_best(results: Sequence[Dict[str, Any]], names: Sequence[str], size: int) -> List[Dict[str, Any]]:
+    """The first ``size`` results (best first) whose values of ``names``, rounded to 4 digits, differ: a
+    search revisits sets that differ only in their last bits, which would fill an ensemble with copies."""
+    chosen, seen = [], set()
+    for result in results:
+        key = tuple(round(result["values"][n], 4) for n in names)
+        if key not in seen:
+            seen.add(key)
+            chosen.append(result)
+        if len(chosen) >= size:
+            break
+    return chosen
+
+
+def _median_or_none(values: Sequence[Optional[float]]) -> Optional[float]:
+    """The median of the values that exist, if more than half of them do (the majority has a value); None
+    otherwise (most members never rose or never settled)."""
+    present = sorted(v for v in values if v is not None)
+    return float(np.median(present)) if 2 * len(present) > len(values) else None
+
+
+def ensemble_rows(members: Sequence[Sequence[Dict[str, Any]]]) -> List[Dict[str, Any]]:
+    """The ensemble's prediction of each experiment, as a comparison row (:func:`paper_experiments.
+    comparison_rows`) that :func:`targets` and :func:`case_cost` score like a single set's: settled when
+    more than half the members settle; each metric (t_r, t_s, e_ss, M_p and yaw's) the median over the
+    members that have it, None where most have none. ``members``: each member's rows, the same
+    experiments in the same order."""
+    out = []
+    for rows in zip(*members):
+        first = rows[0]
+        sims = [r["sim"] for r in rows]
+        # the attitudes at the start are the experiment's, the same for every member
+        sim = dict(first["sim"], **{k: _median_or_none([s[k] for s in sims]) for k in ("t_r", "t_s", "e_ss", "M_p")})
+        sim["yaw"] = {k: _median_or_none([s["yaw"][k] for s in sims]) for k in ("t_r", "t_s", "e_ss", "M_p")}
+        settled = 2 * sum(bool(r["settled_sim"]) for r in rows) > len(rows)
+        sim["t_s"] = sim["t_s"] if settled else None
+        if "marks" in sim:  # which axis was the worst differs between members: the median marks none
+            sim["marks"] = ""
+        out.append(dict(first, sim=sim, settled_sim=settled))
+    return out
+
+
+def _covers(paper: Optional[float], sims: Sequence[Optional[float]]) -> bool:
+    """Whether the robot's value lies within the members' spread, a missing value (never rose or settled
+    within the trial) counting as later than any: a robot that did not settle is covered by any member
+    that did not."""
+    finite = [v for v in sims if v is not None]
+    if paper is None:
+        return len(finite) < len(sims)
+    return bool(finite) and min(finite) <= paper and (paper <= max(finite) or len(finite) < len(sims))
+
+
+def coverage(members: Sequence[Sequence[Dict[str, Any]]]) -> Dict[str, int]:
+    """How many experiments the ensemble's spread covers (:func:`_covers`): the robot's t_s (its outcome
+    included), t_r and yaw t_s (where the paper reports one) against the members' values. An ensemble that
+    covers few is more certain than the model's fit to Table 1 allows."""
+    counts = {"cases": 0, "t_s": 0, "t_r": 0, "yaw_t_s": 0, "yaw_t_s_reported": 0}
+    for rows in zip(*members):
+        paper = rows[0]["paper"]
+        counts["cases"] += 1
+        counts["t_s"] += _covers(paper["t_s"], [r["sim"]["t_s"] for r in rows])
+        counts["t_r"] += _covers(paper["t_r"], [r["sim"]["t_r"] for r in rows])
+        if paper["yaw"]["t_s"] is not None:
+            counts["yaw_t_s_reported"] += 1
+            counts["yaw_t_s"] += _covers(paper["yaw"]["t_s"], [r["sim"]["yaw"]["t_s"] for r in rows])
+    return counts
+
+
+def ensemble_prediction(members: Sequence[Dict[str, Any]], band: float = 1.0) -> Optional[Dict[str, Any]]:
+    """An ensemble's members run on the same experiments (:class:`Evaluator` results) -> its prediction
+    (:func:`ensemble_rows`) scored like one set's (objective with the timing ``band`` of :func:`case_cost`,
+    :func:`targets`), each member's objective and counts, and the spread's :func:`coverage`. The Table-1
+    experiments only: the slow-recovery checks stay in each member's own objective. A member with an
+    experiment that could not run is left out of the median and the spread (its rows lack that experiment)
+    and counted in ``left_out``; None if no member ran every experiment."""
+    complete = [m for m in members if not m["failed"]]
+    if not complete:
+        return None
+    member_rows = [m["rows"] for m in complete]
+    rows = ensemble_rows(member_rows)
+    return {"members": len(complete), "left_out": len(members) - len(complete),
+            "objective": float(sum(case_cost(r, band=band) for r in rows)),
+            "targets": targets(rows), "rows": rows, "member_objectives": [m["objective"] for m in members],
+            "member_targets": [m["targets"] for m in members], "coverage": coverage(member_rows)}
+
+
 def _without_rows(result: Dict[str, Any]) -> Dict[str, Any]:
     return {k: v for k, v in result.items() if k != "rows"}
 
@@ -746,17 +837,15 @@ def main_study(args: argparse.Namespace) -> int:
         fold_fit = fold_results[0]
         slow = baseline(evaluate, nominal, train, args.popsize, "base-" + group)
         predicted, slow_predicted = evaluate([fold_fit["values"], slow["values"]], held, "held-" + group)
+        # the fold's ensemble, chosen as the full fit's is, on the held-out group: its own tag, so that the
+        # labels of the trials above stay as they were before it existed
+        members = evaluate([r["values"] for r in distinct_best(fold_results, chosen, args.ensemble)], held,
+                           "ens-" + group)
         folds.append({"held_out": group, "fit": _without_rows(fold_fit), "polish": fold_polish, "search": fold_search,
                       "prediction": predicted, "baseline_fit": _without_rows(slow),
-                      "baseline_prediction": slow_predicted})
-    ensemble, seen = [], set()
-    for result in full:
-        key = tuple(round(result["values"][n], 4) for n in chosen)
-        if key not in seen:
-            seen.add(key)
-            ensemble.append(result)
-        if len(ensemble) >= args.ensemble:
-            break
+                      "baseline_prediction": slow_predicted,
+                      "ensemble_prediction": ensemble_prediction(members, evaluate.band)})
+    ensemble = distinct_best(full, chosen, args.ensemble)
     wall = time.perf_counter() - start_time
     provenance = code_record()
     note = "simulate --study identify (%d trials, code %s)" % (evaluate.trials, provenance["code"][:12])
@@ -827,6 +916,43 @@ def plot_report(report: Dict[str, Any], path: str) -> None:
     plt.close(figure)
 
 
+def _ensemble_prediction_text(folds: Sequence[Dict[str, Any]]) -> List[str]:
+    """The folds' ensembles on their held-out groups (:func:`ensemble_prediction`), and the sums over the
+    folds; nothing for reports before the folds' ensembles existed."""
+    if not any(f.get("ensemble_prediction") for f in folds):
+        return []
+    lines = ["", "The folds' ensembles on their held-out groups (each fold's best distinct sets, chosen as the full "
+             "fit's; prediction: the members' median per experiment, settled if most members settle; spread: "
+             "experiments whose robot value lies within the members' values, a member that never settles "
+             "counting as later than any):", "",
+             "| held out | members | objective | same outcome | t_s within 2x | t_r within 2x | yaw t_s within 2x "
+             "| members' t_s within 2x | spread covers t_s / t_r / yaw t_s |", "|---|---|---|---|---|---|---|---|---|"]
+    total = {k: 0 for k in ("same_outcome", "t_s_within_2x", "t_r_within_2x", "yaw_t_s_within_2x", "cases",
+                            "yaw_t_s_reported", "t_s", "t_r", "yaw_t_s")}
+    objective_sum = 0.0
+    for fold in folds:
+        e = fold.get("ensemble_prediction")
+        if not e:
+            lines.append("| %s | no member ran every experiment | | | | | | | |" % fold["held_out"])
+            continue
+        t, c = e["targets"], e["coverage"]
+        member_counts = [m["t_s_within_2x"] for m in e["member_targets"]]
+        objective_sum += e["objective"]
+        for k in ("same_outcome", "t_s_within_2x", "t_r_within_2x", "yaw_t_s_within_2x", "cases", "yaw_t_s_reported"):
+            total[k] += t[k]
+        for k in ("t_s", "t_r", "yaw_t_s"):
+            total[k] += c[k]
+        lines.append("| %s | %d%s | %.2f | %d of %d | %d | %d | %d of %d | %d-%d | %d / %d / %d of %d |" % (
+            fold["held_out"], e["members"], " (%d left out)" % e["left_out"] if e["left_out"] else "",
+            e["objective"], t["same_outcome"], t["cases"], t["t_s_within_2x"], t["t_r_within_2x"],
+            t["yaw_t_s_within_2x"], t["yaw_t_s_reported"], min(member_counts), max(member_counts),
+            c["t_s"], c["t_r"], c["yaw_t_s"], c["cases"]))
+    lines.append("| sum | | %.2f | %d of %d | %d | %d | %d of %d | | %d / %d / %d |" % (
+        objective_sum, total["same_outcome"], total["cases"], total["t_s_within_2x"], total["t_r_within_2x"],
+        total["yaw_t_s_within_2x"], total["yaw_t_s_reported"], total["t_s"], total["t_r"], total["yaw_t_s"]))
+    return lines
+
+
 def _report_text(report: Dict[str, Any], best: Dict[str, Any]) -> str:
     screening = report["screening"]
     lines = ["## Identification: %d trials, %.0f s wall" % (report["trials"], report["wall_time"]), ""]
@@ -881,6 +1007,7 @@ def _report_text(report: Dict[str, Any], best: Dict[str, Any]) -> str:
             tp["t_s_within_2x"], tb["t_s_within_2x"], tp["t_r_within_2x"], tb["t_r_within_2x"],
             tp["yaw_t_s_within_2x"], tb["yaw_t_s_within_2x"], tp["yaw_t_s_reported"])
             + (" %d / %s |" % (tp["slow_recovery_unsettled"], unsettled(tb)) if checks else ""))
+    lines += _ensemble_prediction_text(report["cross_validation"])
     polished_folds = [f for f in report["cross_validation"] if (f.get("polish") or {}).get("evaluations")]
     if polished_folds:
         lines += ["", "The folds' training objectives, CMA-ES's best -> after the compass search: " + ", ".join(

@@ -62,6 +62,69 @@ def test_targets_count_the_issue_figures() -> None:
                                                                                      is not None), failed=2)
 
 
+def _member(*rows):
+    return {"rows": list(rows), "failed": [], "objective": idf.objective(rows), "targets": idf.targets(rows)}
+
+
+def test_an_ensemble_of_copies_predicts_as_its_one_set_does() -> None:
+    rows = [_row(), _row(sim_ts=120.0), _row(paper_ts=None, sim_ts=None), _row(sim_ts=None)]
+    rows[1]["sim"]["yaw"]["t_s"] = None
+    for size in (1, 2, 5):
+        predicted = idf.ensemble_rows([rows] * size)
+        assert idf.targets(predicted) == idf.targets(rows)
+        assert idf.objective(predicted) == pytest.approx(idf.objective(rows))
+
+
+def test_the_ensemble_predicts_the_members_median_and_settles_when_most_members_do() -> None:
+    members = [[_row(sim_ts=t)] for t in (10.0, 40.0, 60.0, None)]  # 3 of 4 settle: settled, median of the three
+    (row,) = idf.ensemble_rows(members)
+    assert row["settled_sim"] and row["sim"]["t_s"] == 40.0 and row["paper"] == members[0][0]["paper"]
+    (row,) = idf.ensemble_rows([[_row(sim_ts=t)] for t in (10.0, 40.0, None, None)])  # half: not settled
+    assert not row["settled_sim"] and row["sim"]["t_s"] is None
+    members = [[_row()] for _ in range(3)]
+    for member, t_r in zip(members, (5.0, None, 7.0)):
+        member[0]["sim"]["t_r"] = t_r
+    members[2][0]["sim"]["yaw"]["t_s"] = None
+    (row,) = idf.ensemble_rows(members)
+    assert row["sim"]["t_r"] == 6.0 and row["sim"]["yaw"]["t_s"] == 30.0  # the median of those that have it
+    members[1][0]["sim"]["yaw"]["t_s"] = None
+    assert idf.ensemble_rows(members)[0]["sim"]["yaw"]["t_s"] is None  # most never settled in yaw
+
+
+def test_the_spread_covers_the_robot_where_it_lies_between_the_members() -> None:
+    def spread(paper_ts, *sim_ts):
+        return idf.coverage([[_row(paper_ts=paper_ts, sim_ts=t)] for t in sim_ts])["t_s"]
+
+    assert spread(50.0, 30.0, 60.0) == 1 and spread(50.0, 50.0) == 1
+    assert spread(50.0, 60.0, 70.0) == 0 and spread(50.0, 20.0, 30.0) == 0  # all later, all sooner
+    assert spread(50.0, 20.0, None) == 1  # a member that never settles is later than any
+    assert spread(50.0, None, None) == 0  # ... but a robot that settled is not covered by none that did
+    assert spread(None, 20.0, None) == 1 and spread(None, 20.0, 30.0) == 0  # the robot did not settle
+    members = [[_row(), _row()], [_row(), _row()]]
+    for member in members:
+        member[1]["paper"]["yaw"]["t_s"] = None  # the paper reports no yaw settling time for the second
+    members[1][0]["sim"]["yaw"]["t_s"] = 90.0  # the first's robot yaw 30 s: within 30-90 s
+    assert idf.coverage(members) == {"cases": 2, "t_s": 2, "t_r": 2, "yaw_t_s": 1, "yaw_t_s_reported": 1}
+    members[0][0]["sim"]["yaw"]["t_s"] = 40.0
+    assert idf.coverage(members)["yaw_t_s"] == 0
+
+
+def test_an_ensemble_prediction_leaves_out_a_member_that_could_not_run_every_experiment() -> None:
+    good = [_member(_row(), _row(sim_ts=200.0)) for _ in range(2)]
+    broken = dict(_member(_row(sim_ts=None)), failed=[{"case": 1, "label": "x", "reason": "diverged"}])
+    e = idf.ensemble_prediction(good + [broken])
+    assert e["members"] == 2 and e["left_out"] == 1 and len(e["member_targets"]) == 3
+    assert e["targets"] == idf.targets(good[0]["rows"]) and e["coverage"]["cases"] == 2
+    assert idf.ensemble_prediction([broken]) is None
+
+
+def test_distinct_best_skips_sets_that_differ_only_in_their_last_bits() -> None:
+    results = [{"values": {"a": v, "b": 1.0}} for v in (0.1, 0.1 + 1e-9, 0.2, 0.3)]
+    assert [r["values"]["a"] for r in idf.distinct_best(results, ["a"], 2)] == [0.1, 0.2]
+    assert len(idf.distinct_best(results, ["b"], 3)) == 1  # b alone: all the same set
+    assert len(idf.distinct_best(results, ["a", "b"], 8)) == 3
+
+
 def test_timing_bias_is_the_geometric_mean_of_paper_over_simulation_per_group() -> None:
     """Per group: exp(mean ln(paper / sim)) over the experiments where both report the metric (0.5 s
     floor), their number, and each side's median overshoot; groups without rows are left out."""
@@ -263,13 +326,19 @@ def test_identify_cli_tiny_run(tmp_path) -> None:
     assert [f["held_out"] for f in report["cross_validation"]] == list(idf.GROUPS)
     for fold, cases in zip(report["cross_validation"], (6, 6, 3)):
         assert fold["prediction"]["targets"]["cases"] == cases == fold["baseline_prediction"]["targets"]["cases"]
+        # the fold's own ensemble (up to --ensemble distinct sets of its fit) on the held-out group
+        ensemble = fold["ensemble_prediction"]
+        assert 1 <= ensemble["members"] <= 2 and ensemble["targets"]["cases"] == cases
+        assert ensemble["coverage"]["cases"] == cases and len(ensemble["rows"]) == cases
     assert len(report["ensemble_files"]) == 2
     # what produced the report: the command as given and the code's fingerprint, in the report and each set
     assert report["command"][:4] == ["python", "-m", "quadruped_control.simulate", "--study"]
     assert "--include" in report["command"] and report["code"] == code_fingerprint()
     assert report["code_source"] == code_source()  # the commit, and any file that differs from it
     with open(os.path.join(out, "identify.md")) as stream:
-        assert "Code %s (%s)." % (report["code"], describe_source(report["code_source"])) in stream.read()
+        text = stream.read()
+    assert "Code %s (%s)." % (report["code"], describe_source(report["code_source"])) in text
+    assert "The folds' ensembles on their held-out groups" in text
     # every set the run tried, joined to its trials by their label prefix
     with open(os.path.join(out, "sets.json")) as stream:
         tried = json.load(stream)
@@ -397,8 +466,9 @@ def test_a_polish_added_to_an_earlier_run_reuses_its_searches_trials(tmp_path) -
                                                            "cv-roll+pitch-pol"))}
     # four polishes of four sets each: the full fit's on 15 experiments, each fold's on its training groups
     assert len(polishes) == 4 * (15 + 9 + 9 + 12)
-    # and the held-out predictions of the folds whose polish found a better set; nothing else ran again
-    assert all(name.startswith("held-") for name in added - polishes), sorted(added - polishes)[:5]
+    # and the held-out predictions (best set and ensemble) of the folds whose polish found a better set;
+    # nothing else ran again
+    assert all(name.startswith(("held-", "ens-")) for name in added - polishes), sorted(added - polishes)[:5]
     assert polished["fit"]["search"]["sets"] == first["fit"]["search"]["sets"] + 4
 
 
