@@ -702,7 +702,7 @@ def distinct_best(results: Sequence[Dict[str, Any]], names: Sequence[str], size:
 def _median_or_none(values: Sequence[Optional[float]]) -> Optional[float]:
     """The median of the values that exist, if more than half of them do (the majority has a value); None
     otherwise (most members never rose or never settled)."""
-    present = sorted(v for v in values if v is not None)
+    present = [v for v in values if v is not None]
     return float(np.median(present)) if 2 * len(present) > len(values) else None
 
 
@@ -719,11 +719,10 @@ def ensemble_rows(members: Sequence[Sequence[Dict[str, Any]]]) -> List[Dict[str,
         # the attitudes at the start are the experiment's, the same for every member
         sim = dict(first["sim"], **{k: _median_or_none([s[k] for s in sims]) for k in ("t_r", "t_s", "e_ss", "M_p")})
         sim["yaw"] = {k: _median_or_none([s["yaw"][k] for s in sims]) for k in ("t_r", "t_s", "e_ss", "M_p")}
-        settled = 2 * sum(bool(r["settled_sim"]) for r in rows) > len(rows)
-        sim["t_s"] = sim["t_s"] if settled else None
         if "marks" in sim:  # which axis was the worst differs between members: the median marks none
             sim["marks"] = ""
-        out.append(dict(first, sim=sim, settled_sim=settled))
+        # settled, as in comparison_rows, is having a t_s: the median has one when more than half the members do
+        out.append(dict(first, sim=sim, settled_sim=sim["t_s"] is not None))
     return out
 
 
