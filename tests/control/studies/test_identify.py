@@ -62,6 +62,20 @@ def test_targets_count_the_issue_figures() -> None:
                                                                                      is not None), failed=2)
 
 
+def test_a_reported_zero_is_met_by_a_simulated_zero_alone() -> None:
+    # Table 1's yaw t_s 0.00 (pitch 15, roll+pitch 30): the heading started inside the band and stayed
+    assert pe.within_factor(0.0, 0.0)
+    assert not pe.within_factor(0.3, 0.0) and not pe.within_factor(None, 0.0) and not pe.within_factor(0.0, 5.0)
+    assert pe.within_factor(10.0, 5.0) and pe.within_factor(2.5, 5.0) and not pe.within_factor(10.01, 5.0)
+    assert not pe.within_factor(5.0, None) and pe.within_factor(14.9, 5.0, factor=3.0)
+    rows = [_row(), _row(), _row()]
+    rows[0]["paper"]["yaw"]["t_s"], rows[0]["sim"]["yaw"]["t_s"] = 0.0, 0.0
+    rows[1]["paper"]["yaw"]["t_s"], rows[1]["sim"]["yaw"]["t_s"] = 0.0, 0.4  # left the band, came back
+    counts = idf.targets(rows)
+    assert (counts["yaw_t_s_within_2x"], counts["yaw_t_s_reported"]) == (2, 3)
+    assert idf.case_cost(rows[0]) == 0.0  # the objective already counted the 0.00 pair as met
+
+
 def _member(*rows):
     return {"rows": list(rows), "failed": [], "objective": idf.objective(rows), "targets": idf.targets(rows)}
 
