@@ -1,12 +1,11 @@
 """Identification of the tank plant against the paper's Table 1: screening, fit, cross-validation.
 
-Parameters and their physically plausible bounds (:data:`PARAMETERS`; the reasons in
-docs/identification.md): the tank's uncertain estimates (centre of buoyancy, hook, net weight, rope
-length, torso added mass, servo speed, paw drag) and the candidate effects of
-:mod:`quadruped_control.sim.plants.tank` (appendage damping, linear and quadratic, roll/pitch and yaw;
-rope torsion; the paws' wake, fraction, time constant and the body's share; loaded servos; the servos'
-lag; the body wake, fraction and time constant; the floating block, its mobility 1 / m_b, drag and tie;
-the paws' buoyancy beyond robot.yaml's estimate).
+Parameters and their physically plausible bounds (:data:`PARAMETERS`; the reasons in docs/identification.md): the tank's
+uncertain estimates (centre of buoyancy, hook, net weight, rope length, torso added mass, servo speed, paw drag) and the
+candidate effects of :mod:`quadruped_control.sim.plants.tank` (appendage damping, linear and quadratic, roll/pitch and
+yaw; rope torsion and its relaxing twist; the paws' wake, fraction, time constant and the body's share; loaded servos;
+the servos' lag; the body wake, fraction and time constant; the floating block, its mobility 1 / m_b, drag and tie; the
+paws' buoyancy beyond robot.yaml's estimate).
 Every set is run on the batched simulator (:mod:`quadruped_control.sim.batch`), the 15 experiments of
 Table 1 with the experiment gains and rate-limited servos, 160 s each.
 
@@ -123,6 +122,9 @@ PARAMETERS: Tuple[Tuple[str, float, float], ...] = (
     #                                        could not hold Table 1's 45 deg (0.79 rad) tilts, which the robot did
     ("tether_relaxing_stiffness", 0.0, 0.5),  # N m/rad: EI / L of a 6-8 mm jacketed cable, 0.004-0.5
     ("tether_relaxation_time", 1.0, 120.0),  # s: the cable re-hanging in the water (seconds) to its jacket's creep
+    ("torsion_relaxing_stiffness", 0.0, 0.1),  # N m/rad: GJ / L of the tether twisted at the gland (0.001-0.1), or
+    #                                            the rope's torsion in series with its block's turning
+    ("torsion_relaxation_time", 1.0, 120.0),  # s: the hanging cable untwisting in the water to its jacket's creep
 )
 
 #: Each parameter's (low, high): :data:`PARAMETERS` by name.
@@ -194,6 +196,9 @@ _PLACES: Dict[str, _Place] = {
     "tether_stiffness": _Place("tether_stiffness", (), "tether", "stiffness"),
     "tether_relaxing_stiffness": _Place("tether_relaxing_stiffness", (), "tether", "relaxing_stiffness"),
     "tether_relaxation_time": _Place("tether_relaxation_time", (), "tether", "relaxation_time"),
+    "torsion_relaxing_stiffness": _Place("rope_torsion_relaxing_stiffness", (), "suspension",
+                                         "torsion_relaxing_stiffness"),
+    "torsion_relaxation_time": _Place("rope_torsion_relaxation_time", (), "suspension", "torsion_relaxation_time"),
 }
 
 

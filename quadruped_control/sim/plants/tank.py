@@ -41,6 +41,23 @@ Candidate effects of the identification against Table 1, each zero (today's mode
   attach: about the vertical, that torque did work round closed paths of tilts and turns; along that
   twist's gradient, it pushed the tilt of a twisted rope, without bound near a swing of 180 deg, where a
   fit's trial diverged.) Acts only with the suspension on.
+- ``relaxing twist`` (``rope_torsion_relaxing_stiffness`` k_r, ``rope_torsion_relaxation_time`` tau_r,
+  :func:`~.tank_dynamics.twist_relaxation_update`): what the body's turns twist may let go over seconds. The
+  rope is tied to a floating block that can turn in the water: the rope's torsion spring in series with the
+  block's rotational drag is a Maxwell element, whose twist the block unwinds with tau_r = c_block / k_r. The
+  robot's tether leaves the enclosure's gland beside the hook (the paper, section "Robot Design") and hangs
+  to the surface: a turn of the body twists it at the gland at once, and the hanging cable untwists along its
+  length through the water, and its jacket creeps, over seconds. Both resist a turn at once and then fade.
+  A third branch of the torsion beside k_t and c_t, -k_r (theta - s) g, the relaxed twist s following the
+  whole twist theta, ds/dt = (theta - s) / tau_r, 0 at :meth:`TankModel.attach` (the rope and the tether hang
+  untwisted at a trial's start): a standard linear solid about the vertical, as the tether's bend is on the
+  tilt. A long turn builds a torque against it; the controller's integral winds up to carry the body through
+  it; at the setpoint the branch still pulls back and then fades, and the wound-up integral carries the body
+  past the setpoint and returns it as slowly as it unwinds: overshoot and slow settling that grow with the
+  turn made, in yaw and, through the SO(3) error, in the tilt the robot holds while it turns. A 6-8 mm
+  jacketed cable's torsional rigidity GJ of about 0.001-0.02 N m^2 over a twisted length of 0.2-1 m gives
+  k_r of about 0.001-0.1 N m/rad. The spring inside the step's RK4, s held over the step and carried exactly
+  after it (tau_r >= 0.1 s). k_r = 0 (the default) is today's model exactly.
 
 - ``paw wake`` (:func:`paw_wake_update`): a paw that strokes sets the water around it moving, and the
   recovery stroke reverses into that water. Each paw carries a wake velocity w_i (body axes) that relaxes
@@ -196,8 +213,8 @@ from quadruped_control.sim.plants.tank_dynamics import (TankConstants, appendage
                                                         floating_block_update, hook_friction_update, leg_sums,
                                                         mass_solver, paw_joint_loads, paw_wake_update, rope_force,
                                                         rope_torsion_torque, rope_twist, tank_forces, tank_rk4,
-                                                        tether_relaxation_update, tilt_vector, whole_twist,
-                                                        wound_friction_limit)
+                                                        tether_relaxation_update, tilt_vector,
+                                                        twist_relaxation_update, whole_twist, wound_friction_limit)
 
 __all__ = ["TankModel", "TankParams", "TurnUnresolved", "VALIDITY_NOTE", "appendage_damping_torque",
            "hydrostatic_wrench", "load_tank_params", "rope_force", "rope_torsion_torque", "rope_twist",
@@ -280,8 +297,9 @@ HOOK_FRICTION_ROLL_RATIO_RANGE = (0.1, 10.0)
 #: cable's EI / L (0.05 N m^2 over 0.1 m); a larger one is a unit slip (N mm for N m), not a cable.
 MAX_TETHER_STIFFNESS = 2.0
 
-#: The tether's relaxation times tank.yaml accepts (s): from ten 10 ms steps (its relaxation is carried
-#: exactly, but a faster one is a viscous damper, not a bend) to nearly three hours (a cable that never relaxes).
+#: The tether's relaxation times tank.yaml accepts (s), for its bend and the torsion's relaxing twist alike: from
+#: ten 10 ms steps (the relaxation is carried exactly, but a faster one is a viscous damper, not a spring) to
+#: nearly three hours (a cable that never relaxes).
 TETHER_RELAXATION_TIME_RANGE = (0.1, 10000.0)
 
 #: Largest residual field at the IMU (its norm), in units of the earth's horizontal field: at 1 the levelled
@@ -328,6 +346,10 @@ class TankParams:
     #: rope torsion about the vertical: stiffness (N m/rad) and damping (N m s/rad)
     rope_torsion_stiffness: float = 0.0
     rope_torsion_damping: float = 0.0
+    #: the torsion's relaxing branch (:func:`~.tank_dynamics.rope_torsion_torque`): its stiffness k_r (N m/rad;
+    #: 0: off) and relaxation time tau_r (s)
+    rope_torsion_relaxing_stiffness: float = 0.0
+    rope_torsion_relaxation_time: float = 10.0
     #: paw wake: fraction kappa of the paw's velocity its wake reaches, and its time constant tau_w (s)
     paw_wake_fraction: float = 0.0
     paw_wake_time_constant: float = 0.3
@@ -371,7 +393,7 @@ class TankParams:
             if not (math.isfinite(value) and value > 0.0):
                 raise ParameterError("tank %s must be positive and finite, got %r" % (name, value))
         for name in ("rope_damping", "added_mass_scale", "paw_added_mass_scale", "paw_drag_scale",
-                     "rope_torsion_stiffness", "rope_torsion_damping"):
+                     "rope_torsion_stiffness", "rope_torsion_damping", "rope_torsion_relaxing_stiffness"):
             value = getattr(self, name)
             if not (math.isfinite(value) and value >= 0.0):
                 raise ParameterError("tank %s must be finite and >= 0, got %r" % (name, value))
@@ -405,6 +427,9 @@ class TankParams:
                 raise ParameterError("tank %s must be in [0, %g] N m/rad (0: off), got %r"
                                      % (name, MAX_TETHER_STIFFNESS, value))
         low, high = TETHER_RELAXATION_TIME_RANGE
+        if not (math.isfinite(self.rope_torsion_relaxation_time) and low <= self.rope_torsion_relaxation_time <= high):
+            raise ParameterError("tank rope_torsion_relaxation_time must be in [%g, %g] s, got %r"
+                                 % (low, high, self.rope_torsion_relaxation_time))
         if not (math.isfinite(self.tether_relaxation_time) and low <= self.tether_relaxation_time <= high):
             raise ParameterError("tank tether_relaxation_time must be in [%g, %g] s, got %r"
                                  % (low, high, self.tether_relaxation_time))
@@ -482,7 +507,8 @@ def tank_params_from_dict(data: Mapping[str, Any]) -> TankParams:
                          ("suspension", "hydrostatics", "torso_added_mass", "paw_added_mass", "drag"))
     rope = check_keys(data["suspension"], "suspension",
                       ("hook", "length", "stiffness", "damping", "torsion_stiffness", "torsion_damping",
-                       "block_mass", "block_drag", "block_tie_stiffness", "friction_arm", "friction_angle",
+                       "torsion_relaxing_stiffness", "torsion_relaxation_time", "block_mass", "block_drag",
+                       "block_tie_stiffness", "friction_arm", "friction_angle",
                        "friction_static_ratio", "friction_stribeck_rate", "friction_roll_ratio", "friction_wrap"),
                       required=("hook", "length", "stiffness", "damping"))
     hydro = check_keys(data["hydrostatics"], "hydrostatics",
@@ -530,6 +556,10 @@ def tank_params_from_dict(data: Mapping[str, Any]) -> TankParams:
         appendage_damping_quadratic=axes(appendage, "quadratic", 100.0),
         rope_torsion_stiffness=number(rope.get("torsion_stiffness", 0.0), "suspension.torsion_stiffness", 0.0, 1e4),
         rope_torsion_damping=number(rope.get("torsion_damping", 0.0), "suspension.torsion_damping", 0.0, 1e4),
+        rope_torsion_relaxing_stiffness=number(rope.get("torsion_relaxing_stiffness", 0.0),
+                                               "suspension.torsion_relaxing_stiffness", 0.0, 1e4),
+        rope_torsion_relaxation_time=number(rope.get("torsion_relaxation_time", 10.0),
+                                            "suspension.torsion_relaxation_time", *TETHER_RELAXATION_TIME_RANGE),
         block_mass=number(rope.get("block_mass", 0.0), "suspension.block_mass", 0.0, 100.0),
         block_drag=number(rope.get("block_drag", 2.0), "suspension.block_drag", 0.0, 1e4),
         block_tie_stiffness=number(rope.get("block_tie_stiffness", 0.0), "suspension.block_tie_stiffness", 0.0,
@@ -649,6 +679,11 @@ class TankModel(FloatingBaseModel):
         #: something reads it (the rope's torsion, the wound tether); 0 otherwise.
         self.twist = 0.0
         self.twist_rotation: Tuple[float, ...] = tuple(self.untwisted.ravel().tolist())
+        #: The torsion's relaxed twist s (rad; :func:`~.tank_dynamics.twist_relaxation_update`): plant state, 0 at
+        #: :meth:`attach`, carried to each step's end where the relaxing branch is on.
+        self.twist_relaxed = 0.0
+        #: Whether the torsion's relaxing branch is on (the batch asks its constants the same).
+        self.relaxes_twist = bool(tank.suspension) and tank.rope_torsion_relaxing_stiffness > 0.0
         self._body_m = tuple(self.body_mass_matrix.ravel().tolist())
         #: Each paw's wake velocity (body axes, m/s; :func:`~.tank_dynamics.paw_wake_update`): plant state
         #: beside the rigid body's, zero at :meth:`attach`.
@@ -685,7 +720,8 @@ class TankModel(FloatingBaseModel):
         self._wound = self._friction_limit > 0.0 and tank.hook_friction_wrap > 0.0
         #: Whether this plant carries :attr:`twist` (the batch reads it too, one source for both plants).
         self.counts_twist = bool(tank.suspension) and (tank.rope_torsion_stiffness > 0.0
-                                                       or tank.rope_torsion_damping > 0.0 or self._wound)
+                                                       or tank.rope_torsion_damping > 0.0 or self.relaxes_twist
+                                                       or self._wound)
         # the step and the wound tether's turn check_step_stability has covered (s, rad)
         self._checked_step = _MAX_STEP
         self.checked_turn = math.pi
@@ -717,9 +753,9 @@ class TankModel(FloatingBaseModel):
         period) resolves every stiff term of these parameters. Each is a rate of the linearised plant
         against the body's own mass and inertia (the torso's, with added mass, without the paws': the
         smaller, so the stricter):
-        - in the RK4 step, |lambda| dt <= 2.5: the appendage damping c / I and, at 1 rad/s, 2 k |w| / I
-          per axis; the rope's torsion c_t / I_zz and sqrt(k_t / I_zz); the rope's damping c / M_z and
-          stiffness sqrt(k / M_z), and both again through the hook's arm h about the tilts (c h^2 / I,
+        - in the RK4 step, |lambda| dt <= 2.5: the appendage damping c / I and, at 1 rad/s, 2 k |w| / I per axis; the
+          rope's torsion c_t / I_zz and sqrt((k_t + k_r) / I_zz) (k_r its relaxing branch, at once); the rope's damping
+          c / M_z and stiffness sqrt(k / M_z), and both again through the hook's arm h about the tilts (c h^2 / I,
           sqrt(k h^2 / I));
         - the hook friction's presliding spring, held over the step (:func:`~.tank_dynamics.hook_friction_update`
           takes the rate at the step's start, so body and tie advance as symplectic Euler, stable below 4):
@@ -749,9 +785,10 @@ class TankModel(FloatingBaseModel):
             if tank.rope_torsion_damping / inertia[2] > limit:
                 problems.append("suspension.torsion_damping = %g N m s/rad > %.3g" % (
                     tank.rope_torsion_damping, limit * inertia[2]))
-            if tank.rope_torsion_stiffness / inertia[2] > limit ** 2:
-                problems.append("suspension.torsion_stiffness = %g N m/rad > %.3g" % (
-                    tank.rope_torsion_stiffness, limit ** 2 * inertia[2]))
+            twist_stiffness = tank.rope_torsion_stiffness + tank.rope_torsion_relaxing_stiffness
+            if twist_stiffness / inertia[2] > limit ** 2:
+                problems.append("suspension.torsion_stiffness + torsion_relaxing_stiffness = %g N m/rad > %.3g" % (
+                    twist_stiffness, limit ** 2 * inertia[2]))
             rope_mass = min(heave_mass, tilt_inertia / arm2 if arm2 > 0.0 else math.inf)  # at the hook
             if tank.rope_damping / rope_mass > limit:
                 problems.append("suspension.damping = %g N s/m > %.3g" % (tank.rope_damping, limit * rope_mass))
@@ -801,6 +838,7 @@ class TankModel(FloatingBaseModel):
         self.untwisted = np.array(state.rotation, dtype=float)
         self.twist = 0.0
         self.twist_rotation = tuple(self.untwisted.ravel().tolist())
+        self.twist_relaxed = 0.0  # the rope and the tether hang untwisted and relaxed
         self.wake[:] = 0.0  # still water
         self.body_wake[:] = 0.0
         self.hook_friction[:] = 0.0  # the tie unloaded
@@ -832,7 +870,9 @@ class TankModel(FloatingBaseModel):
                 (self.torso_buoyancy - self.torso_weight) if tank.hydrostatics else 0.0, bool(tank.suspension),
                 tuple(float(x) for x in tank.hook), self._anchor,
                 (float(tank.rope_length), float(tank.rope_stiffness), float(tank.rope_damping)),
-                (float(tank.rope_torsion_stiffness), float(tank.rope_torsion_damping), self.twist),
+                (float(tank.rope_torsion_stiffness), float(tank.rope_torsion_damping), self.twist,
+                 float(tank.rope_torsion_relaxing_stiffness), float(tank.rope_torsion_relaxation_time),
+                 self.twist_relaxed),
                 self.twist_rotation,
                 tuple(float(x) for x in tank.appendage_damping_linear),
                 tuple(float(x) for x in tank.appendage_damping_quadratic), self._body_m, float(self.paw_added_mass),
@@ -933,6 +973,8 @@ class TankModel(FloatingBaseModel):
         end = chart_step_end(R0, y[0:6], y[6:9], y[9:12], dt, state)
         if self.counts_twist:
             self._count_twist(end.rotation.ravel().tolist())
+        if self.relaxes_twist:
+            self._relax_twist(dt)
         if self.bends_tether:
             self._relax_tether(end.rotation.ravel().tolist(), dt)
         return end
@@ -945,6 +987,15 @@ class TankModel(FloatingBaseModel):
         self.tether_relaxed = tether_relaxation_update(rotation, k[at], dt)
         self._constants = k[:at] + (k[at][:3] + tuple(self.tether_relaxed),) + k[at + 1:]
 
+    def _relax_twist(self, dt: float) -> None:
+        """:func:`~.tank_dynamics.twist_relaxation_update` over a step whose end :attr:`twist` has been carried to:
+        the relaxed twist moves, and the constants carry it."""
+        k = self._constants
+        at = _AT["torsion"]
+        self.twist_relaxed = twist_relaxation_update(self.twist, self.twist_relaxed,
+                                                     self.tank.rope_torsion_relaxation_time, dt)
+        self._constants = k[:at] + (k[at][:5] + (self.twist_relaxed,),) + k[at + 1:]
+
     def _count_twist(self, rotation: Sequence[float]) -> None:
         """Carry :attr:`twist` to ``rotation`` (row-major; a step's start or end: the batch counts at the same
         two points, so the two plants agree to the bit) and into the constants' torsion fields. At a step's
@@ -954,8 +1005,8 @@ class TankModel(FloatingBaseModel):
         if self._wound and abs(self.twist) > self.checked_turn:
             self.check_turn(self.twist)
         k = self._constants
-        at = _AT["torsion"]  # the torsion's (stiffness, damping, twist), then the attitude the twist belongs to
-        self._constants = k[:at] + ((k[at][0], k[at][1], self.twist), self.twist_rotation) + k[at + 2:]
+        at = _AT["torsion"]  # the torsion's (stiffness, damping, twist, ...), then the attitude the twist belongs to
+        self._constants = k[:at] + (k[at][:2] + (self.twist,) + k[at][3:], self.twist_rotation) + k[at + 2:]
 
     def _advance_block(self, state: RigidBodyState, R0: Tuple[float, ...], dt: float) -> None:
         """:func:`~.tank_dynamics.floating_block_update` over this step (the body state of its start):
@@ -1028,8 +1079,9 @@ class TankModel(FloatingBaseModel):
         return 0.5 * float(nu @ self.mass_matrix(legs.foot_positions.tolist()) @ nu)
 
     def potential_energy(self, state: RigidBodyState, q: Any) -> float:
-        """Paw buoyancy + torso weight and buoyancy + elastic rope energy + the tether's bend (both branches,
-        against the relaxed tilt as it stands), J. The rope's twist is counted from :attr:`twist`: call it on
+        """Paw buoyancy + torso weight and buoyancy + elastic rope energy (its twist's relaxing branch against
+        the relaxed twist as it stands) + the tether's bend (both branches, against the relaxed tilt as it
+        stands), J. The rope's twist is counted from :attr:`twist`: call it on
         the state the plant last stepped to (or one within half a turn)."""
         energy = super().potential_energy(state, q)
         R, p = state.rotation, state.position
@@ -1041,6 +1093,8 @@ class TankModel(FloatingBaseModel):
                 energy += 0.5 * self.tank.rope_stiffness * stretch * stretch
             twist = whole_twist(R.ravel().tolist(), self.twist_rotation, self.twist)
             energy += 0.5 * self.tank.rope_torsion_stiffness * twist * twist
+            if self.relaxes_twist:
+                energy += 0.5 * self.tank.rope_torsion_relaxing_stiffness * (twist - self.twist_relaxed) ** 2
         if self.bends_tether:
             theta = np.array(tilt_vector(R.ravel().tolist()))
             bent = theta - np.array(self.tether_relaxed)

@@ -27,14 +27,15 @@ from quadruped_control.sim.plants.tank import TankModel, TankParams, TurnUnresol
 from quadruped_control.sim.plants.tank_dynamics import (TANK_CONSTANT_FIELDS, body_wake_update, floating_block_update,
                                                         hook_friction_update, leg_sums, mass_solver, paw_joint_loads,
                                                         paw_wake_update, tank_rk4, tether_relaxation_update,
-                                                        whole_twist, wound_friction_limit)
+                                                        twist_relaxation_update, whole_twist, wound_friction_limit)
 
 __all__ = ["TankPlantBatch", "tank_batch_step", "tank_trial_step"]
 
 
 @jitable
 def _carry_twist(rotation, reference, torsion) -> None:
-    """The rope's whole twist ``torsion[2]`` carried from the attitude ``reference`` (9, in place) to
+    """The rope's whole twist ``torsion[2]`` (``torsion``: the six torsion constants of
+    :data:`~.tank_dynamics.TankConstants`) carried from the attitude ``reference`` (9, in place) to
     ``rotation`` (9 floats), as TankModel._count_twist."""
     torsion[2] = whole_twist(rotation, reference, torsion[2])
     for k in range(9):
@@ -100,6 +101,8 @@ def tank_trial_step(i, frames, five_bar, net_paw_buoyancy, drag_constant, drag, 
                R[i, 2, 2])
         if counts_twist[i]:
             _carry_twist(end, untwisted[i], torsion[i])
+            if torsion[i, 3] > 0.0:  # the relaxed twist carried to the step's end, as TankModel._relax_twist
+                torsion[i, 5] = twist_relaxation_update(torsion[i, 2], torsion[i, 5], torsion[i, 4], dt)
         if bends_tether:  # the tether's relaxed tilt carried to the step's end, as TankModel._relax_tether
             tether[i, 3], tether[i, 4], tether[i, 5] = tether_relaxation_update(end, tether[i], dt)
     return True

@@ -4,8 +4,9 @@ per-trial plant (:class:`~quadruped_control.sim.plants.tank.TankModel`, plain Py
 when it is installed, :mod:`quadruped_common.jit`).
 
 - :func:`rope_force`, :func:`rope_twist`, :func:`whole_twist`, :func:`rope_torsion_torque`,
-  :func:`appendage_damping_torque`, :func:`paw_wake_update`, :func:`body_wake_update`, :func:`floating_block_update`,
-  :func:`hook_friction_update`, :func:`wound_friction_limit`: the tank's own force laws, the paws' wake,
+  :func:`twist_relaxation_update`, :func:`appendage_damping_torque`, :func:`paw_wake_update`,
+  :func:`body_wake_update`, :func:`floating_block_update`, :func:`hook_friction_update`,
+  :func:`wound_friction_limit`: the tank's own force laws, the paws' wake,
   the water the body's appendages set turning, the floating block the rope hangs from and the friction
   where the rope is tied to the hook, with the tether wound round it (physics and sources in
   :mod:`.tank`'s docstring);
@@ -39,18 +40,19 @@ __all__ = ["TANK_CONSTANT_AT", "TANK_CONSTANT_FIELDS", "TankConstants", "appenda
            "floating_block_update", "hook_friction_update", "leg_sums",
            "mass_solver", "paw_joint_loads", "paw_wake_update", "rope_force", "rope_torsion_torque", "rope_twist",
            "solve_mass", "tank_chart_derivative", "tank_forces", "tank_rk4", "tether_bend_torque",
-           "tether_relaxation_update", "tilt_vector", "whole_twist", "wound_friction_limit"]
+           "tether_relaxation_update", "tilt_vector", "twist_relaxation_update", "whole_twist", "wound_friction_limit"]
 
 Vec3 = Tuple[float, float, float]
 
-#: (drag_constant, body drag coefficients (8), extra lift (torso buoyancy - weight, N), suspension (bool),
-#: hook (3, m), anchor (6: position (m) and velocity (m/s) of the rope's upper end, world), rope (length,
-#: stiffness, damping), torsion (stiffness, damping, the rope's whole twist at the step's start, rad:
-#: :func:`whole_twist`), the attitude at the step's start that twist belongs to (9), appendage damping linear (3),
-#: quadratic (3), M_RB + M_A (36), paw added mass m_a, paw wake (fraction kappa, time constant tau_w in s,
-#: body share s_b), body wake (fraction kappa_b, time constant tau_b in s), tether (6: its elastic stiffness k_e
-#: and relaxing stiffness k in N m/rad, relaxation time tau in s, and the relaxed tilt s at the step's start,
-#: world axes, rad: :func:`tether_bend_torque`))
+#: (drag_constant, body drag coefficients (8), extra lift (torso buoyancy - weight, N), suspension (bool), hook (3, m),
+#: anchor (6: position (m) and velocity (m/s) of the rope's upper end, world), rope (length, stiffness, damping),
+#: torsion (6: stiffness k_t, damping c_t, the rope's whole twist at the step's start, rad: :func:`whole_twist`, then
+#: the relaxing branch's stiffness k_r in N m/rad, its relaxation time tau_r in s and its relaxed twist s at the step's
+#: start, rad: :func:`rope_torsion_torque`), the attitude at the step's start that twist belongs to (9), appendage
+#: damping linear (3), quadratic (3), M_RB + M_A (36), paw added mass m_a, paw wake (fraction kappa, time constant tau_w
+#: in s, body share s_b), body wake (fraction kappa_b, time constant tau_b in s), tether (6: its elastic stiffness k_e
+#: and relaxing stiffness k in N m/rad, relaxation time tau in s, and the relaxed tilt s at the step's start, world
+#: axes, rad: :func:`tether_bend_torque`))
 TankConstants = Tuple[Any, ...]
 
 #: The names of :data:`TankConstants`' fields, in order: the one list that the per-trial plant (which replaces
@@ -141,12 +143,13 @@ def whole_twist(R: Sequence[float], reference_rotation: Sequence[float], referen
 
 @jitable
 def rope_torsion_torque(R: Sequence[float], R0: Sequence[float], omega: Sequence[float], stiffness: float,
-                        damping: float, reference: float) -> Vec3:
-    """Body-axes torque (N m) of a rope twisted by theta = :func:`whole_twist` (R, R0, ``reference``): the
-    spring's potential k_t theta^2 / 2 and a damper on the twist's rate, tau = -(k_t theta + c_t theta_dot) g
-    (:mod:`.tank`). ``R``, ``R0`` row-major (``R0`` the attitude where the twist was ``reference``: the
-    plants' step start, so that g stays the world vertical to first order in the step's rotation);
-    ``omega`` body axes.
+                        damping: float, reference: float, relaxing: float, relaxed: float) -> Vec3:
+    """Body-axes torque (N m) of a rope twisted by theta = :func:`whole_twist` (R, R0, ``reference``): the spring's
+    potential k_t theta^2 / 2, a damper on the twist's rate and the relaxing branch k_r (``relaxing``) against the
+    relaxed twist s (``relaxed``, held over the step, :func:`twist_relaxation_update`), tau = -(k_t theta + k_r (theta -
+    s) + c_t theta_dot) g (:mod:`.tank`, "relaxing twist"). ``R``, ``R0`` row-major (``R0`` the attitude where the twist
+    was ``reference``: the plants' step start, so that g stays the world vertical to first order in the step's
+    rotation); ``omega`` body axes.
 
     g is the twist's gradient: theta_dot = g . omega (world axes), and with Q = R R0^T,
     g = (Q_02, Q_12, 1 + Q_22) / (1 + Q_22) (from theta = 2 atan2(q_z, q_w) and q_dot = (0, omega) q / 2:
@@ -170,8 +173,20 @@ def rope_torsion_torque(R: Sequence[float], R0: Sequence[float], omega: Sequence
     by = R[1] * gx + R[4] * gy + R[7]
     bz = R[2] * gx + R[5] * gy + R[8]
     twist_rate = bx * omega[0] + by * omega[1] + bz * omega[2]
-    torque = -(stiffness * whole_twist(R, R0, reference) + damping * twist_rate)
+    theta = whole_twist(R, R0, reference)
+    torque = -(stiffness * theta + damping * twist_rate)
+    if relaxing > 0.0:  # exactly the two-branch torque without it
+        torque -= relaxing * (theta - relaxed)
     return (torque * bx, torque * by, torque * bz)
+
+
+@jitable
+def twist_relaxation_update(twist: float, relaxed: float, relaxation_time: float, dt: float) -> float:
+    """The relaxing twist's relaxed twist s (rad) after a step of ``dt`` s that ended at the whole twist
+    ``twist`` (:func:`whole_twist`): ds/dt = (theta - s) / tau_r with theta held over the step, exactly,
+    s + (1 - exp(-dt / tau_r)) (theta - s) (:func:`rope_torsion_torque`; as :func:`tether_relaxation_update`
+    for the tilt)."""
+    return relaxed + (1.0 - math.exp(-dt / relaxation_time)) * (twist - relaxed)
 
 
 @jitable
@@ -591,9 +606,9 @@ def tank_forces(k: TankConstants, feet: Sequence[Sequence[float]], drag_feet: Se
         Fbx, Fby, Fbz = r0 * Fx + r3 * Fy + r6 * Fz, r1 * Fx + r4 * Fy + r7 * Fz, r2 * Fx + r5 * Fy + r8 * Fz
         mx, my, mz = _cross(hook[0], hook[1], hook[2], Fbx, Fby, Fbz)
         fx, fy, fz, tx, ty, tz = fx + Fbx, fy + Fby, fz + Fbz, tx + mx, ty + my, tz + mz
-        if torsion[0] > 0.0 or torsion[1] > 0.0:
+        if torsion[0] > 0.0 or torsion[1] > 0.0 or torsion[3] > 0.0:
             mx, my, mz = rope_torsion_torque(R, untwisted, (wx, wy, wz), torsion[0], torsion[1],
-                                             torsion[2])
+                                             torsion[2], torsion[3], torsion[5])
             tx, ty, tz = tx + mx, ty + my, tz + mz
         # the hook's friction (exactly today's torque without it: x + 0.0 == x)
         tx, ty, tz = tx + held_torque[0], ty + held_torque[1], tz + held_torque[2]

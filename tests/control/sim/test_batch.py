@@ -169,6 +169,7 @@ def test_tank_batch_agrees_with_the_per_trial_tank_plant_bit_for_bit_over_10_s(r
                               imu_field_residual=(0.2, -0.5, 0.6), tether_stiffness=0.005,
                               tether_relaxing_stiffness=0.03, tether_relaxation_time=5.0),
              base.with_values(rope_torsion_stiffness=0.05, rope_torsion_damping=0.02, paw_drag_scale=0.6,
+                              rope_torsion_relaxing_stiffness=0.03, rope_torsion_relaxation_time=4.0,
                               paw_wake_fraction=0.5, paw_wake_time_constant=0.2, paw_wake_body_share=0.3,
                               servo_stall_torque=3.9, paw_buoyancy_offset=0.06, hook_friction_arm=0.002,
                               hook_friction_wrap=0.4),

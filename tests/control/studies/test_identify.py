@@ -218,7 +218,8 @@ def _values():
             "servo_dead_band": 0.008, "hook_friction_arm": 0.0025, "hook_friction_static_ratio": 1.4,
             "hook_friction_stribeck_rate": 0.05, "hook_friction_roll_ratio": 2.5, "hook_friction_wrap": 0.35,
             "imu_field_x": 0.1, "imu_field_y": -0.35, "imu_field_z": 0.45, "tether_stiffness": 0.015,
-            "tether_relaxing_stiffness": 0.12, "tether_relaxation_time": 25.0}
+            "tether_relaxing_stiffness": 0.12, "tether_relaxation_time": 25.0, "torsion_relaxing_stiffness": 0.02,
+            "torsion_relaxation_time": 7.0}
 
 
 def test_every_parameter_reaches_the_tank_plant_and_its_yaml_round_trips(tmp_path) -> None:
@@ -232,6 +233,7 @@ def test_every_parameter_reaches_the_tank_plant_and_its_yaml_round_trips(tmp_pat
     tank = load_tank_params(path)
     assert tank == load_tank_params().with_values(**dict(idf.tank_overrides(values)))
     assert tank.appendage_damping_quadratic == (0.1, 0.1, 0.2) and tank.rope_torsion_damping == 0.04
+    assert tank.rope_torsion_relaxing_stiffness == 0.02 and tank.rope_torsion_relaxation_time == 7.0
     assert tank.paw_wake_fraction == 0.45 and tank.paw_wake_time_constant == 0.25 and tank.paw_wake_body_share == 0.35
     assert tank.servo_stall_torque == 2.0 and idf.stall_torque_of(0.0) == 0.0
     assert tank.body_wake_fraction == 0.55 and tank.body_wake_time_constant == 7.5
@@ -245,7 +247,7 @@ def test_every_parameter_reaches_the_tank_plant_and_its_yaml_round_trips(tmp_pat
     assert tank.center_of_buoyancy == (0.0007, -0.0003, -0.0012)
     # the centre of buoyancy's and the IMU field's lines carry three parameters each, the two appendage
     # lines four
-    assert text.count("[identified] test") == 32
+    assert text.count("[identified] test") == 34
     with pytest.raises(ValueError, match="no line for net_weight"):
         idf.update_tank_yaml("hydrostatics:\n  center_of_buoyancy: [0, 0, 0]\n", {"net_weight": 1.0}, "x")
 

@@ -356,6 +356,7 @@ def test_candidate_effects_are_off_unless_configured() -> None:
     for params in (TankParams(), TANK):
         assert params.appendage_damping_linear == params.appendage_damping_quadratic == (0.0, 0.0, 0.0)
         assert params.rope_torsion_stiffness == params.rope_torsion_damping == 0.0
+        assert params.rope_torsion_relaxing_stiffness == 0.0
         assert params.paw_wake_fraction == params.body_wake_fraction == 0.0
         assert params.block_mass == 0.0  # the anchor is fixed
         assert params.hook_friction_arm == 0.0
@@ -399,10 +400,10 @@ def test_rope_torsion_is_the_twists_spring_and_damper_at_any_tilt(untwisted_rpy,
     gradient = np.array([(rope_twist(flat(R @ exp_so3(1e-6 * e)), flat(R0))
                           - rope_twist(flat(R @ exp_so3(-1e-6 * e)), flat(R0))) / 2e-6 for e in np.eye(3)])
     theta = rope_twist(flat(R), flat(R0))
-    spring = np.array(rope_torsion_torque(flat(R), flat(R0), (0.0, 0.0, 0.0), 0.7, 0.0, 0.0))
+    spring = np.array(rope_torsion_torque(flat(R), flat(R0), (0.0, 0.0, 0.0), 0.7, 0.0, 0.0, 0.0, 0.0))
     np.testing.assert_allclose(spring, -0.7 * theta * gradient, rtol=1e-7, atol=1e-9)
     omega = (0.3, -0.2, 0.5)
-    damper = np.array(rope_torsion_torque(flat(R), flat(R0), omega, 0.0, 0.4, 0.0))
+    damper = np.array(rope_torsion_torque(flat(R), flat(R0), omega, 0.0, 0.4, 0.0, 0.0, 0.0))
     np.testing.assert_allclose(damper, -0.4 * float(gradient @ omega) * gradient, rtol=1e-7, atol=1e-9)
     assert float(damper @ omega) <= 0.0
     if rpy[:2] == (0.0, 0.0) and untwisted_rpy == (0.0, 0.0, 0.0):  # about the vertical: along R^T z_hat
@@ -439,11 +440,11 @@ def test_the_ropes_torsion_acts_about_the_world_vertical_at_any_tilt(swing_deg) 
     from quadruped_control.sim.plants.tank_dynamics import rope_torsion_torque
     R = rpy_to_rot(math.radians(swing_deg), 0.0, 0.8)
     flat = R.ravel().tolist()
-    world = R @ np.array(rope_torsion_torque(flat, flat, (0.0, 0.0, 0.0), 0.1, 0.0, 2.0))
+    world = R @ np.array(rope_torsion_torque(flat, flat, (0.0, 0.0, 0.0), 0.1, 0.0, 2.0, 0.0, 0.0))
     np.testing.assert_allclose(world, [0.0, 0.0, -0.2], atol=1e-12)
     level = np.eye(3).ravel().tolist()
     if swing_deg == 170.0:  # the earlier measure, from the level attitude the rope hung in
-        torque = R @ np.array(rope_torsion_torque(flat, level, (0.0, 0.0, 0.0), 0.1, 0.0, 0.0))
+        torque = R @ np.array(rope_torsion_torque(flat, level, (0.0, 0.0, 0.0), 0.1, 0.0, 0.0, 0.0, 0.0))
         assert np.hypot(torque[0], torque[1]) == pytest.approx(0.1 * 0.8 * math.tan(math.radians(85.0)), rel=1e-9)
 
 
@@ -515,8 +516,86 @@ def test_rope_torsion_turns_the_robot_back_with_its_period_and_keeps_the_energy(
     assert abs(math.atan2(*_spin(damped, start, 2.0 * period)[-1].rotation[[1, 0], 0])) < math.radians(5.0)
 
 
+def test_the_relaxing_twist_is_a_spring_on_the_twist_less_its_relaxed_part() -> None:
+    """The torsion's relaxing branch k_r against the relaxed twist s is the rope's spring of stiffness k_r on the
+    whole twist less s, at any tilt; with k_r = 0 the torque is the two-branch torque, bit for bit."""
+    from quadruped_control.sim.plants.tank_dynamics import rope_torsion_torque
+
+    R = rpy_to_rot(0.4, -0.7, 1.1)
+    R0 = (R @ exp_so3(np.array([0.01, -0.02, 0.03]))).ravel().tolist()
+    flat, omega = R.ravel().tolist(), (0.2, -0.1, 0.4)
+    for twist, relaxed in ((1.3, 0.4), (-2.0, 0.5), (0.0, -0.3)):
+        relaxing = rope_torsion_torque(flat, R0, omega, 0.0, 0.0, twist, 0.07, relaxed)
+        spring = rope_torsion_torque(flat, R0, omega, 0.07, 0.0, twist - relaxed, 0.0, 0.0)
+        np.testing.assert_allclose(relaxing, spring, rtol=1e-12, atol=1e-15)
+        assert rope_torsion_torque(flat, R0, omega, 0.03, 0.02, twist, 0.0, relaxed) == \
+            rope_torsion_torque(flat, R0, omega, 0.03, 0.02, twist, 0.0, 0.0)
+
+
+def test_the_relaxed_twist_follows_the_twist_exactly() -> None:
+    """ds/dt = (theta - s) / tau_r with theta held: any number of steps of dt is one step of their sum."""
+    from quadruped_control.sim.plants.tank_dynamics import twist_relaxation_update
+
+    relaxed = 0.0
+    for _ in range(250):
+        relaxed = twist_relaxation_update(0.8, relaxed, 4.0, DT)
+    assert relaxed == pytest.approx(0.8 * (1.0 - math.exp(-2.5 / 4.0)), rel=1e-12)
+    assert twist_relaxation_update(0.8, 0.8, 4.0, DT) == 0.8
+
+
+def test_a_held_turn_meets_the_relaxing_twist_at_once_and_then_less_and_less() -> None:
+    """The body held still 0.3 rad from the heading the rope hung in: the relaxing branch resists with
+    k_r 0.3 at once, and the torque fades as exp(-t / tau_r) while the rope and the tether let go."""
+    k_r, tau = 0.04, 1.5
+    model = TankModel(ROBOT, BARE.with_values(suspension=True, rope_damping=0.0, rope_torsion_relaxing_stiffness=k_r,
+                                              rope_torsion_relaxation_time=tau))
+    assert model.relaxes_twist and model.counts_twist
+    model.attach(RigidBodyState())
+    held = RigidBodyState(rotation=rpy_to_rot(0.0, 0.0, 0.3))
+    q = nominal_joint_angles(ROBOT)
+    for step in range(301):
+        if step % 100 == 0:
+            torque = model.held_wrench(held, q, np.zeros_like(q))[3:6]
+            expected = -k_r * 0.3 * math.exp(-step * DT / tau)
+            np.testing.assert_allclose(torque, [0.0, 0.0, expected], rtol=1e-3, atol=1e-9)
+        model.step(held, q, np.zeros_like(q), DT)  # handed the held state each step: the body does not move
+
+
+def test_a_relaxing_twist_that_never_relaxes_is_the_ropes_spring_and_one_that_relaxes_takes_energy_out() -> None:
+    """Limiting cases, nothing else acting: with tau_r far past the run the branch is the rope's spring k_t =
+    k_r (the same swing, within tau's reach); with tau_r comparable to the swing's period the stored energy
+    (1/2 I w^2 + 1/2 k_r (theta - s)^2) only falls, and the turn dies out."""
+    k, q = 0.05, nominal_joint_angles(ROBOT)
+    start = RigidBodyState(rotation=rpy_to_rot(0.0, 0.0, math.radians(10.0)))
+    period = 2.0 * math.pi * math.sqrt(ROBOT.inertia[2, 2] / k)
+    spring = TankModel(ROBOT, BARE.with_values(suspension=True, rope_torsion_stiffness=k))
+    lasting = TankModel(ROBOT, BARE.with_values(suspension=True, rope_torsion_relaxing_stiffness=k,
+                                                rope_torsion_relaxation_time=10000.0))
+    yaws = []
+    for model in (spring, lasting):
+        model.attach(RigidBodyState())
+        yaws.append([math.atan2(s.rotation[1, 0], s.rotation[0, 0]) for s in _spin(model, start, 0.75 * period)])
+    np.testing.assert_allclose(yaws[1], yaws[0], atol=math.radians(10.0) * period / 10000.0)
+    relaxing = TankModel(ROBOT, BARE.with_values(suspension=True, rope_torsion_relaxing_stiffness=k,
+                                                 rope_torsion_relaxation_time=0.2 * period))
+    relaxing.attach(RigidBodyState())
+    def swing_energy(state: RigidBodyState) -> float:  # at the state the plant last stepped to
+        return relaxing.kinetic_energy(state, q) + 0.5 * k * (relaxing.twist - relaxing.twist_relaxed) ** 2
+
+    state = _spin(relaxing, start, 0.25 * period)[-1]
+    energy = [swing_energy(state)]
+    for _ in range(int(round(3.0 * period / DT))):
+        state = relaxing.step(state, q, np.zeros((4, 3)), DT)
+        energy.append(swing_energy(state))
+    assert energy[0] > 0.2 * 0.5 * k * math.radians(10.0) ** 2  # a good part of the twist's energy is left
+    assert np.all(np.diff(energy) < 1e-9 * energy[0])
+    assert energy[-1] < 0.01 * energy[0]
+
+
 @pytest.mark.parametrize("section, key, value", [("appendage_damping", "linear", [0.0, -0.1, 0.0]),
                                                  ("suspension", "torsion_stiffness", -1.0),
+                                                 ("suspension", "torsion_relaxing_stiffness", -1.0),
+                                                 ("suspension", "torsion_relaxation_time", 0.01),
                                                  ("paw_wake", "fraction", 1.0),
                                                  ("paw_wake", "time_constant", 0.0),
                                                  ("paw_wake", "body_share", 1.5),
@@ -539,7 +618,8 @@ def test_candidate_effect_keys_are_checked(tmp_path, section, key, value) -> Non
     path.write_text(yaml.safe_dump(tree))
     params = load_tank_params(str(path))
     assert params.appendage_damping_linear == (0.0, 0.1, 0.2) or 0.3 in (
-        params.rope_torsion_stiffness, params.paw_wake_fraction, params.paw_wake_time_constant,
+        params.rope_torsion_stiffness, params.rope_torsion_relaxing_stiffness, params.rope_torsion_relaxation_time,
+        params.paw_wake_fraction, params.paw_wake_time_constant,
         params.paw_wake_body_share, params.body_wake_fraction, params.body_wake_time_constant, params.block_mass,
         params.block_drag, params.block_tie_stiffness, params.paw_buoyancy_offset)
 
@@ -1400,11 +1480,12 @@ def test_the_constants_are_the_named_fields_and_a_step_carries_the_twist_and_the
     from quadruped_control.sim.plants import tank_dynamics
     from quadruped_control.sim.plants.tank_dynamics import TANK_CONSTANT_AT, TANK_CONSTANT_FIELDS
 
-    sizes = {"drag": 8, "hook": 3, "anchor": 6, "rope": 3, "torsion": 3, "untwisted": 9, "linear": 3, "quadratic": 3,
+    sizes = {"drag": 8, "hook": 3, "anchor": 6, "rope": 3, "torsion": 6, "untwisted": 9, "linear": 3, "quadratic": 3,
              "body_m": 36, "tether": 6}
-    model = TankModel(ROBOT, TANK.with_values(rope_torsion_stiffness=0.01, tether_relaxing_stiffness=0.05,
+    model = TankModel(ROBOT, TANK.with_values(rope_torsion_stiffness=0.01, rope_torsion_relaxing_stiffness=0.02,
+                                              rope_torsion_relaxation_time=3.0, tether_relaxing_stiffness=0.05,
                                               tether_relaxation_time=2.0))
-    assert model.counts_twist and model.bends_tether
+    assert model.counts_twist and model.relaxes_twist and model.bends_tether
     model.attach(RigidBodyState())
     before = model.constants()
     assert len(before) == len(TANK_CONSTANT_FIELDS) == len(set(TANK_CONSTANT_FIELDS))
@@ -1419,6 +1500,8 @@ def test_the_constants_are_the_named_fields_and_a_step_carries_the_twist_and_the
     after = model.constants()
     changed = {name for name, a, b in zip(TANK_CONSTANT_FIELDS, before, after) if a != b}
     assert changed == {"torsion", "untwisted", "tether"}
-    assert after[TANK_CONSTANT_AT["torsion"]] == before[TANK_CONSTANT_AT["torsion"]][:2] + (model.twist,)
+    torsion = before[TANK_CONSTANT_AT["torsion"]]
+    assert after[TANK_CONSTANT_AT["torsion"]] == torsion[:2] + (model.twist,) + torsion[3:5] + (model.twist_relaxed,)
+    assert torsion[5] == 0.0 and 0.0 != abs(model.twist_relaxed) < abs(model.twist)
     assert model.twist != 0.0 and after[TANK_CONSTANT_AT["untwisted"]] == model.twist_rotation
     assert after[TANK_CONSTANT_AT["tether"]] == before[TANK_CONSTANT_AT["tether"]][:3] + tuple(model.tether_relaxed)
