@@ -297,10 +297,10 @@ HOOK_FRICTION_ROLL_RATIO_RANGE = (0.1, 10.0)
 #: cable's EI / L (0.05 N m^2 over 0.1 m); a larger one is a unit slip (N mm for N m), not a cable.
 MAX_TETHER_STIFFNESS = 2.0
 
-#: The tether's relaxation times tank.yaml accepts (s), for its bend and the torsion's relaxing twist alike: from
+#: The relaxation times tank.yaml accepts (s), for the tether's bend and the torsion's relaxing twist alike: from
 #: ten 10 ms steps (the relaxation is carried exactly, but a faster one is a viscous damper, not a spring) to
 #: nearly three hours (a cable that never relaxes).
-TETHER_RELAXATION_TIME_RANGE = (0.1, 10000.0)
+RELAXATION_TIME_RANGE = (0.1, 10000.0)
 
 #: Largest residual field at the IMU (its norm), in units of the earth's horizontal field: at 1 the levelled
 #: field's horizontal part can vanish, the reported heading is undefined and some headings have no true one.
@@ -426,13 +426,11 @@ class TankParams:
             if not (math.isfinite(value) and 0.0 <= value <= MAX_TETHER_STIFFNESS):
                 raise ParameterError("tank %s must be in [0, %g] N m/rad (0: off), got %r"
                                      % (name, MAX_TETHER_STIFFNESS, value))
-        low, high = TETHER_RELAXATION_TIME_RANGE
-        if not (math.isfinite(self.rope_torsion_relaxation_time) and low <= self.rope_torsion_relaxation_time <= high):
-            raise ParameterError("tank rope_torsion_relaxation_time must be in [%g, %g] s, got %r"
-                                 % (low, high, self.rope_torsion_relaxation_time))
-        if not (math.isfinite(self.tether_relaxation_time) and low <= self.tether_relaxation_time <= high):
-            raise ParameterError("tank tether_relaxation_time must be in [%g, %g] s, got %r"
-                                 % (low, high, self.tether_relaxation_time))
+        low, high = RELAXATION_TIME_RANGE
+        for name in ("rope_torsion_relaxation_time", "tether_relaxation_time"):
+            value = getattr(self, name)
+            if not (math.isfinite(value) and low <= value <= high):
+                raise ParameterError("tank %s must be in [%g, %g] s, got %r" % (name, low, high, value))
         if not (math.isfinite(self.block_drag) and self.block_drag >= 0.0):
             raise ParameterError("tank block_drag must be finite and >= 0, got %r" % (self.block_drag,))
         if not (math.isfinite(self.block_tie_stiffness) and 0.0 <= self.block_tie_stiffness <= 1000.0):
@@ -559,7 +557,7 @@ def tank_params_from_dict(data: Mapping[str, Any]) -> TankParams:
         rope_torsion_relaxing_stiffness=number(rope.get("torsion_relaxing_stiffness", 0.0),
                                                "suspension.torsion_relaxing_stiffness", 0.0, 1e4),
         rope_torsion_relaxation_time=number(rope.get("torsion_relaxation_time", 10.0),
-                                            "suspension.torsion_relaxation_time", *TETHER_RELAXATION_TIME_RANGE),
+                                            "suspension.torsion_relaxation_time", *RELAXATION_TIME_RANGE),
         block_mass=number(rope.get("block_mass", 0.0), "suspension.block_mass", 0.0, 100.0),
         block_drag=number(rope.get("block_drag", 2.0), "suspension.block_drag", 0.0, 1e4),
         block_tie_stiffness=number(rope.get("block_tie_stiffness", 0.0), "suspension.block_tie_stiffness", 0.0,
@@ -587,7 +585,7 @@ def tank_params_from_dict(data: Mapping[str, Any]) -> TankParams:
         tether_relaxing_stiffness=number(tether.get("relaxing_stiffness", 0.0), "tether.relaxing_stiffness", 0.0,
                                          MAX_TETHER_STIFFNESS),
         tether_relaxation_time=number(tether.get("relaxation_time", 10.0), "tether.relaxation_time",
-                                      *TETHER_RELAXATION_TIME_RANGE))
+                                      *RELAXATION_TIME_RANGE))
 
 
 def load_tank_params(path: Optional[str] = None, tree: Optional[Mapping[str, Any]] = None) -> TankParams:
