@@ -177,6 +177,19 @@ Candidate effects of the identification against Table 1, each zero (today's mode
   are left in the net weight and the body's drag); the tilt's own yaw is untouched. The spring inside the
   step's RK4, s held over the step and carried exactly after it (:func:`~.tank_dynamics.tether_relaxation_update`,
   tau >= 0.1 s, ten steps). Both stiffnesses 0 (the default) is today's model exactly.
+- ``disturbance`` (``disturbance_torque_std``, ``disturbance_correlation_time``, ``disturbance_seed``,
+  :func:`~.tank_dynamics.disturbance_update`): a tank is not still. The strokes set its water circulating and
+  it comes back off the walls; currents and the operator moving the tether at the surface push the body. The
+  strokes' net torque is 0.01-0.04 N m (docs/identification.md), so a push of a few mN m matters: a current
+  of 2-3 cm/s on a 0.6 m body whose centre of pressure sits a few centimetres off its centre of mass, or a
+  tug of 0.1 N on the tether 5 cm from it. Not modelled as flow: a torque d (world axes) from an
+  Ornstein-Uhlenbeck process per axis, stationary standard deviation sigma and correlation time tau_d
+  (dd = -d / tau_d dt + sigma sqrt(2 / tau_d) dW, stepped exactly), started at a stationary draw at
+  :meth:`TankModel.attach` and held over each step in body axes at the step's start, beside the hook's
+  friction. Seeded (``disturbance_seed``, its own stream apart from the IMU noise's): the same tank.yaml runs
+  the same disturbance in every trial, both engines alike; another seed is another tank. sigma = 0 (the
+  default) is today's model exactly. It is an input, not one of the plant's forces:
+  :meth:`TankModel.held_wrench` and :meth:`TankModel.restoring_torque` leave it out.
 
 - **The heading the IMU reports** (not a force: what the robot's VN-100 told its controller and the
   paper's Table 1). A magnetic field that rides with the body and is not calibrated out (motor magnets
@@ -200,7 +213,7 @@ from typing import Any, Mapping, Optional, Sequence, Tuple
 
 import numpy as np
 
-from quadruped_common.config import ParameterError, boolean, check_keys, load_config, number, vector
+from quadruped_common.config import ParameterError, boolean, check_keys, integer, load_config, number, vector
 from quadruped_control.model import hydrodynamics
 from quadruped_control.model.kinematics import _geometry, leg_kinematics_flat
 from quadruped_control.model.params import RobotParams
@@ -210,11 +223,13 @@ from quadruped_control.sim.plants.rigid_body import (Mat3, RigidBodyState, StepC
                                                      check_dt, diverged, joint_array)
 from quadruped_control.sim.plants.tank_dynamics import TANK_CONSTANT_AT as _AT
 from quadruped_control.sim.plants.tank_dynamics import (TankConstants, appendage_damping_torque, body_wake_update,
+                                                        disturbance_coefficients, disturbance_update,
                                                         floating_block_update, hook_friction_update, leg_sums,
                                                         mass_solver, paw_joint_loads, paw_wake_update, rope_force,
                                                         rope_torsion_torque, rope_twist, tank_forces, tank_rk4,
                                                         tether_relaxation_update, tilt_vector,
-                                                        twist_relaxation_update, whole_twist, wound_friction_limit)
+                                                        twist_relaxation_update, whole_twist, world_to_body,
+                                                        wound_friction_limit)
 
 __all__ = ["TankModel", "TankParams", "TurnUnresolved", "VALIDITY_NOTE", "appendage_damping_torque",
            "hydrostatic_wrench", "load_tank_params", "rope_force", "rope_torsion_torque", "rope_twist",
@@ -302,6 +317,23 @@ MAX_TETHER_STIFFNESS = 2.0
 #: nearly three hours (a cable that never relaxes).
 RELAXATION_TIME_RANGE = (0.1, 10000.0)
 
+#: The largest disturbance torque tank.yaml accepts (its standard deviation per axis, N m): ten times the
+#: strokes' net torque at its largest (0.04 N m); a larger one is a unit slip (N mm for N m), not a tank.
+MAX_DISTURBANCE_TORQUE = 0.4
+
+#: The disturbance's correlation times tank.yaml accepts (s): from ten 10 ms steps (the process is stepped
+#: exactly, but held over each step, so a faster one is white noise filtered by the step) to nearly three hours
+#: (a push that stays).
+DISTURBANCE_CORRELATION_TIME_RANGE = (0.1, 10000.0)
+
+#: The stream of a tank's random generator its disturbance draws from, beside its seed: apart from the IMU
+#: noise's stream, default_rng(seed), so that the two are independent for the same seed.
+DISTURBANCE_STREAM = 0x7A4B
+
+#: The disturbance's standard normal draws come in blocks of this many steps (3 per step): the batch takes
+#: each trial's block at once, the per-trial plant one row per step, the same numbers either way.
+DISTURBANCE_BLOCK = 1024
+
 #: Largest residual field at the IMU (its norm), in units of the earth's horizontal field: at 1 the levelled
 #: field's horizontal part can vanish, the reported heading is undefined and some headings have no true one.
 MAX_IMU_FIELD_RESIDUAL = 0.95
@@ -386,6 +418,11 @@ class TankParams:
     tether_stiffness: float = 0.0
     tether_relaxing_stiffness: float = 0.0
     tether_relaxation_time: float = 10.0
+    #: the tank's disturbance torque (:func:`~.tank_dynamics.disturbance_update`): its standard deviation sigma
+    #: per world axis (N m; 0: off), its correlation time tau_d (s) and the seed of its generator
+    disturbance_torque_std: float = 0.0
+    disturbance_correlation_time: float = 10.0
+    disturbance_seed: int = 0
 
     def __post_init__(self) -> None:
         for name in ("rope_length", "rope_stiffness"):
@@ -471,11 +508,28 @@ class TankParams:
             value = getattr(self, name)
             if len(value) != 3 or not all(math.isfinite(float(v)) and float(v) >= 0.0 for v in value):
                 raise ParameterError("tank %s must be 3 finite numbers >= 0 (body axes), got %r" % (name, value))
+        if not (math.isfinite(self.disturbance_torque_std) and 0.0 <= self.disturbance_torque_std
+                <= MAX_DISTURBANCE_TORQUE):
+            raise ParameterError("tank disturbance_torque_std must be in [0, %g] N m (0: off), got %r"
+                                 % (MAX_DISTURBANCE_TORQUE, self.disturbance_torque_std))
+        low, high = DISTURBANCE_CORRELATION_TIME_RANGE
+        if not (math.isfinite(self.disturbance_correlation_time) and low <= self.disturbance_correlation_time <= high):
+            raise ParameterError("tank disturbance_correlation_time must be in [%g, %g] s, got %r"
+                                 % (low, high, self.disturbance_correlation_time))
+        if isinstance(self.disturbance_seed, bool) or not isinstance(self.disturbance_seed, (int, np.integer)) \
+                or not 0 <= self.disturbance_seed < 2 ** 32:
+            raise ParameterError("tank disturbance_seed must be an integer in [0, 2^32), got %r"
+                                 % (self.disturbance_seed,))
         value = self.imu_field_residual
         if len(value) != 3 or not all(math.isfinite(float(v)) for v in value) \
                 or math.sqrt(sum(float(v) ** 2 for v in value)) > MAX_IMU_FIELD_RESIDUAL:
             raise ParameterError("tank imu_field_residual must be 3 finite numbers of norm at most %g (the earth's "
                                  "horizontal field), got %r" % (MAX_IMU_FIELD_RESIDUAL, value))
+
+    @property
+    def disturbed(self) -> bool:
+        """Is the tank not still (a disturbance torque above 0)?"""
+        return self.disturbance_torque_std > 0.0
 
     @property
     def heading_disturbed(self) -> bool:
@@ -499,7 +553,7 @@ def tank_params_from_dict(data: Mapping[str, Any]) -> TankParams:
     wider than the identification's plausible bounds) into :class:`TankParams`; ParameterError naming
     the key otherwise."""
     check_keys(data, "", ("effects", "suspension", "hydrostatics", "added_mass", "paw_drag", "servos",
-                          "appendage_damping", "paw_wake", "imu", "tether"),
+                          "appendage_damping", "paw_wake", "imu", "tether", "disturbance"),
                required=("suspension", "hydrostatics", "added_mass"))
     effects = check_keys(_optional_section(data, "effects"), "effects",
                          ("suspension", "hydrostatics", "torso_added_mass", "paw_added_mass", "drag"))
@@ -522,6 +576,8 @@ def tank_params_from_dict(data: Mapping[str, Any]) -> TankParams:
     imu = check_keys(_optional_section(data, "imu"), "imu", ("field_residual",))
     tether = check_keys(_optional_section(data, "tether"), "tether",
                         ("stiffness", "relaxing_stiffness", "relaxation_time"))
+    disturbance = check_keys(_optional_section(data, "disturbance"), "disturbance",
+                             ("torque_std", "correlation_time", "seed"))
 
     def axes(section: Mapping[str, Any], key: str, high: float) -> Vec3:
         return tuple(vector(section.get(key, [0.0, 0.0, 0.0]), "appendage_damping." + key, 3,
@@ -585,7 +641,12 @@ def tank_params_from_dict(data: Mapping[str, Any]) -> TankParams:
         tether_relaxing_stiffness=number(tether.get("relaxing_stiffness", 0.0), "tether.relaxing_stiffness", 0.0,
                                          MAX_TETHER_STIFFNESS),
         tether_relaxation_time=number(tether.get("relaxation_time", 10.0), "tether.relaxation_time",
-                                      *RELAXATION_TIME_RANGE))
+                                      *RELAXATION_TIME_RANGE),
+        disturbance_torque_std=number(disturbance.get("torque_std", 0.0), "disturbance.torque_std", 0.0,
+                                      MAX_DISTURBANCE_TORQUE),
+        disturbance_correlation_time=number(disturbance.get("correlation_time", 10.0), "disturbance.correlation_time",
+                                            *DISTURBANCE_CORRELATION_TIME_RANGE),
+        disturbance_seed=integer(disturbance.get("seed", 0), "disturbance.seed", 0, 2 ** 32 - 1))
 
 
 def load_tank_params(path: Optional[str] = None, tree: Optional[Mapping[str, Any]] = None) -> TankParams:
@@ -697,6 +758,12 @@ class TankModel(FloatingBaseModel):
         self.tether_relaxed: Tuple[float, float, float] = (0.0, 0.0, 0.0)
         #: Whether this plant's tether bends (either stiffness above 0; the batch asks its constants the same).
         self.bends_tether = tank.tether_stiffness > 0.0 or tank.tether_relaxing_stiffness > 0.0
+        #: The tank's disturbance torque (N m, world axes; :func:`~.tank_dynamics.disturbance_update`) held over
+        #: the next step: drawn at :meth:`attach`, stepped after each step; zeros while the tank is still.
+        self.disturbance = np.zeros(3)
+        self._disturbance_rng: Optional[np.random.Generator] = None
+        self._disturbance_draws = np.zeros((0, 3))
+        self._disturbance_row = 0
         self._drag_feet = np.zeros((4, 6))
         #: The torque each joint felt from its paw's drag at the last step's start (4 x 3, N m;
         #: :func:`~.tank_dynamics.paw_joint_loads`) when the loaded-servo effect is on, else None; the
@@ -841,7 +908,41 @@ class TankModel(FloatingBaseModel):
         self.body_wake[:] = 0.0
         self.hook_friction[:] = 0.0  # the tie unloaded
         self.tether_relaxed = tilt_vector(self.untwisted.ravel().tolist())  # the tether hangs relaxed
+        if self.tank.disturbed:  # the same disturbance in every trial of this tank: its generator restarts
+            self._disturbance_rng = np.random.default_rng([self.tank.disturbance_seed, DISTURBANCE_STREAM])
+            self._disturbance_draws, self._disturbance_row = np.zeros((0, 3)), 0
+            self.disturbance = self.tank.disturbance_torque_std * self.disturbance_noise()  # a stationary start
         self._constants = self._build_constants()
+
+    def disturbance_noise_block(self) -> np.ndarray:
+        """The next :data:`DISTURBANCE_BLOCK` steps' standard normal draws of the disturbance ((B, 3), world
+        axes) from this tank's generator (restarted by :meth:`attach`): the batch takes them a block at a time,
+        :meth:`disturbance_noise` a row at a time, the same numbers."""
+        if self._disturbance_rng is None:
+            raise RuntimeError("the tank is still (disturbance_torque_std 0) or not attached: no disturbance to draw")
+        return self._disturbance_rng.standard_normal((DISTURBANCE_BLOCK, 3))
+
+    def disturbance_noise(self) -> np.ndarray:
+        """The next step's three standard normal draws of the disturbance (world axes)."""
+        if self._disturbance_row >= len(self._disturbance_draws):
+            self._disturbance_draws, self._disturbance_row = self.disturbance_noise_block(), 0
+        self._disturbance_row += 1
+        return self._disturbance_draws[self._disturbance_row - 1]
+
+    def take_disturbance_noise(self) -> np.ndarray:
+        """Every draw :meth:`disturbance_noise` would give before it draws another block ((K, 3); a whole new
+        block when none is left), taken: the batch steps its trials on them."""
+        if self._disturbance_row >= len(self._disturbance_draws):
+            self._disturbance_draws, self._disturbance_row = self.disturbance_noise_block(), 0
+        rest = self._disturbance_draws[self._disturbance_row:]
+        self._disturbance_row = len(self._disturbance_draws)
+        return rest
+
+    def _step_disturbance(self, dt: float) -> None:
+        """:func:`~.tank_dynamics.disturbance_update` over a step of ``dt`` s: the torque the next step holds."""
+        decay, spread = disturbance_coefficients(self.tank.disturbance_torque_std,
+                                                 self.tank.disturbance_correlation_time, dt)
+        self.disturbance = disturbance_update(self.disturbance, decay, spread, self.disturbance_noise())
 
     @property
     def anchor(self) -> np.ndarray:
@@ -964,6 +1065,9 @@ class TankModel(FloatingBaseModel):
                                             tank.hook_friction_static_ratio, tank.hook_friction_stribeck_rate,
                                             tank.hook_friction_roll_ratio, y0[0:3], y0[3:6], R0, y0[9:12],
                                             self._hook, self._anchor, tank.rope_length, dt)
+            if self.tank.disturbed:  # held over the step in body axes at its start, beside the hook's friction
+                bx, by, bz = world_to_body(R0, *self.disturbance.tolist())
+                held = (held[0] + bx, held[1] + by, held[2] + bz)
             y = tank_rk4(self._constants, context.feet, drag_feet, water, held, context.lift, context.up_torque,
                          context.leg_sums, context.mass_solver, R0, y0, dt)
         except (ValueError, OverflowError) as exc:  # math.sin(inf) etc. once the state has blown up
@@ -975,6 +1079,8 @@ class TankModel(FloatingBaseModel):
             self._relax_twist(dt)
         if self.bends_tether:
             self._relax_tether(end.rotation.ravel().tolist(), dt)
+        if self.tank.disturbed:
+            self._step_disturbance(dt)
         return end
 
     def _relax_tether(self, rotation: Sequence[float], dt: float) -> None:

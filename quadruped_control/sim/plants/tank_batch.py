@@ -24,10 +24,13 @@ from quadruped_control.model.params import RobotParams
 from quadruped_control.sim.plants.paper_batch import held_step_inputs, leg_geometry, store_step_end
 from quadruped_control.sim.plants.rigid_body import RigidBodyState
 from quadruped_control.sim.plants.tank import TankModel, TankParams, TurnUnresolved
-from quadruped_control.sim.plants.tank_dynamics import (TANK_CONSTANT_FIELDS, body_wake_update, floating_block_update,
+from quadruped_control.sim.plants.tank_dynamics import (TANK_CONSTANT_FIELDS, body_wake_update,
+                                                        disturbance_coefficients, disturbance_update,
+                                                        floating_block_update,
                                                         hook_friction_update, leg_sums, mass_solver, paw_joint_loads,
                                                         paw_wake_update, tank_rk4, tether_relaxation_update,
-                                                        twist_relaxation_update, whole_twist, wound_friction_limit)
+                                                        twist_relaxation_update, whole_twist, world_to_body,
+                                                        wound_friction_limit)
 
 __all__ = ["TankPlantBatch", "tank_batch_step", "tank_trial_step"]
 
@@ -47,11 +50,12 @@ def tank_trial_step(i, frames, five_bar, net_paw_buoyancy, drag_constant, drag, 
                     rope, torsion, untwisted, linear, quadratic, body_m, paw_added_mass, wake_fraction,
                     wake_time_constant, wake_body_share, body_wake_fraction, body_wake_time_constant, tether,
                     restoring, wake, water, p, v, R, w, q, q_dot, dt, feet, drag_feet, stall_torque, loads, block,
-                    block_rest, friction, hook_friction, counts_twist) -> bool:
+                    block_rest, friction, hook_friction, counts_twist, disturbed, disturbance) -> bool:
     """One held-input RK4 step of eq. (tank) for trial ``i`` in place (its paws' ``wake[i]``, the water
     turning with its body, ``water[i]``, its floating block, ``anchor[i]``, and its hook's friction,
     ``friction[i]``, too, with the body's state at the step's start, as
-    :class:`~quadruped_control.sim.plants.tank.TankModel`); False if it failed."""
+    :class:`~quadruped_control.sim.plants.tank.TankModel`; its tank's disturbance ``disturbance[i]``, world axes,
+    held where ``disturbed[i]``, and stepped by the caller); False if it failed."""
     ok, lift, up, R0 = held_step_inputs(q, q_dot, i, frames, five_bar, net_paw_buoyancy[i], restoring, R, feet)
     if not ok:
         return False
@@ -92,6 +96,9 @@ def tank_trial_step(i, frames, five_bar, net_paw_buoyancy, drag_constant, drag, 
                                     hook_friction[i, 3], hook_friction[i, 4], (y0[0], y0[1], y0[2]),
                                     (y0[3], y0[4], y0[5]), R0, (y0[9], y0[10], y0[11]), hook[i], anchor[i], rope[i, 0],
                                     dt)
+    if disturbed[i]:  # held over the step in body axes at its start, beside the hook's friction, as TankModel
+        bx, by, bz = world_to_body(R0, disturbance[i, 0], disturbance[i, 1], disturbance[i, 2])
+        held = (held[0] + bx, held[1] + by, held[2] + bz)
     y = tank_rk4(constants, feet, rows, turning, held, lift, up, sums, solver, R0, y0, dt)
     if not store_step_end(y, R0, i, p, v, R, w):
         return False
@@ -113,7 +120,7 @@ def tank_batch_step(frames, five_bar, net_paw_buoyancy, drag_constant, drag, ext
                     rope, torsion, untwisted, linear, quadratic, body_m, paw_added_mass, wake_fraction,
                     wake_time_constant, wake_body_share, body_wake_fraction, body_wake_time_constant, tether,
                     restoring, wake, water, p, v, R, w, q, q_dot, dt, failed, stall_torque, loads, block, block_rest,
-                    friction, hook_friction, counts_twist):
+                    friction, hook_friction, counts_twist, disturbed, disturbance):
     """One held-input RK4 step of eq. (tank) for every trial not yet ``failed``, in place on p, v, w
     (N, 3), R (N, 3, 3), the paws' ``wake`` (N, 4, 3), the water turning with each body, ``water``
     (N, 3), and each rope's upper end, ``anchor`` (N, 6). The constants are the fields of
@@ -124,7 +131,9 @@ def tank_batch_step(frames, five_bar, net_paw_buoyancy, drag_constant, drag, ext
     ``hook_friction`` (N, 6) its Coulomb torque tau_c (0: off), presliding angle, static over sliding
     friction, Stribeck rate, roll over pitch friction and the tether's capstan coefficient; ``counts_twist``
     (N,) whether the trial carries the rope's twist (TankModel.counts_twist); ``tether`` (N, 6) the tether's
-    stiffnesses, relaxation time and relaxed tilt (advanced in place where either stiffness is above 0)."""
+    stiffnesses, relaxation time and relaxed tilt (advanced in place where either stiffness is above 0);
+    ``disturbed`` (N,) whether the trial's tank is not still and ``disturbance`` (N, 3) its torque, world axes,
+    held over this step (TankModel.disturbance; the caller steps it)."""
     feet = np.empty((4, 6))
     drag_feet = np.empty((4, 6))
     for i in range(p.shape[0]):
@@ -134,7 +143,8 @@ def tank_batch_step(frames, five_bar, net_paw_buoyancy, drag_constant, drag, ext
                                                  wake_time_constant, wake_body_share, body_wake_fraction,
                                                  body_wake_time_constant, tether, restoring, wake, water, p, v, R,
                                                  w, q, q_dot, dt, feet, drag_feet, stall_torque, loads, block,
-                                                 block_rest, friction, hook_friction, counts_twist):
+                                                 block_rest, friction, hook_friction, counts_twist, disturbed,
+                                                 disturbance):
             failed[i] = True
 
 
@@ -185,6 +195,15 @@ class TankPlantBatch:
         self._wound = np.array([m._wound for m in self.models], dtype=bool)  # noqa: SLF001
         self._checked_turns = np.array([m.checked_turn for m in self.models], dtype=float)
         self._any_wound = bool(self._wound.any())
+        #: Each trial's tank not still (N,; TankParams.disturbed), its disturbance torque (N, 3, world axes:
+        #: TankModel.disturbance for N trials) and the standard normal draws it steps on, a block per trial
+        #: (TankModel.disturbance_noise_block) taken a row per step, as the per-trial plant takes them.
+        self.disturbed = np.array([tank.disturbed for tank in tanks], dtype=bool)
+        self._disturbed = np.flatnonzero(self.disturbed)
+        self.disturbance = np.zeros((self.n, 3))
+        self._disturbance_draws = np.zeros((len(self._disturbed), 0, 3))
+        self._disturbance_row = 0
+        self._disturbance_coefficients: Dict[float, np.ndarray] = {}
         self._load_constants()
 
     def _load_constants(self) -> None:
@@ -207,6 +226,30 @@ class TankPlantBatch:
         self.loads[:] = 0.0
         self._load_constants()
         self.block_rest = np.array([m.block_rest for m in self.models], dtype=float).reshape(self.n, 3)
+        self.disturbance = np.array([m.disturbance for m in self.models], dtype=float).reshape(self.n, 3)
+        if len(self._disturbed):  # the rest of the block each one's start was drawn from (attach took its first row)
+            self._take_disturbance_draws()
+
+    def _take_disturbance_draws(self) -> None:
+        """Each disturbed trial's next draws (TankModel.take_disturbance_noise), one row per step from here."""
+        self._disturbance_draws = np.array([self.models[i].take_disturbance_noise() for i in self._disturbed],
+                                           dtype=float).reshape(len(self._disturbed), -1, 3)
+        self._disturbance_row = 0
+
+    def _step_disturbance(self, dt: float) -> None:
+        """Each disturbed trial's disturbance one step of ``dt`` on (TankModel._step_disturbance for N trials)."""
+        if self._disturbance_row >= self._disturbance_draws.shape[1]:
+            self._take_disturbance_draws()
+        coefficients = self._disturbance_coefficients.get(dt)
+        if coefficients is None:
+            coefficients = np.array([disturbance_coefficients(self.models[i].tank.disturbance_torque_std,
+                                                              self.models[i].tank.disturbance_correlation_time, dt)
+                                     for i in self._disturbed], dtype=float).reshape(-1, 2)
+            self._disturbance_coefficients[dt] = coefficients
+        noise = self._disturbance_draws[:, self._disturbance_row]
+        self._disturbance_row += 1
+        self.disturbance[self._disturbed] = disturbance_update(self.disturbance[self._disturbed],
+                                                               coefficients[:, 0:1], coefficients[:, 1:2], noise)
 
     def step(self, p: np.ndarray, v: np.ndarray, R: np.ndarray, w: np.ndarray, q: np.ndarray, q_dot: np.ndarray,
              dt: float):
@@ -227,7 +270,9 @@ class TankPlantBatch:
                         c["body_wake_time_constant"], c["tether"], self.restoring, self.wake, self.water, p, v, R, w,
                         np.ascontiguousarray(q), np.ascontiguousarray(q_dot), float(dt), self.failed, self.stall_torque,
                         self.loads, self.block, self.block_rest, self.friction, self.hook_friction,
-                        self.counts_twist)
+                        self.counts_twist, self.disturbed, self.disturbance)
+        if len(self._disturbed):
+            self._step_disturbance(float(dt))
         if self._any_wound:  # TankModel.check_turn where a wound tether has turned past its checked turn
             turns = np.abs(c["torsion"][:, 2])
             for i in np.flatnonzero(self._wound & ~self.failed & (turns > self._checked_turns)):

@@ -12,6 +12,8 @@ when it is installed, :mod:`quadruped_common.jit`).
   :mod:`.tank`'s docstring);
 - :func:`tilt_vector`, :func:`tether_bend_torque`, :func:`tether_relaxation_update`: the tether bent where it
   leaves the body, a standard linear solid on the body's tilt;
+- :func:`disturbance_update`, :func:`world_to_body`: the torque of a tank that is not still, an
+  Ornstein-Uhlenbeck process per world axis, held over each step;
 - :func:`leg_sums`, :func:`mass_solver`, :func:`solve_mass`: the mass matrix
   M = M_RB + M_A + sum_i M_paw(r_i) of a held step and its solution by the Schur complement;
 - :func:`tank_forces`: the right-hand side of eq. (tank), the paper's forces
@@ -37,10 +39,11 @@ from quadruped_control.sim.plants.paper import body_wrench_f
 from quadruped_control.sim.plants.rigid_body import Mat3, chart_point
 
 __all__ = ["TANK_CONSTANT_AT", "TANK_CONSTANT_FIELDS", "TankConstants", "appendage_damping_torque", "body_wake_update",
-           "floating_block_update", "hook_friction_update", "leg_sums",
-           "mass_solver", "paw_joint_loads", "paw_wake_update", "rope_force", "rope_torsion_torque", "rope_twist",
-           "solve_mass", "tank_chart_derivative", "tank_forces", "tank_rk4", "tether_bend_torque",
-           "tether_relaxation_update", "tilt_vector", "twist_relaxation_update", "whole_twist", "wound_friction_limit"]
+           "disturbance_coefficients", "disturbance_update", "floating_block_update", "hook_friction_update",
+           "leg_sums", "mass_solver", "paw_joint_loads", "paw_wake_update", "rope_force", "rope_torsion_torque",
+           "rope_twist", "solve_mass", "tank_chart_derivative", "tank_forces", "tank_rk4", "tether_bend_torque",
+           "tether_relaxation_update", "tilt_vector", "twist_relaxation_update", "whole_twist", "world_to_body",
+           "wound_friction_limit"]
 
 Vec3 = Tuple[float, float, float]
 
@@ -187,6 +190,30 @@ def twist_relaxation_update(twist: float, relaxed: float, relaxation_time: float
     s + (1 - exp(-dt / tau_r)) (theta - s) (:func:`rope_torsion_torque`; as :func:`tether_relaxation_update`
     for the tilt)."""
     return relaxed + (1.0 - math.exp(-dt / relaxation_time)) * (twist - relaxed)
+
+
+def disturbance_update(torque: Any, decay: Any, spread: Any, noise: Any) -> Any:
+    """The tank's disturbance torque (N m, world axes) one step on: ``decay`` torque + ``spread`` noise, the exact
+    step of an Ornstein-Uhlenbeck process dd = -d / tau_d dt + sigma sqrt(2 / tau_d) dW with decay = exp(-dt /
+    tau_d) and spread = sigma sqrt(1 - decay^2) (:func:`disturbance_coefficients`), ``noise`` standard normal draws.
+    Its stationary law is N(0, sigma^2) per axis and its autocorrelation exp(-|lag| / tau_d), whatever the step.
+    Element-wise on numpy arrays: one trial's (3,) or a batch's (N, 3) with (N, 1) coefficients, the same
+    operations in the same order either way (the two engines agree to the bit). Physics in :mod:`.tank`
+    ("disturbance")."""
+    return decay * torque + spread * noise
+
+
+def disturbance_coefficients(std: float, correlation_time: float, dt: float) -> Tuple[float, float]:
+    """(decay, spread) of :func:`disturbance_update` for a step of ``dt`` s: exp(-dt / tau_d) and
+    sigma sqrt(1 - exp(-2 dt / tau_d)) (``std`` sigma in N m, ``correlation_time`` tau_d in s)."""
+    decay = math.exp(-dt / correlation_time)
+    return decay, std * math.sqrt(-math.expm1(-2.0 * dt / correlation_time))
+
+
+@jitable
+def world_to_body(R: Sequence[float], x: float, y: float, z: float) -> Vec3:
+    """R^T (x, y, z): a world-axes vector in body axes (``R`` row-major, 9 floats, body to world)."""
+    return (R[0] * x + R[3] * y + R[6] * z, R[1] * x + R[4] * y + R[7] * z, R[2] * x + R[5] * y + R[8] * z)
 
 
 @jitable
@@ -588,7 +615,8 @@ def tank_forces(k: TankConstants, feet: Sequence[Sequence[float]], drag_feet: Se
     the rows the paw drag sees: ``feet`` itself, or with each paw's wake taken off, :func:`paw_wake_update`;
     ``water`` the body-axes rate of the water the appendages set turning, :func:`body_wake_update`, zeros
     without it; ``held_torque`` a body-axes torque held over the step, the hook's friction,
-    :func:`hook_friction_update`, zeros without it) and the state p, v (world), R (row-major), omega (body)."""
+    :func:`hook_friction_update`, plus the tank's disturbance, :func:`disturbance_update`, zeros without
+    them) and the state p, v (world), R (row-major), omega (body)."""
     (drag_constant, drag, extra_lift, suspension, hook, anchor, rope, torsion, untwisted, linear, quadratic,
      body_m, ma, _wake_fraction, _wake_time_constant, _wake_body_share, _body_wake_fraction,
      _body_wake_time_constant, tether) = k
@@ -610,8 +638,8 @@ def tank_forces(k: TankConstants, feet: Sequence[Sequence[float]], drag_feet: Se
             mx, my, mz = rope_torsion_torque(R, untwisted, (wx, wy, wz), torsion[0], torsion[1],
                                              torsion[2], torsion[3], torsion[5])
             tx, ty, tz = tx + mx, ty + my, tz + mz
-        # the hook's friction (exactly today's torque without it: x + 0.0 == x)
-        tx, ty, tz = tx + held_torque[0], ty + held_torque[1], tz + held_torque[2]
+    # the hook's friction and the tank's disturbance (exactly today's torque without them: x + 0.0 == x)
+    tx, ty, tz = tx + held_torque[0], ty + held_torque[1], tz + held_torque[2]
     if tether[0] > 0.0 or tether[1] > 0.0:
         mx, my, mz = tether_bend_torque(R, tether)
         tx, ty, tz = tx + mx, ty + my, tz + mz
@@ -693,8 +721,8 @@ def tank_rk4(k: TankConstants, feet: Sequence[Sequence[float]], drag_feet: Seque
              dt: float) -> Tuple[float, ...]:
     """One classic RK4 step of :func:`tank_chart_derivative` in the chart around R0 from the chart state
     y0 = (p, v, 0, omega), the legs (the paws' wake, ``drag_feet``, the water turning with the body,
-    ``water``, and the hook's friction, ``held_torque``) held over it: the chart state at its end (12 floats;
-    the caller maps it back with :func:`~.rigid_body.chart_step_end`)."""
+    ``water``, and the hook's friction with the tank's disturbance, ``held_torque``) held over it: the chart
+    state at its end (12 floats; the caller maps it back with :func:`~.rigid_body.chart_step_end`)."""
     h = 0.5 * dt
     k1 = tank_chart_derivative(k, feet, drag_feet, water, held_torque, lift, up_torque, sums, solver, R0, y0)
     k2 = tank_chart_derivative(k, feet, drag_feet, water, held_torque, lift, up_torque, sums, solver, R0,

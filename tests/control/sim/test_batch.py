@@ -172,10 +172,12 @@ def test_tank_batch_agrees_with_the_per_trial_tank_plant_bit_for_bit_over_10_s(r
                               rope_torsion_relaxing_stiffness=0.03, rope_torsion_relaxation_time=4.0,
                               paw_wake_fraction=0.5, paw_wake_time_constant=0.2, paw_wake_body_share=0.3,
                               servo_stall_torque=3.9, paw_buoyancy_offset=0.06, hook_friction_arm=0.002,
-                              hook_friction_wrap=0.4),
+                              hook_friction_wrap=0.4, disturbance_torque_std=0.008,
+                              disturbance_correlation_time=4.0, disturbance_seed=3),
              base.with_values(added_mass_scale=3.0, paw_added_mass_scale=2.0, net_weight=2.0, servo_stall_torque=1.5,
                               block_mass=1.0, block_drag=10.0, block_tie_stiffness=5.0, servo_dead_band=0.01),
-             base.with_values(suspension=False, hydrostatics=False)]
+             base.with_values(suspension=False, hydrostatics=False, disturbance_torque_std=0.003,
+                              disturbance_correlation_time=0.7)]
     trials, sims = [], []
     for spec, tank in zip(specs, tanks):
         setup = trial_setup(spec)

@@ -1505,3 +1505,92 @@ def test_the_constants_are_the_named_fields_and_a_step_carries_the_twist_and_the
     assert torsion[5] == 0.0 and 0.0 != abs(model.twist_relaxed) < abs(model.twist)
     assert model.twist != 0.0 and after[TANK_CONSTANT_AT["untwisted"]] == model.twist_rotation
     assert after[TANK_CONSTANT_AT["tether"]] == before[TANK_CONSTANT_AT["tether"]][:3] + tuple(model.tether_relaxed)
+
+
+# ---- the tank's disturbance ------------------------------------------------------------------------------
+
+def test_the_disturbance_is_an_ornstein_uhlenbeck_process_stepped_exactly() -> None:
+    """disturbance_update with disturbance_coefficients: the stationary variance sigma^2 is kept exactly by
+    every step (decay^2 sigma^2 + spread^2 = sigma^2), two steps of dt decay as one of 2 dt, and a long run
+    has the stationary standard deviation and the autocorrelation exp(-lag / tau_d)."""
+    from quadruped_control.sim.plants.tank_dynamics import disturbance_coefficients, disturbance_update
+
+    sigma, tau = 0.004, 0.5
+    decay, spread = disturbance_coefficients(sigma, tau, DT)
+    assert decay ** 2 * sigma ** 2 + spread ** 2 == pytest.approx(sigma ** 2, rel=1e-12)
+    assert disturbance_coefficients(sigma, tau, 2 * DT)[0] == pytest.approx(decay ** 2, rel=1e-12)
+    rng = np.random.default_rng(3)
+    torque, samples = sigma * rng.standard_normal(3), []
+    for noise in rng.standard_normal((200000, 3)):
+        torque = disturbance_update(torque, decay, spread, noise)
+        samples.append(torque)
+    series = np.array(samples)  # 4,000 correlation times, three axes
+    assert np.std(series, axis=0) == pytest.approx([sigma] * 3, rel=0.04)
+    lag = int(round(tau / DT))
+    correlation = np.mean(series[lag:] * series[:-lag], axis=0) / np.var(series, axis=0)
+    np.testing.assert_allclose(correlation, math.exp(-1.0), atol=0.04)
+    assert np.array_equal(disturbance_update(torque, 1.0, 0.0, np.ones(3)), torque)  # no decay, no spread: held
+
+
+def test_a_still_tank_is_todays_model_and_a_disturbed_one_repeats_with_its_seed() -> None:
+    """sigma = 0 is today's plant bit for bit whatever the other two keys; sigma > 0 runs the same disturbance
+    with the same seed (and again after attach), another with another seed, and moves the body."""
+    start = RigidBodyState(rotation=rpy_to_rot(0.2, -0.1, 0.4))
+
+    def run(tank: TankParams, seconds: float = 3.0) -> np.ndarray:
+        model = TankModel(ROBOT, tank)
+        model.attach(start)
+        return _spin(model, start, seconds)[-1].rotation
+
+    today = run(TANK)
+    assert np.array_equal(run(TANK.with_values(disturbance_correlation_time=0.3, disturbance_seed=5)), today)
+    pushed = TANK.with_values(disturbance_torque_std=0.01, disturbance_correlation_time=2.0, disturbance_seed=5)
+    first = run(pushed)
+    assert np.array_equal(run(pushed), first)
+    assert not np.array_equal(run(pushed.with_values(disturbance_seed=6)), first)
+    assert np.degrees(np.arccos((np.trace(first.T @ today) - 1.0) / 2.0)) > 0.1
+    model = TankModel(ROBOT, pushed)
+    model.attach(start)
+    assert np.linalg.norm(model.disturbance) > 0.0  # a stationary start, not zero
+    started = model.disturbance.copy()
+    _spin(model, start, 0.5)
+    model.attach(start)
+    assert np.array_equal(model.disturbance, started)
+
+
+def test_the_disturbance_turns_a_free_body_as_its_torque_says() -> None:
+    """Nothing else acting (no rope, hydrostatics, added mass or drag; neutral paws), a body at rest under the
+    disturbance gains the world angular momentum R I omega = sum of its held torques times dt (to 0.1 %: the
+    torque is held in body axes at each step's start and turns with the body within the step)."""
+    neutral_paws = dataclasses.replace(ROBOT, paw_mass=ROBOT.rho * ROBOT.paw_volume)
+    tank = BARE.with_values(disturbance_torque_std=0.02, disturbance_correlation_time=1.0, disturbance_seed=1)
+    model = TankModel(neutral_paws, tank)
+    state = RigidBodyState()
+    model.attach(state)
+    q = nominal_joint_angles(neutral_paws)
+    impulse = np.zeros(3)
+    inertia = model.body_mass_matrix[3:, 3:]
+    for _ in range(50):
+        impulse += model.disturbance * DT
+        state = model.step(state, q, np.zeros((4, 3)), DT)
+    momentum = state.rotation @ inertia @ state.omega
+    assert np.linalg.norm(impulse) > 1e-4
+    np.testing.assert_allclose(momentum, impulse, rtol=0.0, atol=1e-3 * np.linalg.norm(impulse))
+
+
+@pytest.mark.parametrize("key, value", [("torque_std", -0.001), ("torque_std", 1.0), ("correlation_time", 0.01),
+                                        ("seed", -1), ("seed", 1.5), ("seed", True), ("colour", 1)])
+def test_the_disturbance_keys_are_checked(tmp_path, key, value) -> None:
+    import yaml
+    with open(config_path("tank.yaml")) as stream:
+        tree = yaml.safe_load(stream)
+    assert load_tank_params(tree=tree).disturbance_torque_std == 0.0  # the shipped tank is still
+    tree["disturbance"] = {"torque_std": 0.003, "correlation_time": 20.0, "seed": 4}
+    params = load_tank_params(tree=tree)
+    assert (params.disturbance_torque_std, params.disturbance_correlation_time, params.disturbance_seed) == \
+        (0.003, 20.0, 4) and params.disturbed
+    tree["disturbance"][key] = value
+    with pytest.raises(ParameterError, match="disturbance"):
+        load_tank_params(tree=tree)
+    with pytest.raises(ParameterError, match="disturbance_seed"):
+        TankParams(disturbance_seed=-2)

@@ -158,3 +158,39 @@ def test_a_tether_wound_past_the_turn_its_tie_was_checked_for_is_refused_by_name
     assert batch.failure_reasons == {0: str(raised.value)} and not batch.failed[1]
     batch.attach(p, R)
     assert not batch.failed.any() and batch.failure_reasons == {}
+
+
+def test_the_batch_pushes_its_trials_with_their_own_tanks_disturbance_to_the_bit_and_again_after_attach() -> None:
+    """Two tanks that are not still (their own seeds and correlation times) beside a still one, 25 s of legs
+    held on the tank plant: the batch's states are each per-trial plant's, step by step, across the blocks
+    the draws come in (1,024 steps each); the disturbance it holds is each plant's; attach starts each
+    trial's disturbance again, so a second run repeats the first."""
+    base = TankParams()
+    tanks = [base.with_values(disturbance_torque_std=0.01, disturbance_correlation_time=3.0, disturbance_seed=7),
+             base, base.with_values(disturbance_torque_std=0.004, disturbance_correlation_time=0.5,
+                                    disturbance_seed=8)]
+    batch = TankPlantBatch(ROBOT, tanks)
+    q, q_dot = _legs(3)
+    runs = []
+    for _ in range(2):
+        models = [TankModel(ROBOT, tank) for tank in tanks]
+        p, v, R, w = _states(3)
+        batch.attach(p, R)
+        for model in models:
+            model.attach(RigidBodyState())
+        states = [RigidBodyState() for _ in models]
+        for step in range(2500):
+            batch.step(p, v, R, w, q, q_dot, DT)
+            states = [model.step(state, q[i], q_dot[i], DT) for i, (model, state) in enumerate(zip(models, states))]
+            if step % 97 == 0 or step in (1022, 1023, 1024, 2047, 2048):
+                for i, state in enumerate(states):
+                    for mine, theirs in ((p[i], state.position), (v[i], state.velocity), (R[i], state.rotation),
+                                         (w[i], state.omega)):
+                        np.testing.assert_array_equal(mine, theirs)
+                    np.testing.assert_array_equal(batch.disturbance[i], models[i].disturbance)
+        runs.append(R.copy())
+    np.testing.assert_array_equal(runs[1], runs[0])
+    assert np.array_equal(runs[0][1], np.eye(3))  # the still tank's body stays at rest upright
+    angles = [math.degrees(math.acos(max(-1.0, min(1.0, (np.trace(runs[0][i]) - 1.0) / 2.0)))) for i in range(3)]
+    assert angles[0] > 1.0 and angles[2] > 0.1  # the disturbed bodies were pushed off their rest
+    assert not batch.failed.any()
