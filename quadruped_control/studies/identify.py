@@ -398,7 +398,10 @@ def update_tank_yaml(text: str, values: Dict[str, float], note: str) -> str:
     """config/tank.yaml text with the identified values in place (comments of other lines kept); each
     replaced line is marked ``# [identified] <note>``. A vector's line is written whole, its components
     that no parameter in ``values`` sets as ``text`` had them: a fit of some components (``identify_bags
-    --parameters appendage_linear_z``) keeps the others the fit ran with."""
+    --parameters appendage_linear_z``) keeps the others the fit ran with. A scalar whose key ``text`` lacks
+    (a file written before the key existed, such as an older ensemble member given as ``--tank-yaml``) gets its
+    line at the end of its section (the section too, if that is missing); a vector without its line is a
+    ValueError."""
     lines_of: Dict[Tuple[str, str], List[str]] = {}  # (section, key) -> the parameters on that line
     for name, _, _ in PARAMETERS:
         lines_of.setdefault((_PLACES[name].section, _PLACES[name].key), []).append(name)
@@ -426,9 +429,28 @@ def update_tank_yaml(text: str, values: Dict[str, float], note: str) -> str:
         lines[i] = "%s%s: %s  # [identified] %s" % (indent, stripped.split(":", 1)[0], value, note)
         done.update(given)
     missing = [n for n in values if n not in done]
-    if missing:
-        raise ValueError("tank.yaml has no line for %s" % ", ".join(missing))
+    vectors = [n for n in missing if _PLACES[n].components]
+    if vectors:  # a vector's other components are the file's: without its line there are none to keep
+        raise ValueError("tank.yaml has no line for %s" % ", ".join(vectors))
+    for name in missing:  # a file written before the key existed (an older fit's ensemble member)
+        _insert_line(lines, _PLACES[name].section, "  %s: %s  # [identified] %s" % (
+            _PLACES[name].key, _EXACT % _field_value(name, values[name]), note))
     return "\n".join(lines) + "\n"
+
+
+def _insert_line(lines: List[str], section: str, line: str) -> None:
+    """``line`` appended to the block of top-level ``section`` in the yaml ``lines`` (in place; before the blank
+    lines that end it), or a new section at the end."""
+    header = "%s:" % section
+    start = next((i for i, text in enumerate(lines) if text.rstrip() == header), None)
+    if start is None:
+        lines.extend(["", header, line])
+        return
+    end = next((i for i in range(start + 1, len(lines)) if lines[i] and not lines[i][0].isspace()
+                and not lines[i].startswith("#")), len(lines))
+    while end > start + 1 and not lines[end - 1].strip():
+        end -= 1
+    lines.insert(end, line)
 
 
 # --------------------------------------------------------------------------------------------------

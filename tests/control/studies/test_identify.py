@@ -248,8 +248,30 @@ def test_every_parameter_reaches_the_tank_plant_and_its_yaml_round_trips(tmp_pat
     # the centre of buoyancy's and the IMU field's lines carry three parameters each, the two appendage
     # lines four
     assert text.count("[identified] test") == 34
-    with pytest.raises(ValueError, match="no line for net_weight"):
-        idf.update_tank_yaml("hydrostatics:\n  center_of_buoyancy: [0, 0, 0]\n", {"net_weight": 1.0}, "x")
+    with pytest.raises(ValueError, match="no line for cob_z"):
+        idf.update_tank_yaml("hydrostatics:\n  net_weight: 1.0\n", {"cob_z": 0.001, "net_weight": 1.0}, "x")
+
+
+def test_a_file_written_before_a_key_existed_gets_its_line() -> None:
+    """An ensemble member written before the torsion's relaxing twist existed has no line for it: a fit that
+    starts from it (--tank-yaml) writes the line at the end of its section, a missing section at the end,
+    and the file loads with the fitted values; the members' other lines are untouched."""
+    import yaml
+
+    assert idf.update_tank_yaml("hydrostatics:\n  center_of_buoyancy: [0, 0, 0]\n\nservos:\n  lag_scale: 1.0\n",
+                                {"net_weight": 1.5}, "x") == \
+        "hydrostatics:\n  center_of_buoyancy: [0, 0, 0]\n  net_weight: 1.5  # [identified] x\n\nservos:\n" \
+        "  lag_scale: 1.0\n"
+    assert idf.update_tank_yaml("servos:\n  lag_scale: 1.0\n", {"net_weight": 1.5}, "x").endswith(
+        "\nhydrostatics:\n  net_weight: 1.5  # [identified] x\n")
+    with open(config_path("tank_ensemble/member_00.yaml")) as stream:
+        member = stream.read()
+    assert "torsion_relaxing_stiffness" not in member
+    text = idf.update_tank_yaml(member, {"torsion_relaxing_stiffness": 0.02, "torsion_relaxation_time": 7.0}, "y")
+    tank = load_tank_params(tree=yaml.safe_load(text))
+    assert tank == load_tank_params(config_path("tank_ensemble/member_00.yaml")).with_values(
+        rope_torsion_relaxing_stiffness=0.02, rope_torsion_relaxation_time=7.0)
+    assert [line for line in text.splitlines() if "[identified] y" not in line] == member.splitlines()
 
 
 def test_a_partial_set_keeps_the_templates_other_components_in_the_yaml() -> None:
