@@ -440,7 +440,7 @@ def update_tank_yaml(text: str, values: Dict[str, float], note: str) -> str:
 
 def _insert_line(lines: List[str], section: str, line: str) -> None:
     """``line`` appended to the block of top-level ``section`` in the yaml ``lines`` (in place; before the blank
-    lines that end it), or a new section at the end."""
+    lines and the next section's own comments that end it), or a new section at the end."""
     header = "%s:" % section
     start = next((i for i, text in enumerate(lines) if text.rstrip() == header), None)
     if start is None:
@@ -448,7 +448,7 @@ def _insert_line(lines: List[str], section: str, line: str) -> None:
         return
     end = next((i for i in range(start + 1, len(lines)) if lines[i] and not lines[i][0].isspace()
                 and not lines[i].startswith("#")), len(lines))
-    while end > start + 1 and not lines[end - 1].strip():
+    while end > start + 1 and (not lines[end - 1].strip() or lines[end - 1].startswith("#")):
         end -= 1
     lines.insert(end, line)
 

@@ -262,6 +262,9 @@ def test_a_file_written_before_a_key_existed_gets_its_line() -> None:
                                 {"net_weight": 1.5}, "x") == \
         "hydrostatics:\n  center_of_buoyancy: [0, 0, 0]\n  net_weight: 1.5  # [identified] x\n\nservos:\n" \
         "  lag_scale: 1.0\n"
+    assert idf.update_tank_yaml("hydrostatics:\n  center_of_buoyancy: [0, 0, 0]\n# the servos\nservos:\n",
+                                {"net_weight": 1.5}, "x") == \
+        "hydrostatics:\n  center_of_buoyancy: [0, 0, 0]\n  net_weight: 1.5  # [identified] x\n# the servos\nservos:\n"
     assert idf.update_tank_yaml("servos:\n  lag_scale: 1.0\n", {"net_weight": 1.5}, "x").endswith(
         "\nhydrostatics:\n  net_weight: 1.5  # [identified] x\n")
     with open(config_path("tank_ensemble/member_00.yaml")) as stream:
