@@ -141,6 +141,7 @@ def trial_setup(spec: TrialSpec) -> TrialSetup:
         tank = load_tank_params(spec.tank_yaml)
         if spec.tank_overrides:
             tank = tank.with_values(**{k: (tuple(v) if isinstance(v, list) else v) for k, v in spec.tank_overrides})
+        tank = tank.for_trial(spec.seed)  # a disturbed tank: each trial seed another draw of its disturbance
         model = make_plant(spec.plant, robot, tank)
         servo_params = tank_servo_params(servo_params, tank)
     initial_R = rpy_to_rot(*np.radians(spec.initial_rpy_deg))

@@ -187,7 +187,8 @@ Candidate effects of the identification against Table 1, each zero (today's mode
   (dd = -d / tau_d dt + sigma sqrt(2 / tau_d) dW, stepped exactly), started at a stationary draw at
   :meth:`TankModel.attach` and held over each step in body axes at the step's start, beside the hook's
   friction. Seeded (``disturbance_seed``, its own stream apart from the IMU noise's): the same tank.yaml runs
-  the same disturbance in every trial, both engines alike; another seed is another tank. sigma = 0 (the
+  the same disturbance in every trial, both engines alike, and a trial's own seed (:meth:`TankParams.for_trial`:
+  the robustness study's seeds, ``--seed``) draws another from it; another tank seed is another tank. sigma = 0 (the
   default) is today's model exactly. It is an input, not one of the plant's forces:
   :meth:`TankModel.held_wrench` and :meth:`TankModel.restoring_torque` leave it out.
 
@@ -535,6 +536,16 @@ class TankParams:
     def heading_disturbed(self) -> bool:
         """Does the IMU report a heading other than the true one (a residual field at the IMU)?"""
         return any(float(v) != 0.0 for v in self.imu_field_residual)
+
+    def for_trial(self, seed: int) -> "TankParams":
+        """This tank for a trial of seed ``seed`` (TrialSpec.seed: the robustness study's seeds, ``--seed``):
+        itself for seed 0 or a still tank; otherwise the same tank pushed by another disturbance, its seed
+        drawn from (``disturbance_seed``, ``seed``) by numpy's SeedSequence, so that each trial seed is a
+        draw of the tank's disturbance and the same pair is the same draw."""
+        if seed == 0 or not self.disturbed:
+            return self
+        state = np.random.SeedSequence([int(self.disturbance_seed), int(seed)]).generate_state(1)
+        return replace(self, disturbance_seed=int(state[0]))
 
     def with_values(self, **values: Any) -> "TankParams":
         """A copy with some fields replaced (identification, tests)."""

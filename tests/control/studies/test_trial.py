@@ -183,3 +183,20 @@ def test_a_batch_trial_the_plant_refuses_mid_run_is_recorded_with_the_plants_rea
     assert refused["metrics"] is None and beside["metrics"] is not None
     with pytest.raises(SimulationError, match="hook friction's test"):
         run_batch([tank])
+
+
+def test_each_trial_seed_is_another_draw_of_a_disturbed_tanks_disturbance_on_both_engines():
+    """A tank that is not still: trial seed 0 runs the tank's own disturbance, another seed another draw (the
+    same seed the same draw), in the per-trial and the batched engine alike; a still tank ignores the seed."""
+    pushed = (("disturbance_torque_std", 0.01), ("disturbance_correlation_time", 2.0), ("disturbance_seed", 5))
+    spec = TrialSpec(label="pushed", setpoint_rpy_deg=(20.0, 0.0, 0.0), duration=4.0, gains="experiment",
+                     servo_model="rate-limited", plant="tank", quiet=True, keep_trace=True, tank_overrides=pushed)
+    seeds = [trial_setup(dataclasses.replace(spec, seed=seed)).model.tank.disturbance_seed for seed in (0, 3, 3, 4)]
+    assert seeds[0] == 5 and seeds[1] == seeds[2] and len({seeds[0], seeds[1], seeds[3]}) == 3
+    still = dataclasses.replace(spec, tank_overrides=(), seed=3)
+    assert trial_setup(still).model.tank == trial_setup(dataclasses.replace(still, seed=0)).model.tank
+    runs = [dataclasses.replace(spec, seed=seed) for seed in (0, 3)]
+    per_trial, batched = [run_trial(s) for s in runs], run_batch(runs)
+    for a, b in zip(per_trial, batched):
+        np.testing.assert_array_equal(a["trace"]["rpy"], b["trace"]["rpy"])
+    assert not np.array_equal(per_trial[0]["trace"]["rpy"], per_trial[1]["trace"]["rpy"])
