@@ -74,7 +74,9 @@ def build_parser() -> argparse.ArgumentParser:
                              "default sim, experiment for --study paper-experiments")
     parser.add_argument("--servo-model", choices=("ideal", "rate-limited"), default=None,
                         help="servo model (default from config/simulation.yaml: ideal, the paper's)")
-    parser.add_argument("--seed", type=int, default=0, help="seed of the IMU noise (default 0)")
+    parser.add_argument("--seed", type=int, default=0,
+                        help="seed of the IMU noise and, in a tank.yaml with a disturbance, of its draw (0: the "
+                             "tank's own; default 0); the identification's search is seeded with it too")
     parser.add_argument("--attitude-noise", type=float, default=None, metavar="DEG",
                         help="IMU attitude noise std, degrees (default from config: 0)")
     parser.add_argument("--gyro-noise", type=float, default=None, metavar="RAD_S",
