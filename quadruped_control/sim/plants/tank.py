@@ -313,19 +313,15 @@ HOOK_FRICTION_ROLL_RATIO_RANGE = (0.1, 10.0)
 #: cable's EI / L (0.05 N m^2 over 0.1 m); a larger one is a unit slip (N mm for N m), not a cable.
 MAX_TETHER_STIFFNESS = 2.0
 
-#: The relaxation times tank.yaml accepts (s), for the tether's bend and the torsion's relaxing twist alike: from
-#: ten 10 ms steps (the relaxation is carried exactly, but a faster one is a viscous damper, not a spring) to
-#: nearly three hours (a cable that never relaxes).
-RELAXATION_TIME_RANGE = (0.1, 10000.0)
+#: The time constants tank.yaml accepts (s): the relaxation times of the tether's bend and of the torsion's
+#: relaxing twist, and the disturbance's correlation time. From ten 10 ms steps (each is carried exactly, but a
+#: faster relaxation is a viscous damper, not a spring, and a faster disturbance white noise filtered by the
+#: step) to nearly three hours (a cable that never relaxes, a push that stays).
+TIME_CONSTANT_RANGE = (0.1, 10000.0)
 
 #: The largest disturbance torque tank.yaml accepts (its standard deviation per axis, N m): ten times the
 #: strokes' net torque at its largest (0.04 N m); a larger one is a unit slip (N mm for N m), not a tank.
 MAX_DISTURBANCE_TORQUE = 0.4
-
-#: The disturbance's correlation times tank.yaml accepts (s): from ten 10 ms steps (the process is stepped
-#: exactly, but held over each step, so a faster one is white noise filtered by the step) to nearly three hours
-#: (a push that stays).
-DISTURBANCE_CORRELATION_TIME_RANGE = (0.1, 10000.0)
 
 #: The stream of a tank's random generator its disturbance draws from, beside its seed: apart from the IMU
 #: noise's stream, default_rng(seed), so that the two are independent for the same seed.
@@ -464,8 +460,8 @@ class TankParams:
             if not (math.isfinite(value) and 0.0 <= value <= MAX_TETHER_STIFFNESS):
                 raise ParameterError("tank %s must be in [0, %g] N m/rad (0: off), got %r"
                                      % (name, MAX_TETHER_STIFFNESS, value))
-        low, high = RELAXATION_TIME_RANGE
-        for name in ("rope_torsion_relaxation_time", "tether_relaxation_time"):
+        low, high = TIME_CONSTANT_RANGE
+        for name in ("rope_torsion_relaxation_time", "tether_relaxation_time", "disturbance_correlation_time"):
             value = getattr(self, name)
             if not (math.isfinite(value) and low <= value <= high):
                 raise ParameterError("tank %s must be in [%g, %g] s, got %r" % (name, low, high, value))
@@ -513,10 +509,6 @@ class TankParams:
                 <= MAX_DISTURBANCE_TORQUE):
             raise ParameterError("tank disturbance_torque_std must be in [0, %g] N m (0: off), got %r"
                                  % (MAX_DISTURBANCE_TORQUE, self.disturbance_torque_std))
-        low, high = DISTURBANCE_CORRELATION_TIME_RANGE
-        if not (math.isfinite(self.disturbance_correlation_time) and low <= self.disturbance_correlation_time <= high):
-            raise ParameterError("tank disturbance_correlation_time must be in [%g, %g] s, got %r"
-                                 % (low, high, self.disturbance_correlation_time))
         if isinstance(self.disturbance_seed, bool) or not isinstance(self.disturbance_seed, (int, np.integer)) \
                 or not 0 <= self.disturbance_seed < 2 ** 32:
             raise ParameterError("tank disturbance_seed must be an integer in [0, 2^32), got %r"
@@ -624,7 +616,7 @@ def tank_params_from_dict(data: Mapping[str, Any]) -> TankParams:
         rope_torsion_relaxing_stiffness=number(rope.get("torsion_relaxing_stiffness", 0.0),
                                                "suspension.torsion_relaxing_stiffness", 0.0, 1e4),
         rope_torsion_relaxation_time=number(rope.get("torsion_relaxation_time", 10.0),
-                                            "suspension.torsion_relaxation_time", *RELAXATION_TIME_RANGE),
+                                            "suspension.torsion_relaxation_time", *TIME_CONSTANT_RANGE),
         block_mass=number(rope.get("block_mass", 0.0), "suspension.block_mass", 0.0, 100.0),
         block_drag=number(rope.get("block_drag", 2.0), "suspension.block_drag", 0.0, 1e4),
         block_tie_stiffness=number(rope.get("block_tie_stiffness", 0.0), "suspension.block_tie_stiffness", 0.0,
@@ -652,11 +644,11 @@ def tank_params_from_dict(data: Mapping[str, Any]) -> TankParams:
         tether_relaxing_stiffness=number(tether.get("relaxing_stiffness", 0.0), "tether.relaxing_stiffness", 0.0,
                                          MAX_TETHER_STIFFNESS),
         tether_relaxation_time=number(tether.get("relaxation_time", 10.0), "tether.relaxation_time",
-                                      *RELAXATION_TIME_RANGE),
+                                      *TIME_CONSTANT_RANGE),
         disturbance_torque_std=number(disturbance.get("torque_std", 0.0), "disturbance.torque_std", 0.0,
                                       MAX_DISTURBANCE_TORQUE),
         disturbance_correlation_time=number(disturbance.get("correlation_time", 10.0), "disturbance.correlation_time",
-                                            *DISTURBANCE_CORRELATION_TIME_RANGE),
+                                            *TIME_CONSTANT_RANGE),
         disturbance_seed=integer(disturbance.get("seed", 0), "disturbance.seed", 0, 2 ** 32 - 1))
 
 
@@ -933,18 +925,21 @@ class TankModel(FloatingBaseModel):
             raise RuntimeError("the tank is still (disturbance_torque_std 0) or not attached: no disturbance to draw")
         return self._disturbance_rng.standard_normal((DISTURBANCE_BLOCK, 3))
 
-    def disturbance_noise(self) -> np.ndarray:
-        """The next step's three standard normal draws of the disturbance (world axes)."""
+    def _untaken_disturbance_draws(self) -> None:
+        """A new block of draws once every row of the current one is taken."""
         if self._disturbance_row >= len(self._disturbance_draws):
             self._disturbance_draws, self._disturbance_row = self.disturbance_noise_block(), 0
+
+    def disturbance_noise(self) -> np.ndarray:
+        """The next step's three standard normal draws of the disturbance (world axes)."""
+        self._untaken_disturbance_draws()
         self._disturbance_row += 1
         return self._disturbance_draws[self._disturbance_row - 1]
 
     def take_disturbance_noise(self) -> np.ndarray:
         """Every draw :meth:`disturbance_noise` would give before it draws another block ((K, 3); a whole new
         block when none is left), taken: the batch steps its trials on them."""
-        if self._disturbance_row >= len(self._disturbance_draws):
-            self._disturbance_draws, self._disturbance_row = self.disturbance_noise_block(), 0
+        self._untaken_disturbance_draws()
         rest = self._disturbance_draws[self._disturbance_row:]
         self._disturbance_row = len(self._disturbance_draws)
         return rest
