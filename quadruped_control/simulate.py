@@ -93,6 +93,13 @@ def build_parser() -> argparse.ArgumentParser:
     parser.add_argument("--tank-ensemble", default=None, metavar="DIR",
                         help="ensemble study: a folder of tank.yaml files, Table 1 on each (default: the package's "
                              "config/tank_ensemble, the sets fitted to Table 1)")
+    parser.add_argument("--draws", type=int, default=1, metavar="N",
+                        help="ensemble study: run every member N times, trial seeds --seed to --seed + N - 1, each "
+                             "another draw of a disturbed tank's disturbance (default 1)")
+    parser.add_argument("--tank-disturbance", nargs=2, type=float, default=None, metavar=("SIGMA", "TAU"),
+                        help="ensemble study: every member in a tank that is not still, a disturbance torque of "
+                             "standard deviation SIGMA N m per axis and correlation time TAU s (tank.yaml's "
+                             "disturbance section; default: each member's own)")
     parser.add_argument("--controller", choices=("on", "off"), default="on",
                         help="off holds the legs at the nominal pose (passive dynamics, ballast checks)")
     parser.add_argument("--robot-yaml", default=None, metavar="PATH",
@@ -212,8 +219,10 @@ def main(argv: Optional[Sequence[str]] = None) -> int:
                 parser.error("--include adds to the screening's choice, --parameters replaces it: give one")
             if len(set(args.parameters)) == 1:  # pycma: "optimization in 1-D is not supported" (pycma issue 86)
                 parser.error("--parameters: CMA-ES fits two or more parameters; name a second one")
-        if args.tank_ensemble is not None and args.study != "ensemble":
-            parser.error("--tank-ensemble is the ensemble study's (--study ensemble)")
+        for option, given in (("--tank-ensemble", args.tank_ensemble is not None), ("--draws", args.draws != 1),
+                              ("--tank-disturbance", args.tank_disturbance is not None)):
+            if given and args.study != "ensemble":
+                parser.error("%s is the ensemble study's (--study ensemble)" % option)
         if args.study is not None:
             warn_uncommitted()  # before any trial runs: a dirty tree's figures name no commit
             status = STUDIES[args.study].main_study(args)
