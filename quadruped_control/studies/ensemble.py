@@ -203,10 +203,13 @@ def format_report(folder: str, members: Sequence[str], counts: Sequence[Sequence
             _spread_cell(e["M_p"]["paper"], e["M_p"]["sim"], "%.1f"),
             _spread_cell(e["yaw t_s"]["paper"], e["yaw t_s"]["sim"], "%.1f")))
     if cover is not None:
-        lines += ["", "Coverage: experiments whose robot value lies inside the range (min-max) of the runs, of those "
-                  "Table 1 gives a value to judge (t_s: a robot that did not settle is covered by a run that does "
-                  "not). Outside the range of every run, the robot did what no member and no draw does.", "",
-                  "| runs | t_r | t_s | M_p | yaw t_s |", "|---|---|---|---|---|",
+        intro = ("Coverage: experiments whose robot value lies inside the range (min-max) of the runs, of those "
+                 "Table 1 gives a value to judge (t_s: a robot that did not settle is covered by a run that does "
+                 "not). Outside the range of every run, the robot did what no member and no draw does.")
+        if draws > 1:  # N exchangeable draws and one more: the newcomer is the extreme with chance 2 / (N + 1)
+            intro += (" Were the robot one more draw of a member, the member's %d draws would hold its value in about "
+                      "(N - 1) / (N + 1) = %.0f %% of the experiments." % (draws, 100.0 * (draws - 1) / (draws + 1)))
+        lines += ["", intro, "", "| runs | t_r | t_s | M_p | yaw t_s |", "|---|---|---|---|---|",
                   "| all %s | %s |" % (runs, _coverage_cells(cover["runs"]))]
         if draws > 1:
             for path, member_cover in zip(members, cover["members"]):

@@ -71,7 +71,7 @@ def test_a_members_counts_over_its_draws_are_reported_as_median_and_range() -> N
     cover = {"runs": ens.coverage([[_row(4.0, 10.0)]] * 3), "members": [ens.coverage([[_row(4.0, 10.0)]] * 3)]}
     text = ens.format_report("F", ["a.yaml"], [draws], entry, "t", cover)
     assert "| a.yaml | 14 of 15 | 8 (6-9) | 11 | 9 of 14 |" in text
-    assert "runs (1 members x 3 draws)" in text
+    assert "runs (1 members x 3 draws)" in text and "(N - 1) / (N + 1) = 50 % of the experiments." in text
     assert "| a.yaml, its 3 draws | 0 of 1 | 0 of 1 | 0 of 1 | 0 of 1 |" in text
     assert "Outside the range of all runs: t_r: roll 15; t_s: roll 15; M_p: roll 15; yaw t_s: roll 15." in text
 
