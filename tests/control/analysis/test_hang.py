@@ -1,0 +1,108 @@
+"""The hanging robot's linear model and its maximum-likelihood fit (quadruped_control/analysis/hang.py)."""
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+from scipy.integrate import quad
+from scipy.linalg import expm, solve_discrete_lyapunov
+
+from quadruped_control.analysis import hang
+
+TRUE = hang.HangModel(stiffness=0.02, damping=0.05, torque_std=0.002, correlation_time=10.0,
+                      noise_std=math.radians(0.05), inertia=0.06)
+
+
+def _simulate(model: hang.HangModel, dt: float, n: int, seed: int) -> np.ndarray:
+    """A record of the linear model itself, exactly discretised, from its stationary state."""
+    rng = np.random.default_rng(seed)
+    phi, q = hang.discretize(model, dt)
+    noise = np.linalg.cholesky(q + 1e-30 * np.eye(3))
+    x = np.linalg.cholesky(solve_discrete_lyapunov(phi, q)) @ rng.standard_normal(3)
+    out = np.empty(n)
+    for k in range(n):
+        out[k] = x[0] + model.noise_std * rng.standard_normal()
+        x = phi @ x + noise @ rng.standard_normal(3)
+    return out
+
+
+def _exact_log_likelihood(model: hang.HangModel, segments, dt: float) -> float:
+    """The readable form: the time-varying Kalman filter over every sample, from the stationary state."""
+    phi, q = hang.discretize(model, dt)
+    r = model.noise_std ** 2
+    total = 0.0
+    for y in segments:
+        x, p = np.zeros(3), solve_discrete_lyapunov(phi, q)
+        for yk in y:
+            s = p[0, 0] + r
+            innovation = yk - x[0]
+            total -= 0.5 * (math.log(2.0 * math.pi * s) + innovation ** 2 / s)
+            gain = p[:, 0] / s
+            x = phi @ (x + gain * innovation)
+            p = phi @ (p - np.outer(gain, p[0, :])) @ phi.T + q
+    return total
+
+
+def test_the_discretisation_is_the_exponential_and_keeps_the_stationary_variance() -> None:
+    dt = 0.1
+    phi, q = hang.discretize(TRUE, dt)
+    a, _ = hang._continuous(TRUE)
+    np.testing.assert_allclose(phi, expm(a * dt), rtol=1e-10, atol=1e-14)
+    np.testing.assert_allclose(q, q.T)
+    assert np.all(np.linalg.eigvalsh(q) > -1e-20)
+    # the discrete chain's stationary variance is the continuous model's, at any step
+    for step in (0.01, 0.1, 1.0):
+        phi, q = hang.discretize(TRUE, step)
+        assert math.sqrt(solve_discrete_lyapunov(phi, q)[0, 0]) == pytest.approx(hang.stationary_std(TRUE), rel=1e-6)
+
+
+def test_the_spectral_density_integrates_to_the_stationary_variance() -> None:
+    total, _ = quad(lambda f: float(hang.spectral_density(TRUE, np.array([f]))[0]), 0.0, np.inf, limit=400)
+    assert total == pytest.approx(hang.stationary_std(TRUE) ** 2, rel=1e-4)
+    # the static limit: a push held long is sigma / k of tilt, so the low-frequency level is 4 sigma^2 tau / k^2
+    level = 4.0 * TRUE.torque_std ** 2 * TRUE.correlation_time / TRUE.stiffness ** 2
+    assert float(hang.spectral_density(TRUE, np.array([1e-7]))[0]) == pytest.approx(level, rel=1e-6)
+
+
+def test_the_fast_likelihood_equals_the_exact_kalman_filter() -> None:
+    y = _simulate(TRUE, 0.1, 1500, seed=3)
+    segments = [y[:700] - y.mean(), y[720:] - y.mean(), y[700:705] - y.mean()]  # a gap, and a stretch too short
+    others = (hang.HangModel(0.5, 0.01, 0.01, 1.0, 1e-3, 0.06), hang.HangModel(1e-3, 2.0, 1e-4, 50.0, 1e-4, 0.2))
+    for model in (TRUE,) + others:
+        assert hang.log_likelihood(model, segments, 0.1) == pytest.approx(
+            _exact_log_likelihood(model, segments, 0.1), rel=1e-8, abs=1e-6)
+
+
+def test_valid_segments_split_at_invalid_or_missing_samples_and_drop_short_ones() -> None:
+    y = np.arange(40, dtype=float)
+    y[12] = math.nan
+    valid = np.ones(40, dtype=bool)
+    valid[30] = False
+    segments = hang.valid_segments(y, valid, min_length=10)
+    assert [s.tolist() for s in segments] == [list(range(12)), list(range(13, 30))]  # 31-39: nine, dropped
+
+
+def test_the_fit_recovers_a_known_model_inside_its_intervals() -> None:
+    y = _simulate(TRUE, 0.1, 6000, seed=1) + math.radians(3.0)  # hung off level: fitted about its mean
+    fit = hang.fit_axis(y, 0.1, TRUE.inertia)
+    assert fit.samples == 6000 and not fit.on_bound
+    for name in hang.HANG_PARAMETERS:
+        low, high = fit.intervals[name]
+        assert low <= getattr(TRUE, name) <= high, name
+        assert low <= getattr(fit.model, name) <= high
+    assert fit.model.inertia == TRUE.inertia
+    truth = hang.log_likelihood(TRUE, hang.valid_segments(y - y.mean()), 0.1)
+    assert fit.log_likelihood >= truth  # the optimum beats the truth on its own record
+    assert set(fit.as_dict()["values"]) == set(hang.HANG_PARAMETERS)
+
+
+def test_a_record_too_short_or_still_or_a_bad_grid_is_refused() -> None:
+    with pytest.raises(ValueError, match="at least 100"):
+        hang.fit_axis(np.zeros(50), 0.1, 0.06)
+    with pytest.raises(ValueError, match="does not move"):
+        hang.fit_axis(np.full(500, 0.1), 0.1, 0.06)
+    with pytest.raises(ValueError, match="positive grid step"):
+        hang.fit_axis(np.ones(500), 0.0, 0.06)
+    with pytest.raises(ValueError, match="inertia"):
+        hang.fit_axis(np.ones(500), 0.1, math.nan)

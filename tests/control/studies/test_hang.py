@@ -1,0 +1,151 @@
+"""What a hang tells (quadruped_control/studies/hang.py): a recorded or simulated hang fitted, and the models
+set beside it."""
+from __future__ import annotations
+
+import json
+import math
+import os
+
+import numpy as np
+import pytest
+
+from quadruped_common.config import config_path
+from quadruped_common.so3 import rot_to_quat, rpy_to_rot
+from quadruped_control.model.params import load_robot_params
+from quadruped_control.sim.plants.tank import TankModel, load_tank_params
+from quadruped_control.sim.simulation import nominal_joint_angles
+from quadruped_control.studies import StudyError
+from quadruped_control.studies import hang as study
+
+ROBOT = load_robot_params()
+
+
+def _quaternions(roll: np.ndarray, pitch: np.ndarray) -> np.ndarray:
+    return np.array([rot_to_quat(rpy_to_rot(r, p, 0.3)) for r, p in zip(roll, pitch)])
+
+
+def test_the_imu_attitude_goes_on_a_grid_with_bad_samples_and_gaps_left_out() -> None:
+    t = 50.0 + 0.02 * np.arange(600)
+    roll, pitch = 0.1 * np.sin(0.5 * (t - 50.0)), 0.05 * np.cos(0.3 * (t - 50.0))
+    q = _quaternions(roll, pitch)
+    q[10] = math.nan  # not finite
+    q[20] *= 3.0  # far from unit length
+    order = np.r_[np.arange(300, 600), np.arange(0, 250)]  # out of order, and 1 s missing (250-299)
+    record = study.record_from_bag(t[order], q[order], 0.1, 0.5, "synthetic")
+    assert record.dt == 0.1 and record.t[0] == 0.0 and record.t[-1] == pytest.approx(11.9, abs=1e-9)
+    expected_roll = 0.1 * np.sin(0.5 * record.t)
+    good = record.valid
+    assert np.abs(record.roll[good] - expected_roll[good]).max() < 1e-3  # linear between 50 Hz samples
+    assert np.abs(record.pitch[good] - 0.05 * np.cos(0.3 * record.t[good])).max() < 1e-3
+    gap = (record.t > 4.95) & (record.t < 6.0)
+    assert not record.valid[gap].any() and record.valid[~gap].all()
+    with pytest.raises(StudyError, match="fewer than two usable"):
+        study.record_from_bag([1.0, 2.0], [[math.nan] * 4, [0.0, 0.0, 0.0, 2.0]], 0.1, 0.5, "bad")
+    with pytest.raises(StudyError, match="fewer than 100 valid samples"):
+        record.after(5.0)
+
+
+def test_a_record_that_did_not_hang_still_is_refused() -> None:
+    t = 0.1 * np.arange(2000)
+    still = study.HangRecord(t, 0.01 * np.sin(t), np.full(t.size, 0.2), np.ones(t.size, dtype=bool), 0.1, "s")
+    mean = study.check_hanging(still)
+    assert mean["pitch"] == pytest.approx(0.2) and abs(mean["roll"]) < 1e-3
+    tumbled = study.HangRecord(t, np.linspace(0.0, 2.0, t.size), still.pitch, still.valid, 0.1, "t")
+    with pytest.raises(StudyError, match="roll left its mean by 57 deg"):
+        study.check_hanging(tumbled)
+
+
+def test_a_models_stiffness_at_the_hanging_attitude_is_its_restoring_torques_slope() -> None:
+    tank = load_tank_params()
+    sides = study.compare_tank(ROBOT, tank, 0.0, 0.0)
+    model, q = TankModel(ROBOT, tank), nominal_joint_angles(ROBOT)
+    at = math.radians(5.0)
+    slope = -float(model.restoring_torque(rpy_to_rot(at, 0.0, 0.0), q)[0]) / at
+    assert sides["roll"]["stiffness"] == pytest.approx(slope, rel=0.02)  # nearly linear over 5 deg
+    assert sides["roll"]["stiffness"] > 0.1 and sides["pitch"]["stiffness"] > 0.1  # the a priori tank restores
+    member_00 = study.compare_tank(ROBOT, load_tank_params(config_path("tank_ensemble/member_00.yaml")), 0.0, 0.0)
+    assert member_00["roll"]["stiffness"] < 0.0  # it pushes away from level (docs/identification.md)
+    roll_inertia, pitch_inertia = study.tilt_inertia(ROBOT, tank)
+    assert 0.0 < roll_inertia < pitch_inertia  # the body is longer than it is wide
+
+
+def test_verdicts_place_a_stiffness_against_the_interval() -> None:
+    assert study._verdict(0.5, (0.2, 1.0)) == "inside"
+    assert study._verdict(0.1, (0.2, 1.0)) == "softer"
+    assert study._verdict(-0.1, (0.2, 1.0)) == "pushes away (k < 0)"
+    assert study._verdict(2.0, (0.2, 1.0)) == "stiffer"
+    assert study._verdict(2.0, None).startswith("not judged")
+
+
+def _write_imu_bag(path: str, t: np.ndarray, quaternions: np.ndarray) -> None:
+    pytest.importorskip("rosbags")
+    from rosbags.rosbag1 import Writer
+    from rosbags.typesys import Stores, get_typestore
+
+    store = get_typestore(Stores.ROS1_NOETIC)
+    Header, Time = store.types["std_msgs/msg/Header"], store.types["builtin_interfaces/msg/Time"]
+    Quaternion, Vector3 = store.types["geometry_msgs/msg/Quaternion"], store.types["geometry_msgs/msg/Vector3"]
+    Imu = store.types["sensor_msgs/msg/Imu"]
+    cov, zero = np.zeros(9), Vector3(x=0.0, y=0.0, z=0.0)
+    with Writer(path) as writer:
+        connection = writer.add_connection("/imu/data", Imu.__msgtype__, typestore=store)
+        for k, (tk, (x, y, z, w)) in enumerate(zip(t, quaternions)):
+            ns = 1_000_000_000_000 + int(round(tk * 1e9))
+            header = Header(seq=k, stamp=Time(sec=ns // 1000000000, nanosec=ns % 1000000000), frame_id="imu_link")
+            writer.write(connection, ns, store.serialize_ros1(Imu(
+                header=header, orientation=Quaternion(x=x, y=y, z=z, w=w), orientation_covariance=cov,
+                angular_velocity=zero, angular_velocity_covariance=cov, linear_acceleration=zero,
+                linear_acceleration_covariance=cov), Imu.__msgtype__))
+
+
+def test_a_simulated_hang_is_fitted_and_the_same_hang_recorded_in_a_bag_fits_the_same(tmp_path, capsys) -> None:
+    out = str(tmp_path / "sim")
+    common = ["--skip", "10", "--compare", config_path("tank_ensemble/member_00.yaml")]
+    assert study.main(["--simulated", config_path("tank.yaml"), "--tank-disturbance", "0.005", "10",
+                       "--duration", "250", "--seed", "2", "--out", out] + common) == 0
+    with open(os.path.join(out, "hang.json")) as stream:
+        report = json.load(stream)
+    assert os.path.isfile(os.path.join(out, "hang.png")) and os.path.isfile(os.path.join(out, "hang.md"))
+    assert report["truth"]["torque_std"] == 0.005 and report["seconds"] == pytest.approx(240.0, abs=0.11)
+    assert [entry["tank_yaml"] for entry in report["comparison"]] == ["tank.yaml", "member_00.yaml"]
+    for axis in ("roll", "pitch"):
+        fit = report["fits"][axis]["values"]
+        # four minutes of a tank pushing with 5 mN m: the push and the stiffness within a factor 1.5 of the truth's
+        assert 0.005 / 1.5 < fit["torque_std"] < 0.005 * 1.5, axis
+        assert report["truth"]["stiffness"][axis] / 1.5 < fit["stiffness"] < report["truth"]["stiffness"][axis] * 1.5
+        assert report["comparison"][1][axis]["verdict"] == "pushes away (k < 0)"
+    printed = capsys.readouterr().out
+    assert "disturbance:" in printed and "Truth (--simulated tank.yaml)" in printed
+    # the same attitude written to a bag at 50 Hz and read back gives the same fit
+    record = study.simulated_record(config_path("tank.yaml"), (0.005, 10.0), 250.0, 2, 0.05, 0.1, None)
+    t = np.arange(0.0, record.t[-1] + 1e-9, 0.02)
+    quaternions = _quaternions(np.interp(t, record.t, record.roll), np.interp(t, record.t, record.pitch))
+    bag = str(tmp_path / "hang.bag")
+    _write_imu_bag(bag, t, quaternions)
+    assert study.main([bag, "--out", str(tmp_path / "bag")] + common) == 0
+    with open(os.path.join(str(tmp_path / "bag"), "hang.json")) as stream:
+        from_bag = json.load(stream)
+    assert "truth" not in from_bag and from_bag["source"] == bag
+    for axis in ("roll", "pitch"):
+        assert from_bag["fits"][axis]["values"]["stiffness"] == pytest.approx(
+            report["fits"][axis]["values"]["stiffness"], rel=0.05)
+        assert from_bag["mean_deg"][axis] == pytest.approx(report["mean_deg"][axis], abs=0.01)
+
+
+def test_the_cli_refuses_what_it_cannot_fit(tmp_path, capsys) -> None:
+    out = ["--out", str(tmp_path / "out")]
+    with pytest.raises(SystemExit):
+        study.main(out)  # neither a run nor --simulated
+    with pytest.raises(SystemExit):
+        study.main(["--simulated", config_path("tank.yaml")] + out)  # a still tank does not move it
+    with pytest.raises(SystemExit):
+        study.main(["x.bag", "--tank-disturbance", "0.001", "10"] + out)
+    with pytest.raises(SystemExit):
+        study.main(["x.bag", "--grid", "nan"] + out)
+    assert study.main([str(tmp_path / "missing.bag")] + out) == 1
+    assert "no such bag" in capsys.readouterr().err
+    assert study.main(["--simulated", config_path("tank.yaml"), "--tank-disturbance", "1.0", "10"] + out) == 1
+    assert "disturbance_torque_std must be in" in capsys.readouterr().err
+    assert study.main(["--simulated", config_path("tank.yaml"), "--tank-disturbance", "0.001", "10",
+                       "--grid", "0.015"] + out) == 1
+    assert "multiple of the plant's 0.01 s step" in capsys.readouterr().err
