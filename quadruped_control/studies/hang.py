@@ -2,7 +2,7 @@
 pitch fitted by a linear model pushed by the tank (:mod:`quadruped_control.analysis.hang`), and the fitted
 stiffness set beside the tank.yaml files' own.
 
-    python -m quadruped_control.studies.hang RUN [--skip 60] [--grid 0.1] [--max-gap 0.5]
+    python -m quadruped_control.studies.hang RUN [--skip 60] [--grid 0.1] [--max-gap 0.5] [--tether]
         [--tank-yaml Y] [--compare YAML_OR_DIR ...] --out DIR
     python -m quadruped_control.studies.hang --simulated TRUTH_YAML --tank-disturbance SIGMA TAU
         [--duration 660] [--seed 0] [--attitude-noise-deg 0.05] (and the options above)
@@ -18,7 +18,8 @@ about a plant whose values are known, which the report then prints beside the fi
 
 Per axis the fit gives the restoring stiffness k about the attitude it hangs at, the damping c, the tank's
 push sigma and its correlation time tau_d, and the IMU's noise, each with a 95 % interval, for the body's
-rotational inertia I of ``--tank-yaml`` (rigid + added, legs at the nominal pose). Beside it, for
+rotational inertia I of ``--tank-yaml`` (rigid + added, legs at the nominal pose); with ``--tether`` also the
+tether's relaxing bend k_r, tau_r (tank.yaml's ``tether`` section), which one hang pins down poorly. Beside it, for
 ``--tank-yaml`` and each ``--compare`` file (default: the shipped ensemble, config/tank_ensemble), the
 plant's own moment at the measured hanging attitude (TankModel.restoring_torque: a model that would hang
 there holds none) and its stiffness there (its slope over +-1 deg): a model whose stiffness lies outside
@@ -43,7 +44,7 @@ import numpy as np
 from quadruped_common.config import ParameterError, config_path
 from quadruped_common.so3 import rpy_to_rot
 from quadruped_control.analysis.bag_report import BagReportError, read_bags
-from quadruped_control.analysis.hang import HANG_PARAMETERS, HangFit, fit_axis, spectral_density
+from quadruped_control.analysis.hang import HangFit, fit_axis, spectral_density
 from quadruped_control.model.params import RobotParams, load_robot_params
 from quadruped_control.sim.plants.tank import TankModel, TankParams, load_tank_params
 from quadruped_control.sim.simulation import nominal_joint_angles
@@ -175,7 +176,8 @@ def tilt_inertia(robot: RobotParams, tank: TankParams) -> Tuple[float, float]:
 def compare_tank(robot: RobotParams, tank: TankParams, roll: float, pitch: float) -> Dict[str, Dict[str, float]]:
     """A tank.yaml's plant at the measured hanging attitude (rad): per axis, the moment it would need held
     there (N m, body axes; TankModel.restoring_torque, its opposite) and its stiffness there (N m/rad, minus
-    the slope of the moment over +-SLOPE_STEP_DEG; positive: restores)."""
+    the slope of the moment over +-SLOPE_STEP_DEG, the tether's bend that never relaxes included; positive:
+    restores), and its tether's relaxing bend (k_r N m/rad, tau_r s), which a slow tilt does not feel."""
     model = TankModel(robot, tank)
     q = nominal_joint_angles(robot)
     step = math.radians(SLOPE_STEP_DEG)
@@ -185,7 +187,10 @@ def compare_tank(robot: RobotParams, tank: TankParams, roll: float, pitch: float
             angles = [roll, pitch, 0.0]
             angles[index] += offset
             return float(model.restoring_torque(rpy_to_rot(*angles), q)[index])
-        out[name] = {"torque": moment(0.0), "stiffness": -(moment(step) - moment(-step)) / (2.0 * step)}
+        out[name] = {"torque": moment(0.0),
+                     "stiffness": -(moment(step) - moment(-step)) / (2.0 * step),
+                     "relaxing_stiffness": tank.tether_relaxing_stiffness,
+                     "relaxation_time": tank.tether_relaxation_time}
     return out
 
 
@@ -231,6 +236,14 @@ def _text(report: Dict[str, Any]) -> str:
             math.degrees(fit["record_std"]), v["damping"] / v["stiffness"]))
         if fit["on_bound"]:
             lines.append("| | on a search bound: %s | | | | | | | |" % ", ".join(fit["on_bound"]))
+    if report["tether"]:
+        lines += ["", "The tether's relaxing bend (--tether; a slow tilt does not feel it):", "",
+                  "| axis | k_r [mN m/rad] | tau_r [s] |", "|---|---|---|"]
+        for name, _ in AXES:
+            v, iv = report["fits"][name]["values"], report["fits"][name]["intervals"]
+            lines.append("| %s | %s | %s |" % (
+                name, _interval_text(v["relaxing_stiffness"], iv["relaxing_stiffness"], 1e3, "%.3g"),
+                _interval_text(v["relaxation_time"], iv["relaxation_time"], 1.0, "%.3g")))
     if report.get("truth"):
         truth = report["truth"]
         lines += ["", "Truth (--simulated %s): sigma %.3g mN m, tau_d %.3g s; the truth's own stiffness at the "
@@ -248,13 +261,14 @@ def _text(report: Dict[str, Any]) -> str:
                   "  correlation_time: %.3g  # s" % push["correlation_time"], "```"]
     lines += ["", "Each model at the measured attitude: the moment it would need held there (a model that hangs there "
               "needs none) and its stiffness there, against the fitted interval.", "",
-              "| tank.yaml | roll: held [mN m] | roll: k [mN m/rad] | pitch: held [mN m] | pitch: k [mN m/rad] |",
-              "|---|---|---|---|---|"]
+              "| tank.yaml | roll: held [mN m] | roll: k [mN m/rad] | pitch: held [mN m] | pitch: k [mN m/rad] "
+              "| tether: k_r [mN m/rad], tau_r [s] |", "|---|---|---|---|---|---|"]
     for entry in report["comparison"]:
         cells = []
         for name, _ in AXES:
             side = entry[name]
             cells += ["%.3g" % (-side["torque"] * 1e3), "%.3g (%s)" % (side["stiffness"] * 1e3, side["verdict"])]
+        cells.append("%.3g, %.3g" % (entry["roll"]["relaxing_stiffness"] * 1e3, entry["roll"]["relaxation_time"]))
         lines.append("| %s | %s |" % (entry["tank_yaml"], " | ".join(cells)))
     return "\n".join(lines) + "\n"
 
@@ -302,6 +316,8 @@ def main(argv: Optional[Sequence[str]] = None) -> int:
     parser.add_argument("--compare", nargs="*", default=None, metavar="YAML_OR_DIR",
                         help="tank.yaml files or folders of them to set beside the fit (default: the shipped "
                              "ensemble, config/%s)" % DEFAULT_FOLDER)
+    parser.add_argument("--tether", action="store_true",
+                        help="fit the tether's relaxing bend too (k_r, tau_r: tank.yaml's tether section)")
     parser.add_argument("--simulated", metavar="TRUTH_YAML", help="fit a simulated hang on this tank.yaml instead")
     parser.add_argument("--tank-disturbance", nargs=2, type=float, metavar=("SIGMA", "TAU"),
                         help="--simulated: the tank's push, N m and s")
@@ -350,7 +366,7 @@ def main(argv: Optional[Sequence[str]] = None) -> int:
         fits: Dict[str, HangFit] = {}
         mean = check_hanging(record)
         for name, _ in AXES:
-            fits[name] = fit_axis(record.axis(name), record.dt, inertia[name], record.valid)
+            fits[name] = fit_axis(record.axis(name), record.dt, inertia[name], record.valid, tether=args.tether)
         comparison = []
         for path, model in zip(compare, tanks):
             sides = compare_tank(robot, model, mean["roll"], mean["pitch"])
@@ -370,7 +386,7 @@ def main(argv: Optional[Sequence[str]] = None) -> int:
         "mean_deg": {name: math.degrees(mean[name]) for name, _ in AXES},
         "fits": {name: fits[name].as_dict() for name, _ in AXES},
         "disturbance": tank_push(fits),
-        "comparison": comparison, "parameters": list(HANG_PARAMETERS)}
+        "comparison": comparison, "tether": args.tether}
     if args.simulated:
         truth = compare_tank(robot, load_tank_params(args.simulated), mean["roll"], mean["pitch"])
         report["truth"] = {"tank_yaml": os.path.basename(args.simulated), "torque_std": args.tank_disturbance[0],

@@ -149,3 +149,24 @@ def test_the_cli_refuses_what_it_cannot_fit(tmp_path, capsys) -> None:
     assert study.main(["--simulated", config_path("tank.yaml"), "--tank-disturbance", "0.001", "10",
                        "--grid", "0.015"] + out) == 1
     assert "multiple of the plant's 0.01 s step" in capsys.readouterr().err
+
+
+def test_tether_asks_the_fit_for_the_tethers_branch(tmp_path, monkeypatch, capsys) -> None:
+    asked = []
+
+    def quick_fit(y, dt, inertia, valid=None, tether=False):
+        asked.append(tether)
+        return study_fit(y, dt, inertia, valid, max_evaluations=150, tether=tether)
+
+    study_fit = study.fit_axis
+    monkeypatch.setattr(study, "fit_axis", quick_fit)
+    out = str(tmp_path / "out")
+    assert study.main(["--simulated", config_path("tank.yaml"), "--tank-disturbance", "0.005", "10", "--duration",
+                       "40", "--skip", "5", "--tether", "--compare", "--out", out]) == 0
+    assert asked == [True, True]
+    with open(os.path.join(out, "hang.json")) as stream:
+        report = json.load(stream)
+    assert report["tether"] and set(report["fits"]["roll"]["values"]) >= {"relaxing_stiffness", "relaxation_time"}
+    assert [entry["tank_yaml"] for entry in report["comparison"]] == ["tank.yaml"]  # --compare with nothing
+    assert report["comparison"][0]["roll"]["relaxing_stiffness"] == 0.0
+    assert "The tether's relaxing bend (--tether" in capsys.readouterr().out
