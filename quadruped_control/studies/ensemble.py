@@ -24,7 +24,7 @@ with the trial seeds ``--seed`` to ``--seed + N - 1`` (seed 0: the tank's own dr
 every member alike, so members differ by their parameters, not their luck). Then the report gives each
 member's counts as the median and range over its draws, the spread over every run, and the coverage: in
 how many experiments the robot's value lies inside the range of the runs (all of them, and each member's
-own draws), per metric. Docs/identification.md, "A tank that is not still", judges the shipped members so.
+own draws), per metric (docs/identification.md, "The ensemble judged over draws", judges the shipped members so).
 """
 from __future__ import annotations
 
