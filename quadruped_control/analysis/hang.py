@@ -134,7 +134,8 @@ def stationary_std(model: HangModel) -> float:
 def spectral_density(model: HangModel, frequency_hz: np.ndarray) -> np.ndarray:
     """The one-sided power spectral density of theta (rad^2/Hz) at ``frequency_hz``: |H(i w)|^2 times the
     disturbance's 4 sigma^2 tau_d / (1 + (w tau_d)^2) (the transform of sigma^2 exp(-|t| / tau_d), one-sided),
-    H(s) = 1 / (I s^2 + c s + k). Without the measurement noise, whose floor depends on the sampling (2 r^2 dt)."""
+    H(s) = 1 / (I s^2 + c s + k + k_r s tau_r / (1 + s tau_r)). Without the measurement noise, whose floor
+    depends on the sampling (2 r^2 dt)."""
     w = 2.0 * math.pi * np.asarray(frequency_hz, dtype=float)
     tau = model.correlation_time
     torque = 4.0 * model.torque_std ** 2 * tau / (1.0 + (w * tau) ** 2)

@@ -42,7 +42,7 @@ from typing import Any, Dict, List, Optional, Sequence, Tuple
 import numpy as np
 
 from quadruped_common.config import ParameterError, config_path
-from quadruped_common.so3 import rpy_to_rot
+from quadruped_common.so3 import quat_to_rot, rotations_to_rpy, rpy_to_rot
 from quadruped_control.analysis.bag_report import BagReportError, read_bags
 from quadruped_control.analysis.hang import HangFit, fit_axis, spectral_density
 from quadruped_control.model.params import RobotParams, load_robot_params
@@ -83,13 +83,6 @@ class HangRecord:
         return HangRecord(self.t[keep], self.roll[keep], self.pitch[keep], self.valid[keep], self.dt, self.source)
 
 
-def _roll_pitch(rotations: np.ndarray) -> Tuple[np.ndarray, np.ndarray]:
-    """Z-Y-X roll and pitch (rad) of a stack of rotation matrices R_B^W."""
-    roll = np.arctan2(rotations[:, 2, 1], rotations[:, 2, 2])
-    pitch = -np.arcsin(np.clip(rotations[:, 2, 0], -1.0, 1.0))
-    return roll, pitch
-
-
 def record_from_bag(times: Sequence[float], quaternions: Sequence[Sequence[float]], dt: float, max_gap: float,
                     source: str) -> HangRecord:
     """The /imu/data attitude (x, y, z, w quaternions at ``times``) as a :class:`HangRecord` (module
@@ -105,12 +98,8 @@ def record_from_bag(times: Sequence[float], quaternions: Sequence[Sequence[float
     q = q[unique]
     if t.size < 2:
         raise StudyError("hang: %s has fewer than two usable /imu/data samples" % source)
-    x, y, z, w = q.T
-    rotations = np.empty((t.size, 3, 3))
-    rotations[:, 2, 0] = 2.0 * (x * z - w * y)
-    rotations[:, 2, 1] = 2.0 * (y * z + w * x)
-    rotations[:, 2, 2] = 1.0 - 2.0 * (x * x + y * y)
-    roll, pitch = _roll_pitch(rotations)
+    rpy = rotations_to_rpy(np.array([quat_to_rot(row) for row in q]))  # Z-Y-X, REP 103
+    roll, pitch = rpy[:, 0], rpy[:, 1]
     grid = t[0] + dt * np.arange(int(math.floor((t[-1] - t[0]) / dt + 1e-9)) + 1)
     index = np.clip(np.searchsorted(t, grid, side="right"), 1, t.size - 1)
     valid = (t[index] - t[index - 1] <= max_gap) | (np.abs(grid - t[index - 1]) < 1e-9)
