@@ -3,7 +3,7 @@ pitch fitted by a linear model pushed by the tank (:mod:`quadruped_control.analy
 stiffness set beside the tank.yaml files' own.
 
     python -m quadruped_control.studies.hang RUN [--skip 60] [--grid 0.1] [--max-gap 0.5] [--tether]
-        [--tank-yaml Y] [--compare YAML_OR_DIR ...] --out DIR
+        [--tank-yaml Y] [--compare YAML_OR_DIR ...] [--model-hangs] --out DIR
     python -m quadruped_control.studies.hang --simulated TRUTH_YAML --tank-disturbance SIGMA TAU
         [--duration 660] [--seed 0] [--attitude-noise-deg 0.05] (and the options above)
 
@@ -23,8 +23,11 @@ tether's relaxing bend k_r, tau_r (tank.yaml's ``tether`` section), which one ha
 ``--tank-yaml`` and each ``--compare`` file (default: the shipped ensemble, config/tank_ensemble), the
 plant's own moment at the measured hanging attitude (TankModel.restoring_torque: a model that would hang
 there holds none) and its stiffness there (its slope over +-1 deg): a model whose stiffness lies outside
-the interval does not hang like the robot. The tank's push goes into tank.yaml's ``disturbance`` section
-(the report prints the lines).
+the interval does not hang like the robot. That static slope is not what a hang measures (the rope's swing
+and a tether's bend add to it at the body's frequencies): ``--model-hangs`` hangs each compared model in the
+simulator with the fitted push and fits it the same way, so that its stiffness is set beside the robot's as
+the same instrument reads both. The tank's push goes into tank.yaml's ``disturbance`` section (the report
+prints the lines).
 
 Output in ``--out``: ``hang.json`` (the command, the code's fingerprint, the record, the fits, the
 comparison), ``hang.md``, and ``hang.png`` (the record, and each axis's spectrum beside the fitted model's).
@@ -53,7 +56,8 @@ from quadruped_control.studies.ensemble import DEFAULT_FOLDER, disturbance_overr
 from quadruped_control.studies.runner import code_record, command_line, warn_uncommitted
 from quadruped_control.studies.trial import TrialSpec, run_trial
 
-__all__ = ["AXES", "HangRecord", "compare_tank", "main", "record_from_bag", "simulated_record", "tilt_inertia"]
+__all__ = ["AXES", "HangRecord", "check_hanging", "compare_tank", "main", "model_hang", "record_from_bag",
+           "simulated_record", "tank_push", "tilt_inertia"]
 
 #: The axes a hang measures: (name, index in roll-pitch-yaw and in the body's angular coordinates).
 AXES = (("roll", 0), ("pitch", 1))
@@ -183,6 +187,29 @@ def compare_tank(robot: RobotParams, tank: TankParams, roll: float, pitch: float
     return out
 
 
+def model_hang(path: str, push: Optional[Dict[str, Any]], record: HangRecord, skip: float, seed: int,
+               noise_deg: float, inertia: Dict[str, float], interval: Dict[str, Optional[Tuple[float, float]]],
+               tether: bool, robot_yaml: Optional[str]) -> Dict[str, Any]:
+    """The tank.yaml ``path`` hung in the simulator as the robot was recorded (the fitted ``push``, the same
+    length, ``skip`` and grid, the fitted IMU noise, trial ``seed``) and fitted the same way: its stiffness as a
+    hang measures it, the rope's swing and a tether's bend included, set against the robot's ``interval``.
+    ``{"hangs": False, "why": ...}`` for a model that tumbles, and None-valued figures without a push."""
+    if push is None:
+        return {"hangs": None, "why": "the robot's record pins no push to hang the model in"}
+    duration = float(record.t[-1] - record.t[0]) + skip + record.dt
+    simulated = simulated_record(path, (push["torque_std"], push["correlation_time"]), duration, seed, noise_deg,
+                                 record.dt, robot_yaml).after(skip)
+    try:
+        mean = check_hanging(simulated)
+    except StudyError as exc:
+        return {"hangs": False, "why": str(exc).replace("hang: ", "", 1).replace("the robot did not", "it did not")}
+    out: Dict[str, Any] = {"hangs": True, "mean_deg": {name: math.degrees(mean[name]) for name, _ in AXES}}
+    for name, _ in AXES:
+        fit = fit_axis(simulated.axis(name), simulated.dt, inertia[name], simulated.valid, tether=tether)
+        out[name] = {"stiffness": fit.model.stiffness, "verdict": _verdict(fit.model.stiffness, interval[name])}
+    return out
+
+
 def _compare_files(paths: Sequence[str]) -> List[str]:
     files: List[str] = []
     for path in paths:
@@ -259,6 +286,21 @@ def _text(report: Dict[str, Any]) -> str:
             cells += ["%.3g" % (-side["torque"] * 1e3), "%.3g (%s)" % (side["stiffness"] * 1e3, side["verdict"])]
         cells.append("%.3g, %.3g" % (entry["roll"]["relaxing_stiffness"] * 1e3, entry["roll"]["relaxation_time"]))
         lines.append("| %s | %s |" % (entry["tank_yaml"], " | ".join(cells)))
+    own = [entry for entry in report["comparison"] if "own_hang" in entry]
+    if own:
+        lines += ["", "Each model hung in the simulator with the fitted push (--model-hangs; trial seed %d) and fitted "
+                  "the same way: its stiffness as a hang measures it (the rope's swing and a tether included), "
+                  "against the robot's interval." % (report["seed"] + 1), "",
+                  "| tank.yaml | hangs at roll, pitch [deg] | roll: k [mN m/rad] | pitch: k [mN m/rad] |",
+                  "|---|---|---|---|"]
+        for entry in own:
+            hang_ = entry["own_hang"]
+            if not hang_["hangs"]:
+                lines.append("| %s | no: %s | | |" % (entry["tank_yaml"], hang_["why"]))
+                continue
+            lines.append("| %s | %.2f, %.2f | %s | %s |" % (
+                entry["tank_yaml"], hang_["mean_deg"]["roll"], hang_["mean_deg"]["pitch"],
+                *("%.3g (%s)" % (hang_[n]["stiffness"] * 1e3, hang_[n]["verdict"]) for n, _ in AXES)))
     return "\n".join(lines) + "\n"
 
 
@@ -307,6 +349,9 @@ def main(argv: Optional[Sequence[str]] = None) -> int:
                              "ensemble, config/%s)" % DEFAULT_FOLDER)
     parser.add_argument("--tether", action="store_true",
                         help="fit the tether's relaxing bend too (k_r, tau_r: tank.yaml's tether section)")
+    parser.add_argument("--model-hangs", action="store_true",
+                        help="hang each compared tank.yaml in the simulator with the fitted push and fit it the same "
+                             "way: its stiffness as a hang measures it beside the robot's (about 30 s a model)")
     parser.add_argument("--simulated", metavar="TRUTH_YAML", help="fit a simulated hang on this tank.yaml instead")
     parser.add_argument("--tank-disturbance", nargs=2, type=float, metavar=("SIGMA", "TAU"),
                         help="--simulated: the tank's push, N m and s")
@@ -361,7 +406,13 @@ def main(argv: Optional[Sequence[str]] = None) -> int:
             sides = compare_tank(robot, model, mean["roll"], mean["pitch"])
             for name, _ in AXES:
                 sides[name]["verdict"] = _verdict(sides[name]["stiffness"], fits[name].intervals["stiffness"])
-            comparison.append({"tank_yaml": os.path.basename(path), **sides})
+            entry: Dict[str, Any] = {"tank_yaml": os.path.basename(path), **sides}
+            if args.model_hangs:
+                noise = math.degrees(float(np.mean([fits[n].model.noise_std for n, _ in AXES])))
+                entry["own_hang"] = model_hang(
+                    path, tank_push(fits), record, args.skip, args.seed + 1, noise, inertia,
+                    {n: fits[n].intervals["stiffness"] for n, _ in AXES}, args.tether, args.robot_yaml)
+            comparison.append(entry)
     except (ParameterError, BagReportError, ValueError) as exc:
         sys.stderr.write("hang: error: %s\n" % exc)
         return 1
@@ -375,7 +426,7 @@ def main(argv: Optional[Sequence[str]] = None) -> int:
         "mean_deg": {name: math.degrees(mean[name]) for name, _ in AXES},
         "fits": {name: fits[name].as_dict() for name, _ in AXES},
         "disturbance": tank_push(fits),
-        "comparison": comparison, "tether": args.tether}
+        "comparison": comparison, "tether": args.tether, "seed": args.seed}
     if args.simulated:
         truth = compare_tank(robot, load_tank_params(args.simulated), mean["roll"], mean["pitch"])
         report["truth"] = {"tank_yaml": os.path.basename(args.simulated), "torque_std": args.tank_disturbance[0],

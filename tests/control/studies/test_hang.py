@@ -102,7 +102,7 @@ def test_a_simulated_hang_is_fitted_and_the_same_hang_recorded_in_a_bag_fits_the
     out = str(tmp_path / "sim")
     common = ["--skip", "10", "--compare", config_path("tank_ensemble/member_00.yaml")]
     assert study.main(["--simulated", config_path("tank.yaml"), "--tank-disturbance", "0.005", "10",
-                       "--duration", "250", "--seed", "2", "--out", out] + common) == 0
+                       "--duration", "250", "--seed", "2", "--model-hangs", "--out", out] + common) == 0
     with open(os.path.join(out, "hang.json")) as stream:
         report = json.load(stream)
     assert os.path.isfile(os.path.join(out, "hang.png")) and os.path.isfile(os.path.join(out, "hang.md"))
@@ -114,8 +114,15 @@ def test_a_simulated_hang_is_fitted_and_the_same_hang_recorded_in_a_bag_fits_the
         assert 0.005 / 1.5 < fit["torque_std"] < 0.005 * 1.5, axis
         assert report["truth"]["stiffness"][axis] / 1.5 < fit["stiffness"] < report["truth"]["stiffness"][axis] * 1.5
         assert report["comparison"][1][axis]["verdict"] == "pushes away (k < 0)"
+    # --model-hangs: each model hung as the robot was and read by the same fit. The truth's own hang (another
+    # draw) reads the stiffness the record did, rope's swing included; member_00 pushes away and tumbles.
+    own, tumbled = report["comparison"][0]["own_hang"], report["comparison"][1]["own_hang"]
+    assert own["hangs"] and tumbled["hangs"] is False and "it did not hang still" in tumbled["why"]
+    for axis in ("roll", "pitch"):
+        assert own[axis]["stiffness"] == pytest.approx(report["fits"][axis]["values"]["stiffness"], rel=0.15)
     printed = capsys.readouterr().out
     assert "disturbance:" in printed and "Truth (--simulated tank.yaml)" in printed
+    assert "Each model hung in the simulator with the fitted push (--model-hangs; trial seed 3)" in printed
     # the same attitude written to a bag at 50 Hz and read back gives the same fit
     record = study.simulated_record(config_path("tank.yaml"), (0.005, 10.0), 250.0, 2, 0.05, 0.1, None)
     t = np.arange(0.0, record.t[-1] + 1e-9, 0.02)
