@@ -50,7 +50,7 @@ from quadruped_control.analysis.bag_report import BagReportError, read_bags
 from quadruped_control.analysis.hang import HangFit, fit_axis, spectral_density
 from quadruped_control.model.params import RobotParams, load_robot_params
 from quadruped_control.sim.plants.tank import TankModel, TankParams, load_tank_params
-from quadruped_control.sim.simulation import nominal_joint_angles
+from quadruped_control.sim.simulation import load_simulation_settings, nominal_joint_angles
 from quadruped_control.studies import StudyError
 from quadruped_control.studies.ensemble import DEFAULT_FOLDER, disturbance_overrides, member_files
 from quadruped_control.studies.runner import code_record, command_line, warn_uncommitted
@@ -115,11 +115,12 @@ def simulated_record(truth_yaml: str, disturbance: Sequence[float], duration: fl
                      noise_deg: float, dt: float, robot_yaml: Optional[str]) -> HangRecord:
     """The hang of the tank plant of ``truth_yaml`` (module docstring): the robot's trial with the controller
     off for ``duration`` s in a tank pushing with ``disturbance`` (sigma N m, tau_d s), drawn by trial
-    ``seed``, sampled every ``dt`` s (a multiple of the plant's 10 ms), with ``noise_deg`` of attitude
+    ``seed``, sampled every ``dt`` s (a multiple of the plant's step), with ``noise_deg`` of attitude
     noise (seeded) added to roll and pitch."""
-    stride = int(round(dt / 0.01))
-    if stride < 1 or abs(stride * 0.01 - dt) > 1e-9:
-        raise StudyError("hang: --grid must be a multiple of the plant's 0.01 s step, got %r" % dt)
+    step = load_simulation_settings().dt  # the trial's step, config/simulation.yaml
+    stride = int(round(dt / step))
+    if stride < 1 or abs(stride * step - dt) > 1e-9:
+        raise StudyError("hang: --grid must be a multiple of the plant's %g s step, got %r" % (step, dt))
     spec = TrialSpec(label="hang", setpoint_rpy_deg=(0.0, 0.0, 0.0), duration=duration, seed=seed, plant="tank",
                      tank_yaml=truth_yaml, robot_yaml=robot_yaml, controller="off", quiet=True,
                      tank_overrides=disturbance_overrides(disturbance), trace_stride=stride)
@@ -377,13 +378,14 @@ def main(argv: Optional[Sequence[str]] = None) -> int:
     warn_uncommitted()
     try:
         robot = load_robot_params(args.robot_yaml)
-        tank = load_tank_params(args.tank_yaml)
         compare = [args.tank_yaml or config_path("tank.yaml")] + _compare_files(
             args.compare if args.compare is not None else [config_path(DEFAULT_FOLDER)])
         compare = sorted(set(compare), key=compare.index)  # each file once, --tank-yaml's first
         tanks = [load_tank_params(path) for path in compare]
+        tank = tanks[0]  # --tank-yaml's: the body's inertia
         if args.simulated:
-            load_tank_params(args.simulated).with_values(**dict(disturbance_overrides(args.tank_disturbance)))
+            truth_tank = load_tank_params(args.simulated)
+            truth_tank.with_values(**dict(disturbance_overrides(args.tank_disturbance)))  # the push's bounds
             record = simulated_record(args.simulated, args.tank_disturbance, args.duration, args.seed,
                                       args.attitude_noise_deg, args.grid, args.robot_yaml)
         else:
@@ -401,17 +403,18 @@ def main(argv: Optional[Sequence[str]] = None) -> int:
         mean = check_hanging(record)
         for name, _ in AXES:
             fits[name] = fit_axis(record.axis(name), record.dt, inertia[name], record.valid, tether=args.tether)
+        push = tank_push(fits)
+        interval = {name: fits[name].intervals["stiffness"] for name, _ in AXES}
+        noise_deg = math.degrees(float(np.mean([fits[name].model.noise_std for name, _ in AXES])))
         comparison = []
         for path, model in zip(compare, tanks):
             sides = compare_tank(robot, model, mean["roll"], mean["pitch"])
             for name, _ in AXES:
-                sides[name]["verdict"] = _verdict(sides[name]["stiffness"], fits[name].intervals["stiffness"])
+                sides[name]["verdict"] = _verdict(sides[name]["stiffness"], interval[name])
             entry: Dict[str, Any] = {"tank_yaml": os.path.basename(path), **sides}
             if args.model_hangs:
-                noise = math.degrees(float(np.mean([fits[n].model.noise_std for n, _ in AXES])))
-                entry["own_hang"] = model_hang(
-                    path, tank_push(fits), record, args.skip, args.seed + 1, noise, inertia,
-                    {n: fits[n].intervals["stiffness"] for n, _ in AXES}, args.tether, args.robot_yaml)
+                entry["own_hang"] = model_hang(path, push, record, args.skip, args.seed + 1, noise_deg, inertia,
+                                               interval, args.tether, args.robot_yaml)
             comparison.append(entry)
     except (ParameterError, BagReportError, ValueError) as exc:
         sys.stderr.write("hang: error: %s\n" % exc)
@@ -425,10 +428,10 @@ def main(argv: Optional[Sequence[str]] = None) -> int:
         "tank_yaml": os.path.basename(args.tank_yaml or "tank.yaml"),
         "mean_deg": {name: math.degrees(mean[name]) for name, _ in AXES},
         "fits": {name: fits[name].as_dict() for name, _ in AXES},
-        "disturbance": tank_push(fits),
+        "disturbance": push,
         "comparison": comparison, "tether": args.tether, "seed": args.seed}
     if args.simulated:
-        truth = compare_tank(robot, load_tank_params(args.simulated), mean["roll"], mean["pitch"])
+        truth = compare_tank(robot, truth_tank, mean["roll"], mean["pitch"])
         report["truth"] = {"tank_yaml": os.path.basename(args.simulated), "torque_std": args.tank_disturbance[0],
                            "correlation_time": args.tank_disturbance[1],
                            "stiffness": {name: truth[name]["stiffness"] for name, _ in AXES}}
