@@ -345,6 +345,15 @@ def sorted_unique(t: Sequence[float], values: Sequence) -> tuple:
     return times[keep], [values[i] for i, k in zip(order, keep) if k]
 
 
+def covered_by(times: np.ndarray, grid: np.ndarray, max_gap: float) -> np.ndarray:
+    """Whether each time of ``grid`` lies within the span of the sorted sample ``times`` without a gap longer
+    than ``max_gap`` s around it (a grid time on a sample counts as covered)."""
+    after = np.clip(np.searchsorted(times, grid, side="left"), 1, times.size - 1)
+    inside = (grid >= times[0]) & (grid <= times[-1])
+    return inside & ((times[after] - times[after - 1] <= max_gap) | (times[after] == grid)
+                     | (times[after - 1] == grid))
+
+
 def stroke_figures(data: BagData, start: float):
     """:func:`~quadruped_control.analysis.strokes.stroke_statistics` of the trial (from ``start``), with the
     package's robot.yaml and controller.yaml (leg pairs); None without joint angles, pair phases or a

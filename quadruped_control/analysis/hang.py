@@ -237,10 +237,13 @@ def _model(names: Sequence[str], log_values: np.ndarray, inertia: float) -> Hang
 
 
 def _record_time(segments: Sequence[np.ndarray], dt: float) -> float:
-    """The record's correlation time (s): where the longest stretch's autocorrelation falls below 1/e."""
+    """The record's correlation time (s): where the longest stretch's autocorrelation falls below 1/e
+    (by FFT: a ten-minute record at the IMU's rate is too long for the direct sum's O(n^2))."""
+    from scipy.signal import correlate
+
     longest = max(segments, key=len)
     centred = longest - longest.mean()
-    correlation = np.correlate(centred, centred, mode="full")[centred.size - 1:]
+    correlation = correlate(centred, centred, mode="full", method="fft")[centred.size - 1:]
     below = np.flatnonzero(correlation < correlation[0] / math.e)
     return dt * (float(below[0]) if below.size else centred.size / 4.0)
 

@@ -59,17 +59,14 @@ COUNT_KEYS = ("same_outcome", "t_s_within_2x", "t_r_within_2x", "yaw_t_s_within_
 
 
 def member_files(folder: Optional[str]) -> List[str]:
-    """The ``*.yaml`` files of ``folder`` (default the package's config/tank_ensemble), sorted, each loaded
-    once so that a broken member stops the study before any trial (ParameterError naming the file);
-    StudyError for a folder that is missing or holds none."""
+    """The ``*.yaml`` files of ``folder`` (default the package's config/tank_ensemble), sorted (:func:`member_tanks`
+    loads them); StudyError for a folder that is missing or holds none."""
     folder = folder or config_path(DEFAULT_FOLDER)
     if not os.path.isdir(folder):
         raise StudyError("--tank-ensemble %s: no such folder" % folder)
     paths = sorted(os.path.join(folder, name) for name in os.listdir(folder) if name.endswith((".yaml", ".yml")))
     if not paths:
         raise StudyError("--tank-ensemble %s: no tank.yaml files (*.yaml) in it" % folder)
-    for path in paths:
-        load_tank_params(path)
     return paths
 
 
@@ -82,15 +79,16 @@ def disturbance_overrides(disturbance: Optional[Sequence[float]]) -> Tuple[Tuple
 
 
 def member_tanks(paths: Sequence[str], overrides: Tuple[Tuple[str, Any], ...], draws: int) -> List[TankParams]:
-    """Each member's tank with ``overrides`` applied, checked before any trial runs: StudyError for an
-    override out of its bounds (the loader's message) and for ``draws`` > 1 on a member whose tank is still,
-    whose draws would all be the same run."""
+    """Each member's tank with ``overrides`` applied, checked before any trial runs: the loader's
+    ParameterError naming a broken member file, StudyError for an override out of its bounds (the loader's
+    message) and for ``draws`` > 1 on a member whose tank is still, whose draws would all be the same run."""
     if draws < 1:
         raise StudyError("--draws must be at least 1, got %d" % draws)
     tanks = []
     for path in paths:
+        tank = load_tank_params(path)
         try:
-            tank = load_tank_params(path).with_values(**dict(overrides))
+            tank = tank.with_values(**dict(overrides))
         except ParameterError as exc:
             raise StudyError("--tank-disturbance: %s" % exc) from None
         if draws > 1 and not tank.disturbed:

@@ -46,7 +46,7 @@ import numpy as np
 
 from quadruped_common.config import ParameterError, config_path
 from quadruped_common.so3 import quat_to_rot, rotations_to_rpy, rpy_to_rot
-from quadruped_control.analysis.bag_report import BagReportError, read_bags
+from quadruped_control.analysis.bag_report import BagReportError, covered_by, read_bags, sorted_unique
 from quadruped_control.analysis.hang import HangFit, fit_axis, spectral_density
 from quadruped_control.model.params import RobotParams, load_robot_params
 from quadruped_control.sim.plants.tank import TankModel, TankParams, load_tank_params
@@ -93,21 +93,17 @@ def record_from_bag(times: Sequence[float], quaternions: Sequence[Sequence[float
     docstring); StudyError if fewer than two usable samples."""
     t = np.asarray(times, dtype=float)
     q = np.asarray(quaternions, dtype=float).reshape(-1, 4)
-    order = np.argsort(t, kind="stable")
-    t, q = t[order], q[order]
     norm = np.linalg.norm(np.nan_to_num(q, nan=0.0, posinf=0.0, neginf=0.0), axis=1)
     good = np.all(np.isfinite(q), axis=1) & np.isfinite(t) & (np.abs(norm - 1.0) < 0.1)
-    t, q = t[good], q[good] / norm[good, None]
-    t, unique = np.unique(t, return_index=True)
-    q = q[unique]
+    t, q = sorted_unique(t[good], q[good] / norm[good, None])
     if t.size < 2:
         raise StudyError("hang: %s has fewer than two usable /imu/data samples" % source)
     rpy = rotations_to_rpy(np.array([quat_to_rot(row) for row in q]))  # Z-Y-X, REP 103
     roll, pitch = rpy[:, 0], rpy[:, 1]
-    grid = t[0] + dt * np.arange(int(math.floor((t[-1] - t[0]) / dt + 1e-9)) + 1)
-    index = np.clip(np.searchsorted(t, grid, side="right"), 1, t.size - 1)
-    valid = (t[index] - t[index - 1] <= max_gap) | (np.abs(grid - t[index - 1]) < 1e-9)
-    return HangRecord(grid - grid[0], np.interp(grid, t, np.unwrap(roll)), np.interp(grid, t, pitch), valid, dt,
+    t = t - t[0]  # stamps since 1970 would round the grid's steps
+    grid = dt * np.arange(int(math.floor(t[-1] / dt + 1e-9)) + 1)
+    valid = covered_by(t, grid, max_gap)
+    return HangRecord(grid, np.interp(grid, t, np.unwrap(roll)), np.interp(grid, t, pitch), valid, dt,
                       source)
 
 

@@ -71,7 +71,7 @@ import numpy as np
 
 from quadruped_common.config import ParameterError, config_path
 from quadruped_common.so3 import exp_so3, rpy_to_rot
-from quadruped_control.analysis.bag_report import BagData, BagReportError, read_bags, sorted_unique
+from quadruped_control.analysis.bag_report import BagData, BagReportError, covered_by, read_bags, sorted_unique
 from quadruped_control.analysis.strokes import foot_paths
 from quadruped_control.model.params import RobotParams, load_robot_params
 from quadruped_control.sim.magnetic_heading import reported_rotation
@@ -115,14 +115,6 @@ def _sorted_rows(t: Sequence[float], rows: Sequence[Sequence[float]], name: str)
     return times, np.asarray(kept, dtype=float).reshape(times.size, -1)
 
 
-def _covered(times: np.ndarray, grid: np.ndarray, max_gap: float) -> np.ndarray:
-    """Whether each grid time lies within a span of ``times`` without a gap longer than ``max_gap``."""
-    after = np.clip(np.searchsorted(times, grid, side="left"), 1, times.size - 1)
-    inside = (grid >= times[0]) & (grid <= times[-1])
-    return inside & ((times[after] - times[after - 1] <= max_gap) | (times[after] == grid)
-                     | (times[after - 1] == grid))
-
-
 def record_from_bag(data: BagData, robot: RobotParams, dt: float = GRID_DT, max_gap: float = 0.1,
                     source: str = "") -> Tuple[Record, int]:
     """A :class:`~quadruped_control.sim.replay.Record` of a read bag on a ``dt`` grid over the span both
@@ -155,7 +147,7 @@ def record_from_bag(data: BagData, robot: RobotParams, dt: float = GRID_DT, max_
     rotation = Slerp(imu_t, Rotation.from_quat(quaternions))(np.clip(grid, imu_t[0], imu_t[-1])).as_matrix()
     omega = np.column_stack([np.interp(grid, imu_t, rates[:, axis]) for axis in range(3)])
     angles = np.column_stack([np.interp(grid, joint_t, joints[:, j]) for j in range(12)]).reshape(-1, 4, 3)
-    valid = _covered(imu_t, grid, max_gap) & _covered(joint_t, grid, max_gap)
+    valid = covered_by(imu_t, grid, max_gap) & covered_by(joint_t, grid, max_gap)
     return Record(t=grid, rotation=rotation, omega=omega, joints=angles, valid=valid, dt=dt, source=source,
                   commands=_held_commands(data, start, grid, max_gap)), skipped
 

@@ -8,8 +8,8 @@ import numpy as np
 import pytest
 
 from quadruped_common.so3 import rot_to_quat, rpy_to_rot
-from quadruped_control.analysis.bag_report import (BagReportError, analyse, main, missing_spans, read_bags,
-                                                  write_report)
+from quadruped_control.analysis.bag_report import (BagReportError, analyse, covered_by, main, missing_spans,
+                                                  read_bags, write_report)
 from tests.repo import REPO_ROOT
 
 rosbags = pytest.importorskip("rosbags")
@@ -131,6 +131,13 @@ def test_health_across_runs_gives_min_median_max_of_every_figure():
     latency = summary["pwm: servo output"]["latency p99 [ms]"]
     assert latency["n"] == 2.0 and latency["median"] == 3.75
     assert summary["pwm: servo output"]["watchdog tripped"]["max"] == 1.0
+
+
+def test_a_grid_time_is_covered_inside_the_samples_span_and_not_across_a_gap():
+    times = np.array([0.0, 0.1, 0.2, 1.0, 1.1])
+    grid = np.array([-0.05, 0.0, 0.05, 0.2, 0.5, 1.0, 1.05, 1.1, 1.2])
+    assert covered_by(times, grid, 0.15).tolist() == [False, True, True, True, False, True, True, True, False]
+    assert covered_by(times, grid, 1.0).tolist() == [False] + [True] * 7 + [False]
 
 
 def test_hold_episodes_say_when_and_why_in_stamp_order():

@@ -84,6 +84,20 @@ def test_valid_segments_split_at_invalid_or_missing_samples_and_drop_short_ones(
     assert [s.tolist() for s in segments] == [list(range(12)), list(range(13, 30))]  # 31-39: nine, dropped
 
 
+def test_the_records_correlation_time_by_fft_is_the_direct_sums() -> None:
+    rng = np.random.default_rng(4)
+    y = np.zeros(3000)
+    for k in range(1, y.size):  # an AR(1) record with a correlation time of about 2 s at 10 ms
+        y[k] = 0.995 * y[k - 1] + rng.standard_normal()
+    for segments in ([y], [y[:400], y[500:]], [y[:50]]):
+        longest = max(segments, key=len)
+        centred = longest - longest.mean()
+        direct = np.correlate(centred, centred, mode="full")[centred.size - 1:]
+        below = np.flatnonzero(direct < direct[0] / math.e)
+        expected = 0.01 * (float(below[0]) if below.size else centred.size / 4.0)
+        assert hang._record_time(segments, 0.01) == pytest.approx(expected)
+
+
 def test_the_fit_recovers_a_known_model_inside_its_intervals() -> None:
     y = _simulate(TRUE, 0.1, 6000, seed=1) + math.radians(3.0)  # hung off level: fitted about its mean
     fit = hang.fit_axis(y, 0.1, TRUE.inertia)

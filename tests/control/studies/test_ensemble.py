@@ -7,7 +7,7 @@ import shutil
 
 import pytest
 
-from quadruped_common.config import config_path
+from quadruped_common.config import ParameterError, config_path
 from quadruped_control import simulate
 from quadruped_control.sim.config_files import TANK_ENSEMBLE
 from quadruped_control.sim.plants import VALIDITY_NOTE
@@ -102,8 +102,9 @@ def test_a_missing_empty_or_broken_ensemble_is_refused_before_any_trial(tmp_path
     with pytest.raises(StudyError, match="no tank.yaml files"):
         ens.member_files(str(tmp_path))
     (tmp_path / "member.yaml").write_text("tether:\n  stiffness: -1\n")
-    with pytest.raises(Exception, match="member.yaml"):
-        ens.member_files(str(tmp_path))
+    members = ens.member_files(str(tmp_path))
+    with pytest.raises(ParameterError, match="member.yaml"):
+        ens.member_tanks(members, (), 1)
 
 
 def test_study_cli_runs_table_1_on_every_member(tmp_path, capsys) -> None:
