@@ -447,6 +447,12 @@ class ClosedLoopSimulation:
         """Time of the next control step, s (k dt, not accumulated: no drift)."""
         return self.k * self.dt
 
+    def set_setpoint(self, setpoint_R: ArrayLike) -> None:
+        """A new setpoint R_d from the next step on (ValueError unless a rotation), as the ROS node takes one
+        mid-run; the controller keeps its integral (the paper does not reset it)."""
+        self.setpoint_R = _rotation(setpoint_R, "setpoint_R")
+        self.controller.set_setpoint(self.setpoint_R)
+
     def _reported(self, rotation: np.ndarray) -> np.ndarray:
         """The attitude the IMU reports, noise apart: the true one, or with the heading a residual field at
         the IMU turns (the plant's ``imu_field_residual``, :mod:`~quadruped_control.sim.magnetic_heading`)."""

@@ -45,7 +45,7 @@ from quadruped_control.studies.runner import code_record
 from quadruped_control.studies.trial import run_many
 
 __all__ = ["COUNT_KEYS", "DEFAULT_FOLDER", "case_spread", "count_spread", "coverage", "disturbance_overrides",
-           "format_report", "main_study", "member_files", "member_tanks"]
+           "format_report", "main_study", "member_files", "member_tanks", "tank_files"]
 
 #: The package's ensemble (config_files.TANK_ENSEMBLE lists its files).
 DEFAULT_FOLDER = "tank_ensemble"
@@ -68,6 +68,15 @@ def member_files(folder: Optional[str]) -> List[str]:
     if not paths:
         raise StudyError("--tank-ensemble %s: no tank.yaml files (*.yaml) in it" % folder)
     return paths
+
+
+def tank_files(paths: Sequence[str]) -> List[str]:
+    """The tank.yaml files named by ``paths``, each a file or a folder of them (:func:`member_files`), each once
+    in the order given: the models a study sets beside a record (``--compare``)."""
+    files: List[str] = []
+    for path in paths:
+        files += member_files(path) if os.path.isdir(path) else [path]
+    return sorted(set(files), key=files.index)
 
 
 def disturbance_overrides(disturbance: Optional[Sequence[float]]) -> Tuple[Tuple[str, Any], ...]:

@@ -36,7 +36,6 @@ Docs: docs/identification.md, "What a hang tells".
 from __future__ import annotations
 
 import argparse
-import json
 import math
 import os
 import sys
@@ -52,8 +51,8 @@ from quadruped_control.model.params import RobotParams, load_robot_params
 from quadruped_control.sim.plants.tank import TankModel, TankParams, load_tank_params
 from quadruped_control.sim.simulation import load_simulation_settings, nominal_joint_angles
 from quadruped_control.studies import StudyError
-from quadruped_control.studies.ensemble import DEFAULT_FOLDER, disturbance_overrides, member_files
-from quadruped_control.studies.runner import code_record, command_line, warn_uncommitted
+from quadruped_control.studies.ensemble import DEFAULT_FOLDER, disturbance_overrides, tank_files
+from quadruped_control.studies.runner import code_record, command_line, warn_uncommitted, write_study_report
 from quadruped_control.studies.trial import TrialSpec, run_trial
 
 __all__ = ["AXES", "HangRecord", "check_hanging", "compare_tank", "main", "model_hang", "record_from_bag",
@@ -205,13 +204,6 @@ def model_hang(path: str, push: Optional[Dict[str, Any]], record: HangRecord, sk
         fit = fit_axis(simulated.axis(name), simulated.dt, inertia[name], simulated.valid, tether=tether)
         out[name] = {"stiffness": fit.model.stiffness, "verdict": _verdict(fit.model.stiffness, interval[name])}
     return out
-
-
-def _compare_files(paths: Sequence[str]) -> List[str]:
-    files: List[str] = []
-    for path in paths:
-        files += member_files(path) if os.path.isdir(path) else [path]
-    return files
 
 
 def _verdict(stiffness: float, interval: Optional[Tuple[float, float]]) -> str:
@@ -374,7 +366,7 @@ def main(argv: Optional[Sequence[str]] = None) -> int:
     warn_uncommitted()
     try:
         robot = load_robot_params(args.robot_yaml)
-        compare = [args.tank_yaml or config_path("tank.yaml")] + _compare_files(
+        compare = [args.tank_yaml or config_path("tank.yaml")] + tank_files(
             args.compare if args.compare is not None else [config_path(DEFAULT_FOLDER)])
         compare = sorted(set(compare), key=compare.index)  # each file once, --tank-yaml's first
         tanks = [load_tank_params(path) for path in compare]
@@ -431,15 +423,7 @@ def main(argv: Optional[Sequence[str]] = None) -> int:
         report["truth"] = {"tank_yaml": os.path.basename(args.simulated), "torque_std": args.tank_disturbance[0],
                            "correlation_time": args.tank_disturbance[1],
                            "stiffness": {name: truth[name]["stiffness"] for name, _ in AXES}}
-    os.makedirs(args.out, exist_ok=True)
-    text = _text(report)
-    with open(os.path.join(args.out, "hang.md"), "w") as stream:
-        stream.write(text)
-    with open(os.path.join(args.out, "hang.json"), "w") as stream:
-        json.dump(report, stream, indent=1, allow_nan=False)
-    _plot(os.path.join(args.out, "hang.png"), record, fits)
-    print(text)
-    print("wrote %s/{hang.md, hang.json, hang.png}" % args.out)
+    write_study_report(args.out, "hang", _text(report), report, lambda path: _plot(path, record, fits))
     return 0
 
 

@@ -43,7 +43,7 @@ import numpy as np
 
 __all__ = ["CODE_ROOTS", "StudyError", "code_fingerprint", "code_record", "code_source", "command_line",
            "config_fingerprint", "describe_source", "run_trial_batches", "run_trials", "spec_key", "trial_path",
-           "warn_uncommitted"]
+           "warn_uncommitted", "write_study_report"]
 
 TrialFn = Callable[[Any], Dict[str, Any]]
 #: ``fn(specs) -> [result, ...]``: many trials at once (the batched simulator), one result per spec, in order.
@@ -152,6 +152,23 @@ def code_record() -> Dict[str, Any]:
     """What every study's report records of the code that produced it: ``code``
     (:func:`code_fingerprint`) and ``code_source`` (:func:`code_source`)."""
     return {"code": code_fingerprint(), "code_source": code_source()}
+
+
+def write_study_report(out: str, name: str, text: str, report: Dict[str, Any],
+                       plot: Optional[Callable[[str], None]] = None) -> None:
+    """A study's report into ``out`` as ``name``.md (``text``), ``name``.json (``report``, strict JSON) and,
+    with ``plot`` (called with the path), ``name``.png; prints the text and what was written."""
+    os.makedirs(out, exist_ok=True)
+    with open(os.path.join(out, name + ".md"), "w") as stream:
+        stream.write(text)
+    with open(os.path.join(out, name + ".json"), "w") as stream:
+        json.dump(report, stream, indent=1, allow_nan=False)
+    written = [name + ".md", name + ".json"]
+    if plot is not None:
+        plot(os.path.join(out, name + ".png"))
+        written.append(name + ".png")
+    print(text)
+    print("wrote %s/{%s}" % (out, ", ".join(written)))
 
 
 def describe_source(source: Dict[str, Any]) -> str:

@@ -166,6 +166,21 @@ def failed_summary(spec: TrialSpec, reason: str, engine: str) -> Dict[str, Any]:
             "failed": reason, "metrics": None}
 
 
+def trial_simulation(spec: TrialSpec, setup: Optional[TrialSetup] = None) -> ClosedLoopSimulation:
+    """The closed loop of ``spec`` (its :func:`trial_setup` unless given), at its start: what
+    :func:`run_trial` runs, for a study that changes the setpoint during the run."""
+    setup = setup if setup is not None else trial_setup(spec)
+    if spec.controller not in ("on", "off"):
+        raise ValueError("controller must be 'on' or 'off', got %r" % (spec.controller,))
+    return ClosedLoopSimulation(
+        setup.robot, setup.config, make_servo_model(spec.servo_model, setup.servo_params),
+        initial_R=setup.initial_R,
+        setpoint_R=rpy_to_rot(*np.radians(spec.setpoint_rpy_deg)),
+        restoring_offset=spec.restoring_offset, seed=spec.seed,
+        attitude_noise=math.radians(spec.attitude_noise_deg), gyro_noise=spec.gyro_noise,
+        model=setup.model, controller_enabled=spec.controller == "on")
+
+
 def run_trial(spec: TrialSpec) -> Dict[str, Any]:
     """Run one trial; writes its files if ``spec.out_dir``; returns a summary with metrics and the
     traces needed for figures (t, rpy, setpoint, geodesic as lists). A closed loop that cannot go on
@@ -173,17 +188,8 @@ def run_trial(spec: TrialSpec) -> Dict[str, Any]:
     "record" returns :func:`failed_summary`."""
     _check_on_failure(spec)
     setup = trial_setup(spec)
-    robot, config, model = setup.robot, setup.config, setup.model
-    servo = make_servo_model(spec.servo_model, setup.servo_params)
-    if spec.controller not in ("on", "off"):
-        raise ValueError("controller must be 'on' or 'off', got %r" % (spec.controller,))
-    sim = ClosedLoopSimulation(
-        robot, config, servo,
-        initial_R=setup.initial_R,
-        setpoint_R=rpy_to_rot(*np.radians(spec.setpoint_rpy_deg)),
-        restoring_offset=spec.restoring_offset, seed=spec.seed,
-        attitude_noise=math.radians(spec.attitude_noise_deg), gyro_noise=spec.gyro_noise,
-        model=model, controller_enabled=spec.controller == "on")
+    robot = setup.robot
+    sim = trial_simulation(spec, setup)
     try:
         result = sim.run(spec.duration, progress=_progress_printer(spec.label, spec.quiet))
     except SimulationError as exc:

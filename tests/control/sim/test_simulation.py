@@ -221,6 +221,19 @@ def test_closed_loop_records_consistent_arrays_and_turns_towards_setpoint() -> N
     assert all(np.isfinite(v) for v in result.rotation.reshape(-1))
 
 
+def test_a_setpoint_changed_mid_run_steers_from_the_next_step_and_is_recorded() -> None:
+    sim = ClosedLoopSimulation(ROBOT, CONFIG, "ideal")
+    sim.run(0.5)
+    setpoint = rpy_to_rot(0.3, 0.0, 0.0)
+    sim.set_setpoint(setpoint)
+    result = sim.run(3.0)
+    np.testing.assert_allclose(result.setpoint, setpoint)
+    assert result.rpy[-1, 0] > result.rpy[0, 0] + 0.01  # it turns towards the new roll
+    with pytest.raises(ValueError):
+        sim.set_setpoint(np.full((3, 3), math.nan))
+    np.testing.assert_allclose(sim.setpoint_R, setpoint)  # a refused setpoint leaves the last one
+
+
 def test_closed_loop_rejects_non_finite_targets(monkeypatch) -> None:
     sim = ClosedLoopSimulation(ROBOT, CONFIG)
     real_step = sim.controller.step

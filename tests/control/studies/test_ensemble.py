@@ -96,6 +96,13 @@ def test_the_package_ensemble_is_the_default_and_its_members_are_the_shipped_fil
     assert ens.member_files(None) == [config_path(name) for name in TANK_ENSEMBLE]
 
 
+def test_tank_files_take_files_and_folders_each_once_in_the_order_given() -> None:
+    folder = config_path("tank_ensemble")
+    members = ens.member_files(folder)
+    assert ens.tank_files([members[3], folder]) == [members[3]] + [m for m in members if m != members[3]]
+    assert ens.tank_files([config_path("tank.yaml"), config_path("tank.yaml")]) == [config_path("tank.yaml")]
+
+
 def test_a_missing_empty_or_broken_ensemble_is_refused_before_any_trial(tmp_path) -> None:
     with pytest.raises(StudyError, match="no such folder"):
         ens.member_files(str(tmp_path / "missing"))

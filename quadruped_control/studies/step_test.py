@@ -1,0 +1,353 @@
+"""The setpoint step test: the robot holds a tilt, the setpoint steps towards upright and away from it, and
+how long each step takes to settle is set beside what each tank model does on the same steps.
+
+    python -m quadruped_control.studies.step_test RUN [--compare YAML_OR_DIR ...] [--seed 0]
+        [--tank-disturbance SIGMA TAU] [--jobs 1] --out DIR
+    python -m quadruped_control.studies.step_test --simulated TRUTH_YAML [--tank-disturbance SIGMA TAU]
+        [--attitude-noise-deg 0.05] (and the options above)
+
+Why (docs/identification.md, "A step test tells the members apart where Table 1 cannot"): the shipped
+ensemble's members fit Table 1 within 3 of each other and take 1.5 to 15 s to return 12 deg towards upright
+from a held 45 deg roll. A plant whose trim leaves a net static torque pushing away from upright returns much
+more slowly than it moves away; one whose trim and rope balance takes the same time both ways. The robot's
+roll group in Table 1 settled 18-95 s after its rise, which no fitted set reproduces; this test, a quarter of
+an hour in the tank with nothing added, says which kind of plant the robot is.
+
+The protocol (:data:`PROTOCOL`, run on the robot with ``robot.launch`` recording and the setpoints published
+in turn, README "Step test"): roll 45 deg held 120 s, then 33, 45, 57 and 45 deg for 90 s each; level for
+120 s; the same in pitch. A RUN is a bag (or a split recording's parts joined by commas) with ``/imu/data``
+and ``/controller_state``, read by :func:`quadruped_control.analysis.bag_report.read_bags`; the steps are the
+changes of the controller's setpoint while armed (:func:`~quadruped_control.analysis.steps.find_steps`), so
+any single-axis sequence is read, not only this one. ``--simulated`` runs the protocol on the tank plant of
+TRUTH_YAML instead (the robot's own closed loop, experiment gains, rate-limited servos, through
+:func:`~.trial.trial_simulation`): what the test would show of a plant whose values are known.
+
+Each step's response (:func:`~quadruped_control.analysis.steps.step_response`): the paper's settling time
+within 6 deg, the same within 2 deg, the overshoot past the new setpoint, and how well the tilt before it was
+held. Each ``--compare`` tank.yaml (default: the shipped ensemble, config/tank_ensemble) is asked what the
+record asked of the robot (:func:`record_sequence`): from rest at the record's first attitude, the same
+setpoints at the same times, so that each step finds the model with the history the robot had (its integral
+wound up by the same holds). A model agrees on a step when its settling time within 6 deg is within a factor 2
+of the robot's, or neither settles (:func:`~quadruped_control.analysis.steps.agrees`); the report counts,
+per model, the steps that change one axis it agrees on.
+
+Output in ``--out``: ``step_test.json`` (the command, the code's fingerprint, the steps, every model's
+responses), ``step_test.md``, and ``step_test.png`` (each step's stepped angle, the robot's beside each
+model's). Docs: docs/identification.md, "The step test as a study".
+"""
+from __future__ import annotations
+
+import argparse
+import dataclasses
+import math
+import os
+import sys
+from concurrent.futures import ProcessPoolExecutor
+from typing import Any, Dict, List, Optional, Sequence, Tuple
+
+import numpy as np
+
+from quadruped_common.config import ParameterError, config_path
+from quadruped_common.so3 import quat_to_rot, rotations_to_rpy, rpy_to_rot
+from quadruped_control.analysis.bag_report import BagReportError, read_bags, sorted_unique
+from quadruped_control.analysis.steps import Step, StepResponse, agrees, find_steps, step_response
+from quadruped_control.sim.plants.tank import load_tank_params
+from quadruped_control.sim.simulation import SimulationError
+from quadruped_control.studies import StudyError
+from quadruped_control.studies.ensemble import DEFAULT_FOLDER, disturbance_overrides, tank_files
+from quadruped_control.studies.runner import (code_record, command_line, describe_source, warn_uncommitted,
+                                              write_study_report)
+from quadruped_control.studies.trial import TrialSpec, trial_simulation
+
+__all__ = ["PROTOCOL", "StepRecord", "model_run", "record_from_bag", "record_sequence", "run_sequence"]
+
+#: The test's setpoints (roll, pitch, yaw in deg) and how long each is held (s), in order from level.
+PROTOCOL: Tuple[Tuple[Tuple[float, float, float], float], ...] = (
+    ((45.0, 0.0, 0.0), 120.0), ((33.0, 0.0, 0.0), 90.0), ((45.0, 0.0, 0.0), 90.0), ((57.0, 0.0, 0.0), 90.0),
+    ((45.0, 0.0, 0.0), 90.0), ((0.0, 0.0, 0.0), 120.0),
+    ((0.0, 45.0, 0.0), 120.0), ((0.0, 33.0, 0.0), 90.0), ((0.0, 45.0, 0.0), 90.0), ((0.0, 57.0, 0.0), 90.0),
+    ((0.0, 45.0, 0.0), 90.0))
+
+
+class StepRecord:
+    """Attitudes (roll, pitch, yaw, rad) at times ``t`` (s from the record's start, sorted) with the setpoint's
+    steps; ``source`` names it."""
+
+    def __init__(self, t: np.ndarray, rpy: np.ndarray, steps: List[Step], source: str) -> None:
+        self.t, self.rpy, self.steps, self.source = t, rpy, steps, source
+
+    def responses(self) -> List[Tuple[Step, StepResponse]]:
+        """Each step's response, to the next step or the record's end."""
+        ends = [step.time for step in self.steps[1:]] + [float(self.t[-1])]
+        return [(step, step_response(self.t, self.rpy, step, end)) for step, end in zip(self.steps, ends)]
+
+
+def _spec(tank_yaml: str, seed: int, overrides: Tuple[Tuple[str, Any], ...], noise_deg: float,
+          robot_yaml: Optional[str], start_deg: Sequence[float]) -> TrialSpec:
+    """The trial the test runs: the robot's closed loop on the tank plant with the experiment gains and
+    rate-limited servos (Table 1's settings), starting at rest at ``start_deg`` with that setpoint."""
+    start = tuple(float(v) for v in start_deg)
+    return TrialSpec(label="step test", setpoint_rpy_deg=start, initial_rpy_deg=start, duration=1.0, seed=seed,
+                     gains="experiment", servo_model="rate-limited", plant="tank", tank_yaml=tank_yaml,
+                     robot_yaml=robot_yaml, tank_overrides=overrides, attitude_noise_deg=noise_deg, quiet=True)
+
+
+def run_sequence(spec: TrialSpec, sequence: Sequence[Tuple[Sequence[float], float]], source: str) -> StepRecord:
+    """The closed loop of ``spec`` taken through ``sequence`` (setpoint rpy in deg, seconds held) from its
+    start, as the robot is by the setpoints published in turn: the record of the attitude the IMU reports
+    and the setpoint's steps. SimulationError if the loop cannot go on."""
+    sim = trial_simulation(spec)
+    times: List[np.ndarray] = []
+    angles: List[np.ndarray] = []
+    steps: List[Step] = []
+    current = np.radians(spec.setpoint_rpy_deg)
+    for setpoint_deg, seconds in sequence:
+        setpoint = np.radians(setpoint_deg)
+        # a step acts from the instant the setpoint changes (find_steps' rule for what counts as one)
+        steps += find_steps([sim.time - sim.dt, sim.time], [current, setpoint])
+        current = setpoint
+        sim.set_setpoint(rpy_to_rot(*setpoint))
+        result = sim.run(seconds)
+        # each run's first sample is the previous run's last instant, measured again under the new setpoint
+        first = 0 if not times else 1
+        times.append(result.t[first:])
+        angles.append(result.rpy[first:])
+    return StepRecord(np.concatenate(times), np.concatenate(angles), steps, source)
+
+
+def record_from_bag(paths: Sequence[str], source: str) -> StepRecord:
+    """The steps of a recorded run (module docstring): the IMU's attitude (Z-Y-X, REP 103) and the setpoint
+    of each /controller_state step while the controller was armed; StudyError if the bag lacks either."""
+    data = read_bags(paths)
+    if len(data.imu_t) < 2 or len(data.state_t) < 2:
+        raise StudyError("step_test: %s needs /imu/data and /controller_state (got %d and %d messages)"
+                         % (source, len(data.imu_t), len(data.state_t)))
+    quaternions = np.asarray(data.imu_q, dtype=float).reshape(-1, 4)
+    norm = np.linalg.norm(np.nan_to_num(quaternions, nan=0.0, posinf=0.0, neginf=0.0), axis=1)
+    good = np.all(np.isfinite(quaternions), axis=1) & (np.abs(norm - 1.0) < 0.1)
+    imu_t, imu_q = sorted_unique(np.asarray(data.imu_t, dtype=float)[good], quaternions[good] / norm[good, None])
+    armed = np.asarray(data.state_armed, dtype=bool)
+    state_t, setpoint_q = sorted_unique(np.asarray(data.state_t, dtype=float)[armed],
+                                        np.asarray(data.state_setpoint, dtype=float).reshape(-1, 4)[armed])
+    if imu_t.size < 2 or state_t.size < 2:
+        raise StudyError("step_test: %s has fewer than two usable %s samples"
+                         % (source, "/imu/data" if imu_t.size < 2 else "armed /controller_state"))
+    start = float(imu_t[0])
+    rpy = rotations_to_rpy(np.array([quat_to_rot(q) for q in imu_q]))
+    setpoint_rpy = rotations_to_rpy(np.array([quat_to_rot(np.asarray(q) / np.linalg.norm(q)) for q in setpoint_q]))
+    steps = find_steps(state_t - start, setpoint_rpy)
+    if not steps:
+        raise StudyError("step_test: the setpoint of %s never changed while the controller was armed" % source)
+    return StepRecord(imu_t - start, rpy, steps, source)
+
+
+def record_sequence(record: StepRecord) -> Tuple[List[float], List[float], List[Tuple[List[float], float]]]:
+    """What the record asked of the robot, for a model to be asked the same: its first attitude and the
+    setpoint before its first step (deg), then the setpoints (deg) with how long each was held, from the
+    record's start to its end (a first step at the start is the first setpoint, held from there)."""
+    start = [math.degrees(float(v)) for v in record.rpy[0]]
+    first = [math.degrees(v) for v in record.steps[0].before]
+    times = [step.time for step in record.steps] + [float(record.t[-1])]
+    sequence = [(first, times[0] - float(record.t[0]))]
+    sequence += [([math.degrees(v) for v in step.after], end - step.time) for step, end in zip(record.steps, times[1:])]
+    return start, first, [(setpoint, seconds) for setpoint, seconds in sequence if seconds > 0.0]
+
+
+def model_run(job: Tuple[str, List[float], List[float], List[Tuple[List[float], float]], int,
+                         Tuple[Tuple[str, Any], ...], float, Optional[str]]) -> Dict[str, Any]:
+    """One tank.yaml asked what the record asked of the robot (:func:`record_sequence`): from rest at the
+    record's first attitude, the same setpoints held as long; its steps' responses. A loop that cannot go on is
+    reported, not raised."""
+    path, start, first, sequence, seed, overrides, noise_deg, robot_yaml = job
+    spec = dataclasses.replace(_spec(path, seed, overrides, noise_deg, robot_yaml, start),
+                               setpoint_rpy_deg=tuple(first))
+    try:
+        record = run_sequence(spec, sequence, os.path.basename(path))
+    except SimulationError as exc:
+        return {"tank_yaml": os.path.basename(path), "failed": str(exc)}
+    return {"tank_yaml": os.path.basename(path), "record": record}
+
+
+def _model_responses(run: Dict[str, Any], responses: Sequence[Tuple[Step, StepResponse]]) -> List[Dict[str, Any]]:
+    """A model's run (:func:`model_run`) read step by step as the record is: per step of the record, the
+    model's response to its own step at that time (its stepped angle from the step on, for the figure)."""
+    name = run["tank_yaml"]
+    if "failed" in run:
+        return [{"tank_yaml": name, "failed": run["failed"]} for _ in responses]
+    record: StepRecord = run["record"]
+    own = dict(zip((round(step.time, 1) for step in record.steps), record.responses()))
+    out = []
+    for step, _ in responses:
+        match = own.get(round(step.time, 1)) or min(record.responses(), key=lambda pair: abs(pair[0].time - step.time))
+        out.append({"tank_yaml": name, "response": match[1].as_dict(),
+                    "series": _series(record, match[0], match[1].duration)})
+    return out
+
+
+def _series(record: StepRecord, step: Step, duration: float, stride: int = 10) -> Dict[str, List[float]]:
+    """The stepped angle (deg) for ``duration`` s from the step on, every ``stride``-th sample, for the figure."""
+    keep = (record.t >= step.time - 1e-9) & (record.t <= step.time + duration + 1e-9)
+    t = record.t[keep][::stride] - step.time
+    return {"t": [round(float(v), 3) for v in t],
+            "deg": [round(math.degrees(float(v)), 3) for v in record.rpy[keep, step.axis][::stride]]}
+
+
+def _fmt(value: Optional[float]) -> str:
+    return "--" if value is None else "%.1f" % value
+
+
+def _text(report: Dict[str, Any]) -> str:
+    lines = ["# Step test: %s" % report["source"], "",
+             "Command: `%s`  " % " ".join(report["command"]),
+             "Code: %s (fingerprint %s)" % (describe_source(report["code_source"]), report["code"]), "",
+             "Settling time within 6 deg / within 2 deg (s from the step; --: not settled in the record), "
+             "overshoot past the new setpoint (deg). A model agrees on a step when its 6 deg time is within 2x "
+             "of the robot's, or neither settles (*: it does not).", ""]
+    models = report["models"]
+    header = "| step | record | " + " | ".join(m for m in models) + " |"
+    lines += [header, "|" + "---|" * (2 + len(models))]
+    for entry in report["steps"]:
+        robot = entry["record"]
+        label = "%s %g -> %g%s%s" % (robot["axis"], round(robot["before_deg"], 1), round(robot["after_deg"], 1),
+                                     " (towards upright)" if robot["towards_upright"] else "",
+                                     "" if entry["single_axis"] else " +")
+        cells = ["%s / %s, %.1f" % (_fmt(robot["settle_6"]), _fmt(robot["settle_2"]), robot["overshoot_deg"])]
+        for model in entry["models"]:
+            if "failed" in model:
+                cells.append("failed")
+                continue
+            response = model["response"]
+            cells.append("%s / %s, %.1f%s" % (_fmt(response["settle_6"]), _fmt(response["settle_2"]),
+                                              response["overshoot_deg"], "" if model["agrees"] else " *"))
+        lines.append("| %s | %s |" % (label, " | ".join(cells)))
+    lines += ["", "Steps each model agrees on (of the %d that change one axis; a step marked + changes more and is "
+              "not counted):" % report["single_axis_steps"], ""]
+    for name, count in zip(models, report["agreement"]):
+        lines.append("- %s: %d" % (name, count))
+    if report.get("truth"):
+        lines += ["", "Simulated record: %s (seed %d, tank disturbance %s)."
+                  % (report["truth"]["tank_yaml"], report["seed"], report["truth"]["disturbance"] or "none")]
+    return "\n".join(lines) + "\n"
+
+
+def _plot(path: str, report: Dict[str, Any], record: StepRecord) -> None:
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    steps = report["steps"]
+    columns = min(4, max(1, len(steps)))
+    rows = int(math.ceil(len(steps) / columns)) or 1
+    figure, axes = plt.subplots(rows, columns, figsize=(4.0 * columns, 3.0 * rows), squeeze=False)
+    for k, entry in enumerate(steps):
+        axis = axes[k // columns][k % columns]
+        robot = entry["record"]
+        step = Step(entry["time"], tuple(entry["before"]), tuple(entry["after"]))  # type: ignore[arg-type]
+        series = _series(record, step, robot["duration"], stride=1)
+        end = series["t"][-1] if series["t"] else 0.0
+        axis.plot(series["t"], series["deg"], color="black", linewidth=1.5, label="record")
+        for model in entry["models"]:
+            if "series" in model:
+                axis.plot(model["series"]["t"], model["series"]["deg"], linewidth=0.8, alpha=0.8,
+                          label=model["tank_yaml"])
+        target = robot["after_deg"]
+        axis.axhspan(target - 6.0, target + 6.0, color="0.9")
+        axis.set_xlim(0.0, max(end, 1.0))
+        axis.set_title("%s %g -> %g deg" % (robot["axis"], round(robot["before_deg"], 1), round(target, 1)),
+                       fontsize=9)
+        axis.set_xlabel("s from the step", fontsize=8)
+    for k in range(len(steps), rows * columns):
+        axes[k // columns][k % columns].axis("off")
+    handles, labels = axes[0][0].get_legend_handles_labels()
+    figure.legend(handles, labels, loc="lower center", ncol=min(5, len(labels)), fontsize=7)
+    figure.tight_layout(rect=(0.0, 0.08, 1.0, 1.0))
+    figure.savefig(path, dpi=90)
+    plt.close(figure)
+
+
+def main(argv: Optional[Sequence[str]] = None) -> int:
+    parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    parser.add_argument("run", nargs="?", metavar="RUN", help="the recorded test: a bag, or a split recording's "
+                        "parts joined by commas")
+    parser.add_argument("--compare", nargs="*", default=None, metavar="YAML_OR_DIR",
+                        help="tank.yaml files or folders of them to run on the same steps (default: the shipped "
+                             "ensemble, config/%s)" % DEFAULT_FOLDER)
+    parser.add_argument("--robot-yaml", default=None, help="robot parameters (default: config/robot.yaml)")
+    parser.add_argument("--simulated", metavar="TRUTH_YAML", help="run the protocol on this tank.yaml instead")
+    parser.add_argument("--tank-disturbance", nargs=2, type=float, metavar=("SIGMA", "TAU"),
+                        help="a tank that pushes (N m, s): the --simulated truth's and every model's")
+    parser.add_argument("--attitude-noise-deg", type=float, default=0.05,
+                        help="the simulated IMU's attitude noise, deg (default %(default)s)")
+    parser.add_argument("--seed", type=int, default=0, help="the simulated tank's and IMU's draw")
+    parser.add_argument("--jobs", type=int, default=1, help="model runs in parallel processes (default 1)")
+    parser.add_argument("--out", default="out/step_test", help="output folder (default %(default)s)")
+    args = parser.parse_args(argv)
+    if not (math.isfinite(args.attitude_noise_deg) and args.attitude_noise_deg >= 0.0):
+        parser.error("--attitude-noise-deg must be >= 0, got %r" % (args.attitude_noise_deg,))
+    if args.jobs < 1:
+        parser.error("--jobs must be at least 1, got %d" % args.jobs)
+    if bool(args.simulated) == bool(args.run):
+        parser.error("give one recorded RUN or --simulated TRUTH_YAML")
+    warn_uncommitted()
+    overrides = disturbance_overrides(args.tank_disturbance)
+    try:
+        compare = tank_files(args.compare if args.compare is not None else [config_path(DEFAULT_FOLDER)])
+        if not compare:
+            raise StudyError("step_test: --compare names no tank.yaml")
+        for path in compare + ([args.simulated] if args.simulated else []):
+            tank = load_tank_params(path)
+            try:
+                tank.with_values(**dict(overrides))
+            except ParameterError as exc:
+                raise StudyError("step_test: --tank-disturbance: %s" % exc) from None
+        if args.simulated:
+            record = run_sequence(_spec(args.simulated, args.seed, overrides, args.attitude_noise_deg,
+                                        args.robot_yaml, (0.0, 0.0, 0.0)), PROTOCOL,
+                                  "simulated: %s" % os.path.basename(args.simulated))
+        else:
+            paths = [part for part in args.run.split(",") if part]
+            for path in paths:
+                if not os.path.isfile(path):
+                    raise StudyError("step_test: no such bag: %s" % path)
+            record = record_from_bag(paths, args.run)
+        responses = record.responses()
+        start, first, sequence = record_sequence(record)
+        jobs = [(path, start, first, sequence, args.seed + 1, overrides, args.attitude_noise_deg, args.robot_yaml)
+                for path in compare]
+        if args.jobs > 1:
+            with ProcessPoolExecutor(max_workers=min(args.jobs, len(jobs))) as pool:
+                runs = list(pool.map(model_run, jobs))
+        else:
+            runs = [model_run(job) for job in jobs]
+        model_responses = [_model_responses(run, responses) for run in runs]
+    except (ParameterError, BagReportError, ValueError, SimulationError) as exc:
+        sys.stderr.write("step_test: error: %s\n" % exc)
+        return 1
+    except StudyError as exc:
+        sys.stderr.write("%s\n" % exc)
+        return 1
+    names = [os.path.basename(path) for path in compare]
+    steps = []
+    agreement = [0] * len(compare)
+    for k, (step, response) in enumerate(responses):
+        models = [entries[k] for entries in model_responses]
+        for m, model in enumerate(models):
+            model["agrees"] = "response" in model and agrees(model["response"]["settle_6"], response.settle_6)
+            agreement[m] += int(model["agrees"] and step.single_axis)
+        steps.append({"time": step.time, "before": list(step.before), "after": list(step.after),
+                      "single_axis": step.single_axis, "record": response.as_dict(), "models": models})
+    report: Dict[str, Any] = {
+        "study": "step_test", "command": command_line("quadruped_control.studies.step_test", argv), **code_record(),
+        "source": record.source, "seconds": float(record.t[-1]), "seed": args.seed,
+        "tank_overrides": [list(item) for item in overrides], "models": names, "steps": steps,
+        "agreement": agreement, "single_axis_steps": sum(step.single_axis for step, _ in responses)}
+    if args.simulated:
+        report["truth"] = {"tank_yaml": os.path.basename(args.simulated),
+                           "disturbance": list(args.tank_disturbance) if args.tank_disturbance else None}
+    write_study_report(args.out, "step_test", _text(report), report, lambda path: _plot(path, report, record))
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

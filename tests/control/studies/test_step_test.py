@@ -1,0 +1,158 @@
+"""The step test study (quadruped_control.studies.step_test): the protocol on a simulated truth, a recorded bag
+read back to the same steps, every model asked what the record asked, and the refusals."""
+from __future__ import annotations
+
+import json
+import math
+import os
+
+import numpy as np
+import pytest
+
+from quadruped_common.config import config_path
+from quadruped_common.so3 import rot_to_quat, rpy_to_rot
+from quadruped_control.sim.config_files import TANK_ENSEMBLE
+from quadruped_control.studies import StudyError
+from quadruped_control.studies import step_test as st
+
+rosbags = pytest.importorskip("rosbags")
+from rosbags.rosbag1 import Writer  # noqa: E402
+
+from tests.control.analysis.test_bag_report import STATE_TYPE, typestore  # noqa: E402
+
+MEMBER_00, MEMBER_05 = config_path(TANK_ENSEMBLE[0]), config_path(TANK_ENSEMBLE[5])
+
+#: a short protocol: roll 20 deg, back 8 deg towards upright, then away again (50 s in all)
+SHORT = (((20.0, 0.0, 0.0), 20.0), ((12.0, 0.0, 0.0), 15.0), ((20.0, 0.0, 0.0), 15.0))
+
+
+def _simulated(sequence=SHORT, path=MEMBER_00, seed=0):
+    spec = st._spec(path, seed, (), 0.05, None, (0.0, 0.0, 0.0))
+    return st.run_sequence(spec, sequence, "simulated")
+
+
+def test_the_protocol_steps_one_tilt_axis_at_a_time_towards_upright_and_away() -> None:
+    setpoints = [np.array(setpoint) for setpoint, _ in st.PROTOCOL]
+    assert all(seconds >= 90.0 for _, seconds in st.PROTOCOL)
+    changes = [b - a for a, b in zip([np.zeros(3)] + setpoints, setpoints)]
+    assert all(np.count_nonzero(change) == 1 and change[2] == 0.0 for change in changes)
+    assert {(a[np.flatnonzero(c)[0]], b[np.flatnonzero(c)[0]]) for a, b, c in
+            zip([np.zeros(3)] + setpoints, setpoints, changes)} >= {(45.0, 33.0), (45.0, 57.0), (33.0, 45.0)}
+
+
+def test_a_simulated_sequence_records_each_setpoint_change_as_a_step_at_its_time() -> None:
+    record = _simulated()
+    assert [round(step.time, 2) for step in record.steps] == [0.0, 20.0, 35.0]
+    assert record.t[0] == 0.0 and record.t[-1] == pytest.approx(50.0) and np.all(np.diff(record.t) > 0.0)
+    assert [round(math.degrees(step.after[0]), 6) for step in record.steps] == [20.0, 12.0, 20.0]
+    responses = record.responses()
+    assert [r.towards_upright for _, r in responses] == [False, True, False]
+    assert [r.duration for _, r in responses] == pytest.approx([20.0, 15.0, 15.0])
+    start, first, sequence = st.record_sequence(record)
+    assert first == [0.0, 0.0, 0.0] and max(abs(v) for v in start) < 1e-9
+    rounded = [([round(v, 9) for v in setpoint], round(seconds, 6)) for setpoint, seconds in sequence]
+    assert rounded == [(list(map(float, setpoint)), seconds) for setpoint, seconds in SHORT]
+
+
+def _write(path: str, record, setpoint_of) -> None:
+    """``record`` as the robot's bag would hold it: /imu/data and an armed /controller_state at its samples,
+    stamped from 1000 s, with the setpoint ``setpoint_of(t)`` (rad)."""
+    store = typestore()
+    Header, Time = store.types["std_msgs/msg/Header"], store.types["builtin_interfaces/msg/Time"]
+    Quaternion, Vector3 = store.types["geometry_msgs/msg/Quaternion"], store.types["geometry_msgs/msg/Vector3"]
+    Point, Imu = store.types["geometry_msgs/msg/Point"], store.types["sensor_msgs/msg/Imu"]
+    State = store.types[STATE_TYPE]
+    zero3, cov = Vector3(x=0.0, y=0.0, z=0.0), np.zeros(9)
+    with Writer(path) as writer:
+        imu_c = writer.add_connection("/imu/data", Imu.__msgtype__, typestore=store)
+        state_c = writer.add_connection("/controller_state", STATE_TYPE, typestore=store)
+        for k, (t, rpy) in enumerate(zip(record.t, record.rpy)):
+            stamp = 1000.0 + float(t)
+            header = Header(seq=k, stamp=Time(sec=int(stamp), nanosec=int(round((stamp % 1) * 1e9)) % 10 ** 9),
+                            frame_id="")
+            x, y, z, w = rot_to_quat(rpy_to_rot(*rpy))
+            imu = Imu(header=header, orientation=Quaternion(x=x, y=y, z=z, w=w), orientation_covariance=cov,
+                      angular_velocity=zero3, angular_velocity_covariance=cov, linear_acceleration=zero3,
+                      linear_acceleration_covariance=cov)
+            ns = int(round(stamp * 1e9))
+            writer.write(imu_c, ns, store.serialize_ros1(imu, Imu.__msgtype__))
+            sx, sy, sz, sw = rot_to_quat(rpy_to_rot(*setpoint_of(float(t))))
+            state = State(header=header, setpoint=Quaternion(x=sx, y=sy, z=sz, w=sw), attitude_error=zero3,
+                          geodesic_error=0.0, torque_command=zero3, torque_saturated=zero3, integral=zero3,
+                          torque_estimated=zero3, armed=True, holding=False, hold_reason="",
+                          pair_phase=np.zeros(2, dtype=np.uint8), pair_phase_time=np.zeros(2),
+                          foot_targets=[Point(x=0.0, y=0.0, z=0.0)] * 4)
+            writer.write(state_c, ns, store.serialize_ros1(state, STATE_TYPE))
+
+
+def _setpoint_of(sequence=SHORT):
+    ends = np.cumsum([seconds for _, seconds in sequence])
+
+    def setpoint(t: float):
+        k = min(int(np.searchsorted(ends, t + 1e-6, side="right")), len(sequence) - 1)
+        # the record's first sample is measured before the first setpoint acts: level there
+        return np.radians(sequence[k][0]) if t > 0.0 else np.zeros(3)
+    return setpoint
+
+
+def test_a_bag_of_the_run_gives_back_its_steps_and_their_responses(tmp_path) -> None:
+    record = _simulated()
+    path = str(tmp_path / "run.bag")
+    _write(path, record, _setpoint_of())
+    read = st.record_from_bag([path], "run.bag")
+    assert [round(step.time, 2) for step in read.steps] == [0.01, 20.0, 35.0]  # the bag's first setpoint: level
+    assert read.t[0] == 0.0 and read.t.size == record.t.size
+    np.testing.assert_allclose(read.rpy, record.rpy, atol=1e-5)  # float32 quaternions
+    for (_, a), (_, b) in zip(read.responses()[1:], record.responses()[1:]):
+        for key in ("settle_6", "settle_2"):
+            x, y = getattr(a, key), getattr(b, key)
+            assert (x is None and y is None) or x == pytest.approx(y, abs=0.02)
+        assert a.overshoot_deg == pytest.approx(b.overshoot_deg, abs=1e-3)
+
+
+def test_a_bag_whose_setpoint_never_changes_or_lacks_a_stream_is_refused(tmp_path) -> None:
+    record = _simulated(sequence=(((0.0, 0.0, 0.0), 3.0),))
+    path = str(tmp_path / "still.bag")
+    _write(path, record, lambda t: np.zeros(3))
+    with pytest.raises(StudyError, match="never changed while the controller was armed"):
+        st.record_from_bag([path], "still.bag")
+    assert st.main([str(tmp_path / "missing.bag"), "--out", str(tmp_path / "out")]) == 1
+
+
+def test_the_cli_on_a_simulated_truth_agrees_with_the_truth_and_tells_another_member_apart(tmp_path, monkeypatch,
+                                                                                       capsys) -> None:
+    # roll 45 held, then 12 deg back towards upright: member_00's net static torque makes its return slow
+    # (15 s to the 6 deg band, docs/identification.md), member_05 returns in a few seconds
+    monkeypatch.setattr(st, "PROTOCOL", (((45.0, 0.0, 0.0), 60.0), ((33.0, 0.0, 0.0), 60.0)))
+    out = str(tmp_path / "out")
+    assert st.main(["--simulated", MEMBER_00, "--compare", MEMBER_00, MEMBER_05, "--jobs", "2", "--out", out]) == 0
+    with open(os.path.join(out, "step_test.json")) as stream:
+        report = json.load(stream)
+    assert report["models"] == ["member_00.yaml", "member_05.yaml"] and report["single_axis_steps"] == 2
+    assert report["command"][:3] == ["python", "-m", "quadruped_control.studies.step_test"]
+    assert report["truth"] == {"tank_yaml": "member_00.yaml", "disturbance": None}
+    back = report["steps"][1]
+    assert back["record"]["towards_upright"] and back["record"]["settle_6"] > 8.0
+    truth, other = back["models"]
+    assert truth["agrees"] and other["response"]["settle_6"] < back["record"]["settle_6"] / 2.0 and not other["agrees"]
+    assert report["agreement"][0] == 2 and report["agreement"][1] <= 1
+    assert len(truth["series"]["t"]) == len(truth["series"]["deg"]) > 10
+    assert os.path.getsize(os.path.join(out, "step_test.png")) > 0
+    printed = capsys.readouterr().out
+    assert "| roll 45 -> 33 (towards upright) |" in printed and "- member_05.yaml: " in printed
+
+
+def test_the_cli_refuses_bad_options_before_any_trial(tmp_path, capsys) -> None:
+    out = str(tmp_path / "out")
+    with pytest.raises(SystemExit):
+        st.main(["--out", out])  # neither a run nor --simulated
+    with pytest.raises(SystemExit):
+        st.main(["run.bag", "--simulated", MEMBER_00, "--out", out])
+    with pytest.raises(SystemExit):
+        st.main(["--simulated", MEMBER_00, "--jobs", "0", "--out", out])
+    with pytest.raises(SystemExit):
+        st.main(["--simulated", MEMBER_00, "--attitude-noise-deg", "nan", "--out", out])
+    assert st.main(["--simulated", MEMBER_00, "--tank-disturbance", "1.0", "10.0", "--out", out]) == 1
+    assert "--tank-disturbance" in capsys.readouterr().err
+    assert st.main(["--simulated", MEMBER_00, "--compare", str(tmp_path), "--out", out]) == 1
+    assert not os.path.exists(out)
