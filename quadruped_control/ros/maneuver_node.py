@@ -1,13 +1,17 @@
-"""Commands one attitude maneuver on a running stack and ends the launch when it is over.
+"""Commands one attitude maneuver, or a sequence of setpoints held in turn, on a running stack and ends the
+launch when it is over.
 
-Used by the main job (launch/sim_maneuver.launch): waits until the controller is armed and streaming,
-holds the initial setpoint for ~delay seconds, publishes the maneuver setpoint on
-``attitude_setpoint_rpy_deg``, prints the geodesic error every 10 s and shuts down after
-~duration seconds (it is a required node, so roslaunch then stops the whole graph and rosbag closes
-its bag cleanly).
+Used by the main job (launch/sim_maneuver.launch) and the step test (launch/step_test.launch): waits until the
+controller is armed and streaming, holds the initial setpoint for ~delay seconds, then publishes on
+``attitude_setpoint_rpy_deg`` either the one maneuver setpoint for ~duration seconds or each setpoint of the
+sequence for its own time (:mod:`quadruped_control.control.setpoint_sequence`), prints the geodesic error every
+10 s and shuts down at the end (it is a required node, so roslaunch then stops the whole graph and rosbag
+closes its bag cleanly).
 
-Parameters: ~roll ~pitch ~yaw (deg, default 45 0 0), ~delay (5 s), ~duration (120 s), ~timeout (60 s
-to wait for the armed controller).
+Parameters: ~roll ~pitch ~yaw (deg, default 45 0 0) and ~duration (120 s) for one maneuver; ~protocol (a name
+of setpoint_sequence.PROTOCOLS, e.g. step_test) or ~sequence (a list of [roll, pitch, yaw, seconds]) for a
+sequence, which then replaces them; ~delay (5 s), ~timeout (60 s to wait for the armed controller). A bad
+protocol or sequence ends the launch at once with the reason, before anything is published.
 """
 from __future__ import annotations
 
@@ -18,15 +22,19 @@ from typing import List, Optional
 import rospy
 from geometry_msgs.msg import Vector3Stamped
 
+from quadruped_common.config import ParameterError
+from quadruped_control.control.setpoint_sequence import SetpointHold, command_sequence, total_seconds
 from underwater_quadruped.msg import ControllerState
 
 
 class ManeuverNode:
     def __init__(self) -> None:
-        self.setpoint = [float(rospy.get_param("~" + axis, default)) for axis, default in
-                         (("roll", 45.0), ("pitch", 0.0), ("yaw", 0.0))]
+        maneuver = tuple(float(rospy.get_param("~" + axis, default)) for axis, default in
+                         (("roll", 45.0), ("pitch", 0.0), ("yaw", 0.0)))
+        self.sequence = command_sequence(str(rospy.get_param("~protocol", "") or ""),
+                                         rospy.get_param("~sequence", []), maneuver,  # type: ignore[arg-type]
+                                         float(rospy.get_param("~duration", 120.0)))
         self.delay = float(rospy.get_param("~delay", 5.0))
-        self.duration = float(rospy.get_param("~duration", 120.0))
         self.timeout = float(rospy.get_param("~timeout", 60.0))
         self.armed = threading.Event()
         self.last_error = math.nan
@@ -38,25 +46,40 @@ class ManeuverNode:
         if msg.armed and not msg.holding:
             self.armed.set()
 
+    def _publish(self, hold: SetpointHold, index: int) -> None:
+        msg = Vector3Stamped()
+        msg.header.stamp = rospy.Time.now()
+        msg.vector.x, msg.vector.y, msg.vector.z = hold.rpy_deg
+        self.publisher.publish(msg)
+        rospy.loginfo("maneuver: setpoint %d of %d: roll %.1f pitch %.1f yaw %.1f deg, for %.0f s",
+                      index + 1, len(self.sequence), *(hold.rpy_deg + (hold.seconds,)))
+
     def run(self) -> None:
         if not self.armed.wait(self.timeout):
             rospy.logfatal("maneuver: the controller did not report armed and stroking within %.0f s", self.timeout)
             rospy.signal_shutdown("controller not ready")
             return
         rospy.sleep(self.delay)
-        msg = Vector3Stamped()
-        msg.header.stamp = rospy.Time.now()
-        msg.vector.x, msg.vector.y, msg.vector.z = self.setpoint
-        self.publisher.publish(msg)
-        rospy.loginfo("maneuver: setpoint roll %.1f pitch %.1f yaw %.1f deg, running %.0f s", *(self.setpoint + [self.duration]))
-        end = rospy.get_time() + self.duration
-        while not rospy.is_shutdown() and rospy.get_time() < end:
-            rospy.sleep(min(10.0, max(0.0, end - rospy.get_time())))
-            rospy.loginfo("maneuver: %3.0f s left, geodesic error %.1f deg", max(0.0, end - rospy.get_time()),
-                          math.degrees(self.last_error))
+        end = rospy.get_time() + total_seconds(self.sequence)
+        hold_end = rospy.get_time()
+        for index, hold in enumerate(self.sequence):
+            if rospy.is_shutdown():
+                return
+            self._publish(hold, index)
+            hold_end += hold.seconds  # from the sequence's start: no drift from the publishing's own time
+            while not rospy.is_shutdown() and rospy.get_time() < hold_end:
+                rospy.sleep(min(10.0, max(0.0, hold_end - rospy.get_time())))
+                rospy.loginfo("maneuver: %3.0f s left, geodesic error %.1f deg", max(0.0, end - rospy.get_time()),
+                              math.degrees(self.last_error))
         rospy.signal_shutdown("maneuver complete")
 
 
 def main(argv: Optional[List[str]] = None) -> None:
     rospy.init_node("maneuver")
-    ManeuverNode().run()
+    try:
+        node = ManeuverNode()
+    except ParameterError as exc:
+        rospy.logfatal("maneuver: %s", exc)
+        rospy.signal_shutdown(str(exc))
+        return
+    node.run()

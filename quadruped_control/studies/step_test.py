@@ -10,12 +10,12 @@ Why (docs/identification.md, "A step test tells the members apart where Table 1 
 ensemble's members fit Table 1 within 3 of each other and take 1.5 to 15 s to return 12 deg towards upright
 from a held 45 deg roll. A plant whose trim leaves a net static torque pushing away from upright returns much
 more slowly than it moves away; one whose trim and rope balance takes the same time both ways. The robot's
-roll group in Table 1 settled 18-95 s after its rise, which no fitted set reproduces; this test, a quarter of
-an hour in the tank with nothing added, says which kind of plant the robot is.
+roll group in Table 1 settled 18-95 s after its rise, which no fitted set reproduces; this test, eighteen
+minutes in the tank with nothing added, says which kind of plant the robot is.
 
-The protocol (:data:`PROTOCOL`, run on the robot with ``robot.launch`` recording and the setpoints published
-in turn, README "Step test"): roll 45 deg held 120 s, then 33, 45, 57 and 45 deg for 90 s each; level for
-120 s; the same in pitch. A RUN is a bag (or a split recording's parts joined by commas) with ``/imu/data``
+The protocol (:data:`PROTOCOL`; on the robot ``roslaunch underwater_quadruped step_test.launch``, which records
+and publishes the setpoints in turn once the controller is armed, README "The step test"): roll 45 deg held
+120 s, then 33, 45, 57 and 45 deg for 90 s each; level for 120 s; the same in pitch. A RUN is a bag (or a split recording's parts joined by commas) with ``/imu/data``
 and ``/controller_state``, read by :func:`quadruped_control.analysis.bag_report.read_bags`; the steps are the
 changes of the controller's setpoint while armed (:func:`~quadruped_control.analysis.steps.find_steps`), so
 any single-axis sequence is read, not only this one. ``--simulated`` runs the protocol on the tank plant of
@@ -49,6 +49,7 @@ import numpy as np
 
 from quadruped_common.config import ParameterError, config_path
 from quadruped_common.so3 import quat_to_rot, rotations_to_rpy, rpy_to_rot
+from quadruped_control.control.setpoint_sequence import STEP_TEST
 from quadruped_control.analysis.bag_report import BagReportError, read_bags, sorted_unique
 from quadruped_control.analysis.steps import Step, StepResponse, agrees, find_steps, step_response
 from quadruped_control.sim.plants.tank import load_tank_params
@@ -61,12 +62,10 @@ from quadruped_control.studies.trial import TrialSpec, trial_simulation
 
 __all__ = ["PROTOCOL", "StepRecord", "model_run", "record_from_bag", "record_sequence", "run_sequence"]
 
-#: The test's setpoints (roll, pitch, yaw in deg) and how long each is held (s), in order from level.
-PROTOCOL: Tuple[Tuple[Tuple[float, float, float], float], ...] = (
-    ((45.0, 0.0, 0.0), 120.0), ((33.0, 0.0, 0.0), 90.0), ((45.0, 0.0, 0.0), 90.0), ((57.0, 0.0, 0.0), 90.0),
-    ((45.0, 0.0, 0.0), 90.0), ((0.0, 0.0, 0.0), 120.0),
-    ((0.0, 45.0, 0.0), 120.0), ((0.0, 33.0, 0.0), 90.0), ((0.0, 45.0, 0.0), 90.0), ((0.0, 57.0, 0.0), 90.0),
-    ((0.0, 45.0, 0.0), 90.0))
+#: The test's setpoints (roll, pitch, yaw in deg) and how long each is held (s), in order from level: the
+#: maneuver node's ``protocol:=step_test`` (:data:`~quadruped_control.control.setpoint_sequence.STEP_TEST`).
+PROTOCOL: Tuple[Tuple[Tuple[float, float, float], float], ...] = tuple((hold.rpy_deg, hold.seconds)
+                                                                      for hold in STEP_TEST)
 
 
 class StepRecord:

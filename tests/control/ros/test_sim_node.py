@@ -1,17 +1,10 @@
 """launch/sim.launch hands sim_node (quadruped_control/ros/sim_node.py) the tank the operator names; the node's
 closed loop itself runs in the rostests (tests/rostest/sim_*.test)."""
-import subprocess
-
-import yaml
+from tests.control.ros.conftest import launch_params
 
 
 def _sim_node_params(launch: str, *args: str) -> dict:
-    """sim_node's private parameters as ``roslaunch --dump-params LAUNCH ARGS`` resolves them."""
-    out = subprocess.run(["roslaunch", "--dump-params", launch, "description:=false"] + list(args),
-                         stdout=subprocess.PIPE, stderr=subprocess.PIPE, universal_newlines=True, timeout=60)
-    assert out.returncode == 0, out.stderr
-    params = yaml.safe_load(out.stdout)
-    return {key[len("/sim_node/"):]: value for key, value in params.items() if key.startswith("/sim_node/")}
+    return launch_params(launch, "/sim_node", "description:=false", *args)
 
 
 def test_sim_launch_passes_a_tank_yaml_to_the_tank_plant_and_none_by_default(launch_file):
