@@ -19,4 +19,6 @@ def test_the_sim_maneuver_launch_runs_a_protocol_on_the_tank_it_is_given(launch_
     sim = launch_params(launch, "/sim_node", "bag_dir:=/tmp", "plant:=tank", "tank_yaml:=/fits/member_00.yaml")
     assert sim["plant"] == "tank" and sim["tank_yaml"] == "/fits/member_00.yaml"
     default = launch_params(launch, "/maneuver", "bag_dir:=/tmp")
-    assert default["protocol"] == "" and default["roll"] == 45
+    assert default["protocol"] == "" and default["sequence"] == [] and default["roll"] == 45
+    given = launch_params(launch, "/maneuver", "bag_dir:=/tmp", "sequence:=[[20, 0, 0, 40], [12, 0, 0, 40.5]]")
+    assert given["sequence"] == [[20, 0, 0, 40], [12, 0, 0, 40.5]]
