@@ -13,14 +13,15 @@ more slowly than it moves away; one whose trim and rope balance takes the same t
 roll group in Table 1 settled 18-95 s after its rise, which no fitted set reproduces; this test, eighteen
 minutes in the tank with nothing added, says which kind of plant the robot is.
 
-The protocol (:data:`PROTOCOL`; on the robot ``roslaunch underwater_quadruped step_test.launch``, which records
-and publishes the setpoints in turn once the controller is armed, README "The step test"): roll 45 deg held
-120 s, then 33, 45, 57 and 45 deg for 90 s each; level for 120 s; the same in pitch. A RUN is a bag (or a split recording's parts joined by commas) with ``/imu/data``
-and ``/controller_state``, read by :func:`quadruped_control.analysis.bag_report.read_bags`; the steps are the
-changes of the controller's setpoint while armed (:func:`~quadruped_control.analysis.steps.find_steps`), so
-any single-axis sequence is read, not only this one. ``--simulated`` runs the protocol on the tank plant of
-TRUTH_YAML instead (the robot's own closed loop, experiment gains, rate-limited servos, through
-:func:`~.trial.trial_simulation`): what the test would show of a plant whose values are known.
+The protocol (:data:`PROTOCOL`; on the robot ``roslaunch underwater_quadruped step_test.launch``, which records and
+publishes the setpoints in turn once the controller is armed, README "The step test"): roll 45 deg held 120 s, then
+33, 45, 57 and 45 deg for 90 s each; level for 120 s; the same in pitch. A RUN is a bag (or a split recording's
+parts joined by commas) with ``/imu/data`` and ``/controller_state``, read by
+:func:`quadruped_control.analysis.bag_report.read_bags`; the steps are the changes of the controller's setpoint
+while armed (:func:`~quadruped_control.analysis.steps.find_steps`), so any single-axis sequence is read, not only
+this one. ``--simulated`` runs the protocol on the tank plant of TRUTH_YAML instead (the robot's own closed loop,
+experiment gains, rate-limited servos, through :func:`~.trial.trial_simulation`): what the test would show of a
+plant whose values are known.
 
 Each step's response (:func:`~quadruped_control.analysis.steps.step_response`): the paper's settling time
 within 6 deg, the same within 2 deg, the overshoot past the new setpoint, and how well the tilt before it was
@@ -60,7 +61,8 @@ from quadruped_control.studies.runner import (code_record, command_line, describ
                                               write_study_report)
 from quadruped_control.studies.trial import TrialSpec, trial_simulation
 
-__all__ = ["PROTOCOL", "StepRecord", "model_run", "record_from_bag", "record_sequence", "run_sequence"]
+__all__ = ["PROTOCOL", "StepRecord", "model_run", "record_from_bag", "record_sequence", "run_sequence",
+           "step_test_spec"]
 
 #: The test's setpoints (roll, pitch, yaw in deg) and how long each is held (s), in order from level: the
 #: maneuver node's ``protocol:=step_test`` (:data:`~quadruped_control.control.setpoint_sequence.STEP_TEST`).
@@ -81,8 +83,8 @@ class StepRecord:
         return [(step, step_response(self.t, self.rpy, step, end)) for step, end in zip(self.steps, ends)]
 
 
-def _spec(tank_yaml: str, seed: int, overrides: Tuple[Tuple[str, Any], ...], noise_deg: float,
-          robot_yaml: Optional[str], start_deg: Sequence[float]) -> TrialSpec:
+def step_test_spec(tank_yaml: str, seed: int, overrides: Tuple[Tuple[str, Any], ...], noise_deg: float,
+                   robot_yaml: Optional[str], start_deg: Sequence[float]) -> TrialSpec:
     """The trial the test runs: the robot's closed loop on the tank plant with the experiment gains and
     rate-limited servos (Table 1's settings), starting at rest at ``start_deg`` with that setpoint."""
     start = tuple(float(v) for v in start_deg)
@@ -158,7 +160,7 @@ def model_run(job: Tuple[str, List[float], List[float], List[Tuple[List[float], 
     record's first attitude, the same setpoints held as long; its steps' responses. A loop that cannot go on is
     reported, not raised."""
     path, start, first, sequence, seed, overrides, noise_deg, robot_yaml = job
-    spec = dataclasses.replace(_spec(path, seed, overrides, noise_deg, robot_yaml, start),
+    spec = dataclasses.replace(step_test_spec(path, seed, overrides, noise_deg, robot_yaml, start),
                                setpoint_rpy_deg=tuple(first))
     try:
         record = run_sequence(spec, sequence, os.path.basename(path))
@@ -301,7 +303,7 @@ def main(argv: Optional[Sequence[str]] = None) -> int:
             except ParameterError as exc:
                 raise StudyError("step_test: --tank-disturbance: %s" % exc) from None
         if args.simulated:
-            record = run_sequence(_spec(args.simulated, args.seed, overrides, args.attitude_noise_deg,
+            record = run_sequence(step_test_spec(args.simulated, args.seed, overrides, args.attitude_noise_deg,
                                         args.robot_yaml, (0.0, 0.0, 0.0)), PROTOCOL,
                                   "simulated: %s" % os.path.basename(args.simulated))
         else:

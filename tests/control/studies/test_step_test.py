@@ -28,7 +28,7 @@ SHORT = (((20.0, 0.0, 0.0), 20.0), ((12.0, 0.0, 0.0), 15.0), ((20.0, 0.0, 0.0), 
 
 
 def _simulated(sequence=SHORT, path=MEMBER_00, seed=0):
-    spec = st._spec(path, seed, (), 0.05, None, (0.0, 0.0, 0.0))
+    spec = st.step_test_spec(path, seed, (), 0.05, None, (0.0, 0.0, 0.0))
     return st.run_sequence(spec, sequence, "simulated")
 
 
