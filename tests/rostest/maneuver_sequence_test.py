@@ -1,0 +1,60 @@
+#!/usr/bin/env python3
+"""rostest: the maneuver node's sequence reaches the controller, each setpoint for as long as it is held.
+
+Listens to /controller_state (the setpoint the controller steers to, every control step, stamped in simulated
+time). Passes when the setpoint goes from level to roll 10 deg for 4 s and then to pitch 5 deg, never to
+anything else (the bad sequence's node published nothing), and both maneuver nodes have ended: the good one
+after its last hold, the bad one at once.
+"""
+import math
+import sys
+import threading
+import unittest
+
+import numpy as np
+import rosnode
+import rospy
+import rostest
+
+from quadruped_common.so3 import quat_to_rot, rot_to_rpy
+from underwater_quadruped.msg import ControllerState
+
+LEVEL, ROLL_10, PITCH_5 = (0.0, 0.0, 0.0), (10.0, 0.0, 0.0), (0.0, 5.0, 0.0)
+
+
+class ManeuverSequenceTest(unittest.TestCase):
+    def setUp(self):
+        rospy.init_node("maneuver_sequence_test", anonymous=True)
+        self.lock = threading.Lock()
+        self.changes = []  # (stamp s, setpoint rpy deg) at each change of the setpoint
+        rospy.Subscriber("controller_state", ControllerState, self.on_state, queue_size=100)
+
+    def on_state(self, msg):
+        s = msg.setpoint
+        rpy = tuple(round(math.degrees(a), 3) for a in rot_to_rpy(quat_to_rot(np.array([s.x, s.y, s.z, s.w]))))
+        with self.lock:
+            if not self.changes or self.changes[-1][1] != rpy:
+                self.changes.append((msg.header.stamp.to_sec(), rpy))
+
+    def test_each_setpoint_is_held_as_long_as_the_sequence_says_and_the_nodes_end(self):
+        deadline = rospy.Time.now() + rospy.Duration(120.0)
+        while not rospy.is_shutdown() and rospy.Time.now() < deadline:
+            with self.lock:
+                done = [rpy for _, rpy in self.changes] == [LEVEL, ROLL_10, PITCH_5]
+            nodes = rosnode.get_node_names()
+            if done and "/maneuver" not in nodes and "/maneuver_bad" not in nodes:
+                break
+            rospy.sleep(0.5)
+        with self.lock:
+            changes = list(self.changes)
+        self.assertEqual([rpy for _, rpy in changes], [LEVEL, ROLL_10, PITCH_5],
+                         "the controller's setpoints were %r" % (changes,))
+        held = changes[2][0] - changes[1][0]
+        self.assertAlmostEqual(held, 4.0, delta=0.25, msg="roll 10 deg held %.2f s, not 4" % held)
+        nodes = rosnode.get_node_names()
+        self.assertNotIn("/maneuver", nodes, "the maneuver node did not end after its sequence")
+        self.assertNotIn("/maneuver_bad", nodes, "the maneuver node given a bad sequence did not end")
+
+
+if __name__ == "__main__":
+    rostest.rosrun("underwater_quadruped", "maneuver_sequence", ManeuverSequenceTest, sys.argv)
