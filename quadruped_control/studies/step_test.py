@@ -136,10 +136,14 @@ def record_from_bag(paths: Sequence[str], source: str) -> StepRecord:
     start = float(imu_t[0])
     rpy = rotations_to_rpy(np.array([quat_to_rot(q) for q in imu_q]))
     setpoint_rpy = rotations_to_rpy(np.array([quat_to_rot(np.asarray(q) / np.linalg.norm(q)) for q in setpoint_q]))
-    steps = find_steps(state_t - start, setpoint_rpy)
+    times = imu_t - start
+    # a step the IMU's record ends at or before has no response to read (the recorder stopped first)
+    steps = [step for step in find_steps(state_t - start, setpoint_rpy)
+             if np.count_nonzero(times >= step.time) >= 2]
     if not steps:
-        raise StudyError("step_test: the setpoint of %s never changed while the controller was armed" % source)
-    return StepRecord(imu_t - start, rpy, steps, source)
+        raise StudyError("step_test: the setpoint of %s never changed while the controller was armed and the IMU "
+                         "recording" % source)
+    return StepRecord(times, rpy, steps, source)
 
 
 def record_sequence(record: StepRecord) -> Tuple[List[float], List[float], List[Tuple[List[float], float]]]:
@@ -176,10 +180,11 @@ def _model_responses(run: Dict[str, Any], responses: Sequence[Tuple[Step, StepRe
     if "failed" in run:
         return [{"tank_yaml": name, "failed": run["failed"]} for _ in responses]
     record: StepRecord = run["record"]
-    own = dict(zip((round(step.time, 1) for step in record.steps), record.responses()))
+    own = record.responses()
     out = []
     for step, _ in responses:
-        match = own.get(round(step.time, 1)) or min(record.responses(), key=lambda pair: abs(pair[0].time - step.time))
+        # the model's own step nearest in time: its holds are whole control periods, the record's are not
+        match = min(own, key=lambda pair: abs(pair[0].time - step.time))
         out.append({"tank_yaml": name, "response": match[1].as_dict(),
                     "series": _series(record, match[0], match[1].duration)})
     return out

@@ -106,6 +106,16 @@ def test_a_bag_of_the_run_gives_back_its_steps_and_their_responses(tmp_path) -> 
         assert a.overshoot_deg == pytest.approx(b.overshoot_deg, abs=1e-3)
 
 
+def test_a_step_the_record_ends_on_is_left_out(tmp_path) -> None:
+    record = _simulated(sequence=(((20.0, 0.0, 0.0), 5.0), ((12.0, 0.0, 0.0), 3.0)))
+    path = str(tmp_path / "late.bag")
+    # level at the first sample, 20 deg after it, 30 deg at the last sample (the recorder stopped then)
+    _write(path, record, lambda t: np.radians([0.0 if t <= 0.0 else 20.0 if t < 7.995 else 30.0, 0.0, 0.0]))
+    read = st.record_from_bag([path], "late.bag")
+    assert [round(math.degrees(step.after[0]), 3) for step in read.steps] == [20.0]
+    assert len(read.responses()) == 1
+
+
 def test_a_bag_whose_setpoint_never_changes_or_lacks_a_stream_is_refused(tmp_path) -> None:
     record = _simulated(sequence=(((0.0, 0.0, 0.0), 3.0),))
     path = str(tmp_path / "still.bag")
