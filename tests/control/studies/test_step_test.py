@@ -50,9 +50,9 @@ def test_a_simulated_sequence_records_each_setpoint_change_as_a_step_at_its_time
     assert rounded == [(list(map(float, setpoint)), seconds) for setpoint, seconds in SHORT]
 
 
-def _write(path: str, record, setpoint_of) -> None:
-    """``record`` as the robot's bag would hold it: /imu/data and an armed /controller_state at its samples,
-    stamped from 1000 s, with the setpoint ``setpoint_of(t)`` (rad)."""
+def _write(path: str, record, setpoint_of, armed: bool = True, imu: bool = True) -> None:
+    """``record`` as the robot's bag would hold it: /imu/data (unless not ``imu``) and a /controller_state
+    (``armed`` or not) at its samples, stamped from 1000 s, with the setpoint ``setpoint_of(t)`` (rad)."""
     store = typestore()
     Header, Time = store.types["std_msgs/msg/Header"], store.types["builtin_interfaces/msg/Time"]
     Quaternion, Vector3 = store.types["geometry_msgs/msg/Quaternion"], store.types["geometry_msgs/msg/Vector3"]
@@ -67,15 +67,16 @@ def _write(path: str, record, setpoint_of) -> None:
             header = Header(seq=k, stamp=Time(sec=int(stamp), nanosec=int(round((stamp % 1) * 1e9)) % 10 ** 9),
                             frame_id="")
             x, y, z, w = rot_to_quat(rpy_to_rot(*rpy))
-            imu = Imu(header=header, orientation=Quaternion(x=x, y=y, z=z, w=w), orientation_covariance=cov,
-                      angular_velocity=zero3, angular_velocity_covariance=cov, linear_acceleration=zero3,
-                      linear_acceleration_covariance=cov)
+            sample = Imu(header=header, orientation=Quaternion(x=x, y=y, z=z, w=w), orientation_covariance=cov,
+                         angular_velocity=zero3, angular_velocity_covariance=cov, linear_acceleration=zero3,
+                         linear_acceleration_covariance=cov)
             ns = int(round(stamp * 1e9))
-            writer.write(imu_c, ns, store.serialize_ros1(imu, Imu.__msgtype__))
+            if imu:
+                writer.write(imu_c, ns, store.serialize_ros1(sample, Imu.__msgtype__))
             sx, sy, sz, sw = rot_to_quat(rpy_to_rot(*setpoint_of(float(t))))
             state = State(header=header, setpoint=Quaternion(x=sx, y=sy, z=sz, w=sw), attitude_error=zero3,
                           geodesic_error=0.0, torque_command=zero3, torque_saturated=zero3, integral=zero3,
-                          torque_estimated=zero3, armed=True, holding=False, hold_reason="",
+                          torque_estimated=zero3, armed=armed, holding=not armed, hold_reason="",
                           pair_phase=np.zeros(2, dtype=np.uint8), pair_phase_time=np.zeros(2),
                           foot_targets=[Point(x=0.0, y=0.0, z=0.0)] * 4)
             writer.write(state_c, ns, store.serialize_ros1(state, STATE_TYPE))
@@ -122,6 +123,12 @@ def test_a_bag_whose_setpoint_never_changes_or_lacks_a_stream_is_refused(tmp_pat
     _write(path, record, lambda t: np.zeros(3))
     with pytest.raises(StudyError, match="never changed while the controller was armed"):
         st.record_from_bag([path], "still.bag")
+    for name, kwargs, message in (("unarmed.bag", {"armed": False}, "armed /controller_state"),
+                                  ("no_imu.bag", {"imu": False}, "needs /imu/data and /controller_state")):
+        path = str(tmp_path / name)
+        _write(path, record, _setpoint_of(), **kwargs)
+        with pytest.raises(StudyError, match=message):
+            st.record_from_bag([path], name)
     assert st.main([str(tmp_path / "missing.bag"), "--out", str(tmp_path / "out")]) == 1
 
 
