@@ -33,7 +33,7 @@ import math
 import os
 import sys
 from dataclasses import dataclass, field
-from typing import Dict, List, Optional, Sequence
+from typing import Dict, List, Optional, Sequence, Tuple
 
 import numpy as np
 
@@ -343,6 +343,18 @@ def sorted_unique(t: Sequence[float], values: Sequence) -> tuple:
     times = np.array(t, dtype=float)[order]
     keep = np.concatenate(([True], np.diff(times) > 0)) if times.size else np.zeros(0, dtype=bool)
     return times[keep], [values[i] for i, k in zip(order, keep) if k]
+
+
+def attitude_rpy(times: Sequence[float], quaternions: Sequence[Sequence[float]]) -> Tuple[np.ndarray, np.ndarray]:
+    """A recorded attitude stream as (times, roll-pitch-yaw in rad, Z-Y-X, REP 103), in stamp order with
+    repeated stamps dropped (:func:`sorted_unique`); samples whose stamp or (x, y, z, w) quaternion is not finite,
+    or whose quaternion is far from unit length (more than 0.1), are left out, and the rest normalised."""
+    t = np.asarray(times, dtype=float)
+    q = np.asarray(quaternions, dtype=float).reshape(-1, 4)
+    norm = np.linalg.norm(np.nan_to_num(q, nan=0.0, posinf=0.0, neginf=0.0), axis=1)
+    good = np.all(np.isfinite(q), axis=1) & np.isfinite(t) & (np.abs(norm - 1.0) < 0.1)
+    t, kept = sorted_unique(t[good], q[good] / norm[good, None])
+    return t, rotations_to_rpy(np.array([quat_to_rot(row) for row in kept]).reshape(-1, 3, 3))
 
 
 def covered_by(times: np.ndarray, grid: np.ndarray, max_gap: float) -> np.ndarray:

@@ -44,8 +44,8 @@ from typing import Any, Dict, List, Optional, Sequence, Tuple
 import numpy as np
 
 from quadruped_common.config import ParameterError, config_path
-from quadruped_common.so3 import quat_to_rot, rotations_to_rpy, rpy_to_rot
-from quadruped_control.analysis.bag_report import BagReportError, covered_by, read_bags, sorted_unique
+from quadruped_common.so3 import rpy_to_rot
+from quadruped_control.analysis.bag_report import BagReportError, attitude_rpy, covered_by, read_bags
 from quadruped_control.analysis.hang import HangFit, fit_axis, spectral_density
 from quadruped_control.model.params import RobotParams, load_robot_params
 from quadruped_control.sim.plants.tank import TankModel, TankParams, load_tank_params
@@ -90,14 +90,9 @@ def record_from_bag(times: Sequence[float], quaternions: Sequence[Sequence[float
                     source: str) -> HangRecord:
     """The /imu/data attitude (x, y, z, w quaternions at ``times``) as a :class:`HangRecord` (module
     docstring); StudyError if fewer than two usable samples."""
-    t = np.asarray(times, dtype=float)
-    q = np.asarray(quaternions, dtype=float).reshape(-1, 4)
-    norm = np.linalg.norm(np.nan_to_num(q, nan=0.0, posinf=0.0, neginf=0.0), axis=1)
-    good = np.all(np.isfinite(q), axis=1) & np.isfinite(t) & (np.abs(norm - 1.0) < 0.1)
-    t, q = sorted_unique(t[good], q[good] / norm[good, None])
+    t, rpy = attitude_rpy(times, quaternions)
     if t.size < 2:
         raise StudyError("hang: %s has fewer than two usable /imu/data samples" % source)
-    rpy = rotations_to_rpy(np.array([quat_to_rot(row) for row in q]))  # Z-Y-X, REP 103
     roll, pitch = rpy[:, 0], rpy[:, 1]
     t = t - t[0]  # stamps since 1970 would round the grid's steps
     grid = dt * np.arange(int(math.floor(t[-1] / dt + 1e-9)) + 1)

@@ -39,7 +39,6 @@ model's). Docs: docs/identification.md, "The step test as a study".
 from __future__ import annotations
 
 import argparse
-import dataclasses
 import math
 import os
 import sys
@@ -49,14 +48,13 @@ from typing import Any, Dict, List, Optional, Sequence, Tuple
 import numpy as np
 
 from quadruped_common.config import ParameterError, config_path
-from quadruped_common.so3 import quat_to_rot, rotations_to_rpy, rpy_to_rot
+from quadruped_common.so3 import rpy_to_rot
 from quadruped_control.control.setpoint_sequence import STEP_TEST
-from quadruped_control.analysis.bag_report import BagReportError, read_bags, sorted_unique
+from quadruped_control.analysis.bag_report import BagReportError, attitude_rpy, read_bags
 from quadruped_control.analysis.steps import Step, StepResponse, agrees, find_steps, step_response
-from quadruped_control.sim.plants.tank import load_tank_params
 from quadruped_control.sim.simulation import SimulationError
 from quadruped_control.studies import StudyError
-from quadruped_control.studies.ensemble import DEFAULT_FOLDER, disturbance_overrides, tank_files
+from quadruped_control.studies.ensemble import DEFAULT_FOLDER, disturbance_overrides, member_tanks, tank_files
 from quadruped_control.studies.runner import (code_record, command_line, describe_source, warn_uncommitted,
                                               write_study_report)
 from quadruped_control.studies.trial import TrialSpec, trial_simulation
@@ -84,11 +82,14 @@ class StepRecord:
 
 
 def step_test_spec(tank_yaml: str, seed: int, overrides: Tuple[Tuple[str, Any], ...], noise_deg: float,
-                   robot_yaml: Optional[str], start_deg: Sequence[float]) -> TrialSpec:
+                   robot_yaml: Optional[str], start_deg: Sequence[float],
+                   setpoint_deg: Optional[Sequence[float]] = None) -> TrialSpec:
     """The trial the test runs: the robot's closed loop on the tank plant with the experiment gains and
-    rate-limited servos (Table 1's settings), starting at rest at ``start_deg`` with that setpoint."""
+    rate-limited servos (Table 1's settings), starting at rest at ``start_deg`` with the setpoint
+    ``setpoint_deg`` (default the start)."""
     start = tuple(float(v) for v in start_deg)
-    return TrialSpec(label="step test", setpoint_rpy_deg=start, initial_rpy_deg=start, duration=1.0, seed=seed,
+    setpoint = start if setpoint_deg is None else tuple(float(v) for v in setpoint_deg)
+    return TrialSpec(label="step test", setpoint_rpy_deg=setpoint, initial_rpy_deg=start, duration=1.0, seed=seed,
                      gains="experiment", servo_model="rate-limited", plant="tank", tank_yaml=tank_yaml,
                      robot_yaml=robot_yaml, tank_overrides=overrides, attitude_noise_deg=noise_deg, quiet=True)
 
@@ -123,19 +124,14 @@ def record_from_bag(paths: Sequence[str], source: str) -> StepRecord:
     if len(data.imu_t) < 2 or len(data.state_t) < 2:
         raise StudyError("step_test: %s needs /imu/data and /controller_state (got %d and %d messages)"
                          % (source, len(data.imu_t), len(data.state_t)))
-    quaternions = np.asarray(data.imu_q, dtype=float).reshape(-1, 4)
-    norm = np.linalg.norm(np.nan_to_num(quaternions, nan=0.0, posinf=0.0, neginf=0.0), axis=1)
-    good = np.all(np.isfinite(quaternions), axis=1) & (np.abs(norm - 1.0) < 0.1)
-    imu_t, imu_q = sorted_unique(np.asarray(data.imu_t, dtype=float)[good], quaternions[good] / norm[good, None])
+    imu_t, rpy = attitude_rpy(data.imu_t, data.imu_q)
     armed = np.asarray(data.state_armed, dtype=bool)
-    state_t, setpoint_q = sorted_unique(np.asarray(data.state_t, dtype=float)[armed],
-                                        np.asarray(data.state_setpoint, dtype=float).reshape(-1, 4)[armed])
+    state_t, setpoint_rpy = attitude_rpy(np.asarray(data.state_t, dtype=float)[armed],
+                                         np.asarray(data.state_setpoint, dtype=float).reshape(-1, 4)[armed])
     if imu_t.size < 2 or state_t.size < 2:
         raise StudyError("step_test: %s has fewer than two usable %s samples"
                          % (source, "/imu/data" if imu_t.size < 2 else "armed /controller_state"))
     start = float(imu_t[0])
-    rpy = rotations_to_rpy(np.array([quat_to_rot(q) for q in imu_q]))
-    setpoint_rpy = rotations_to_rpy(np.array([quat_to_rot(np.asarray(q) / np.linalg.norm(q)) for q in setpoint_q]))
     times = imu_t - start
     # a step the IMU's record ends at or before has no response to read (the recorder stopped first)
     steps = [step for step in find_steps(state_t - start, setpoint_rpy)
@@ -164,8 +160,7 @@ def model_run(job: Tuple[str, List[float], List[float], List[Tuple[List[float], 
     record's first attitude, the same setpoints held as long; its steps' responses. A loop that cannot go on is
     reported, not raised."""
     path, start, first, sequence, seed, overrides, noise_deg, robot_yaml = job
-    spec = dataclasses.replace(step_test_spec(path, seed, overrides, noise_deg, robot_yaml, start),
-                               setpoint_rpy_deg=tuple(first))
+    spec = step_test_spec(path, seed, overrides, noise_deg, robot_yaml, start, first)
     try:
         record = run_sequence(spec, sequence, os.path.basename(path))
     except SimulationError as exc:
@@ -301,12 +296,7 @@ def main(argv: Optional[Sequence[str]] = None) -> int:
         compare = tank_files(args.compare if args.compare is not None else [config_path(DEFAULT_FOLDER)])
         if not compare:
             raise StudyError("step_test: --compare names no tank.yaml")
-        for path in compare + ([args.simulated] if args.simulated else []):
-            tank = load_tank_params(path)
-            try:
-                tank.with_values(**dict(overrides))
-            except ParameterError as exc:
-                raise StudyError("step_test: --tank-disturbance: %s" % exc) from None
+        member_tanks(compare + ([args.simulated] if args.simulated else []), overrides, 1)  # each file, the push
         if args.simulated:
             record = run_sequence(step_test_spec(args.simulated, args.seed, overrides, args.attitude_noise_deg,
                                         args.robot_yaml, (0.0, 0.0, 0.0)), PROTOCOL,

@@ -8,8 +8,8 @@ import numpy as np
 import pytest
 
 from quadruped_common.so3 import rot_to_quat, rpy_to_rot
-from quadruped_control.analysis.bag_report import (BagReportError, analyse, covered_by, main, missing_spans,
-                                                  read_bags, write_report)
+from quadruped_control.analysis.bag_report import (BagReportError, analyse, attitude_rpy, covered_by, main,
+                                                  missing_spans, read_bags, write_report)
 from tests.repo import REPO_ROOT
 
 rosbags = pytest.importorskip("rosbags")
@@ -131,6 +131,15 @@ def test_health_across_runs_gives_min_median_max_of_every_figure():
     latency = summary["pwm: servo output"]["latency p99 [ms]"]
     assert latency["n"] == 2.0 and latency["median"] == 3.75
     assert summary["pwm: servo output"]["watchdog tripped"]["max"] == 1.0
+
+
+def test_an_attitude_stream_comes_in_stamp_order_with_bad_samples_left_out():
+    roll_30 = rot_to_quat(rpy_to_rot(math.radians(30.0), 0.0, 0.0))
+    t, rpy = attitude_rpy([2.0, 1.0, 1.0, math.nan, 3.0, 4.0, 5.0],
+                          [roll_30, (0.0, 0.0, 0.0, 1.02), roll_30, (0.0, 0.0, 0.0, 1.0), (0.0, 0.0, 0.0, 1.5),
+                           (math.nan, 0.0, 0.0, 1.0), (0.0, 0.0, 0.0, 1.0)])
+    assert t.tolist() == [1.0, 2.0, 5.0]  # a repeated stamp keeps its first sample, normalised
+    np.testing.assert_allclose(rpy, [[0.0, 0.0, 0.0], [math.radians(30.0), 0.0, 0.0], [0.0, 0.0, 0.0]], atol=1e-12)
 
 
 def test_a_grid_time_is_covered_inside_the_samples_span_and_not_across_a_gap():
