@@ -7,7 +7,9 @@ after an overshoot) or away from it. A plant with a net static torque pushing aw
 much more slowly than it moves away; one whose trim and rope balance takes the same time both ways.
 
 A step is any change of the recorded setpoint (:func:`find_steps`); its response (:func:`step_response`)
-runs from the change to the next one or the record's end. On that stretch, the stepped axis's angle is
+runs from the change to the next one, the record's end, or the instant the controller stopped acting
+(:func:`response_ends`: a robot disarmed or holding its safe pose is not following the step, and a step taken
+less than :data:`HOLD_CHECK` s after such a stop is not read at all). On that stretch, the stepped axis's angle is
 smoothed as the paper's metrics smooth it (a 3 s centred moving average, truncated at the stretch's ends:
 :func:`~quadruped_control.analysis.metrics.moving_average_centered`), and the error to the new setpoint
 gives:
@@ -34,8 +36,7 @@ import numpy as np
 from quadruped_control.analysis.metrics import AXES, SETTLING_BAND_DEG, moving_average_centered, settling_time
 
 __all__ = ["AGREEMENT_FACTOR", "FINE_BAND_DEG", "HOLD_CHECK", "MIN_STEP_DEG", "Step", "StepResponse", "TIME_FLOOR",
-           "agrees",
-           "find_steps", "step_response"]
+           "agrees", "find_steps", "response_ends", "step_response"]
 
 #: The narrower band (deg) the test also times: the fitted members differ most in how they creep into it.
 FINE_BAND_DEG = 2.0
@@ -105,6 +106,25 @@ def find_steps(t: Sequence[float], setpoint_rpy: Sequence[Sequence[float]]) -> L
         steps.append(Step(float(times[k + 1]), tuple(float(v) for v in setpoints[k]),  # type: ignore[arg-type]
                           tuple(float(v) for v in setpoints[k + 1])))
     return steps
+
+
+def response_ends(steps: Sequence[Step], stops: Sequence[float], end: float) -> List[Optional[float]]:
+    """Where each step's response ends when the controller stopped acting (disarmed, or holding its safe pose) at
+    the times ``stops``: at the next step, the first stop after the step, or ``end``, whichever is first; None for
+    a step with a stop in the :data:`HOLD_CHECK` s before it (or at it), whose tilt was not held by the controller
+    and whose response is not the test's."""
+    stop_times = np.sort(np.asarray(stops, dtype=float))
+    ends: List[Optional[float]] = []
+    for k, step in enumerate(steps):
+        first_before = int(np.searchsorted(stop_times, step.time - HOLD_CHECK, side="left"))
+        if first_before < stop_times.size and stop_times[first_before] <= step.time:
+            ends.append(None)
+            continue
+        after = int(np.searchsorted(stop_times, step.time, side="right"))
+        candidates = [end] + ([steps[k + 1].time] if k + 1 < len(steps) else [])
+        candidates += [float(stop_times[after])] if after < stop_times.size else []
+        ends.append(min(candidates))
+    return ends
 
 
 def step_response(t: Sequence[float], rpy: Sequence[Sequence[float]], step: Step,

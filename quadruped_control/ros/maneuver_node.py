@@ -11,7 +11,9 @@ closes its bag cleanly).
 Parameters: ~roll ~pitch ~yaw (deg, default 45 0 0) and ~duration (120 s) for one maneuver; ~protocol (a name
 of setpoint_sequence.PROTOCOLS, e.g. step_test) or ~sequence (a list of [roll, pitch, yaw, seconds]) for a
 sequence, which then replaces them; ~delay (5 s), ~timeout (60 s to wait for the armed controller). A bad
-protocol or sequence ends the launch at once with the reason, before anything is published.
+protocol or sequence ends the launch at once with the reason, before anything is published. A controller that
+stops acting (disarmed, or holding its safe pose) once the maneuver has begun is logged as a warning, and again
+when it acts again; the setpoints keep their schedule.
 """
 from __future__ import annotations
 
@@ -38,13 +40,27 @@ class ManeuverNode:
         self.timeout = float(rospy.get_param("~timeout", 60.0))
         self.armed = threading.Event()
         self.last_error = math.nan
+        self.acting = False
+        self.index = -1  # the setpoint being published, from 0; -1 before the first
         self.publisher = rospy.Publisher("attitude_setpoint_rpy_deg", Vector3Stamped, queue_size=1, latch=True)
         rospy.Subscriber("controller_state", ControllerState, self._on_state, queue_size=1)
 
     def _on_state(self, msg: ControllerState) -> None:
         self.last_error = msg.geodesic_error
-        if msg.armed and not msg.holding:
+        acting = bool(msg.armed and not msg.holding)
+        if not acting and self.acting and self.armed.is_set():
+            # the sequence keeps its schedule (a disarmed or holding controller ignores the setpoint); say so, as
+            # the step test's reading cuts the response here and leaves out a step taken soon after
+            rospy.logwarn("maneuver: the controller stopped acting %s (%s); the sequence goes on", self._where(),
+                          (msg.hold_reason or "holding") if msg.armed else "disarmed")
+        elif acting and not self.acting and self.armed.is_set():
+            rospy.loginfo("maneuver: the controller acts again %s", self._where())
+        self.acting = acting
+        if acting:
             self.armed.set()
+
+    def _where(self) -> str:
+        return "before the first setpoint" if self.index < 0 else "during setpoint %d" % (self.index + 1)
 
     def _publish(self, hold: SetpointHold, index: int) -> None:
         msg = Vector3Stamped()
@@ -65,6 +81,7 @@ class ManeuverNode:
         for index, hold in enumerate(self.sequence):
             if rospy.is_shutdown():
                 return
+            self.index = index
             self._publish(hold, index)
             hold_end += hold.seconds  # from the sequence's start: no drift from the publishing's own time
             while not rospy.is_shutdown() and rospy.get_time() < hold_end:

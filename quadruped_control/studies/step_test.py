@@ -18,10 +18,12 @@ publishes the setpoints in turn once the controller is armed, README "The step t
 33, 45, 57 and 45 deg for 90 s each; level for 120 s; the same in pitch. A RUN is a bag (or a split recording's
 parts joined by commas) with ``/imu/data`` and ``/controller_state``, read by
 :func:`quadruped_control.analysis.bag_report.read_bags`; the steps are the changes of the controller's setpoint
-while armed (:func:`~quadruped_control.analysis.steps.find_steps`), so any single-axis sequence is read, not only
-this one. ``--simulated`` runs the protocol on the tank plant of TRUTH_YAML instead (the robot's own closed loop,
-experiment gains, rate-limited servos, through :func:`~.trial.trial_simulation`): what the test would show of a
-plant whose values are known.
+while it was acting, armed and not holding its safe pose (:func:`~quadruped_control.analysis.steps.find_steps`), so
+any single-axis sequence is read, not only this one; a step's response ends where the controller stopped acting,
+and a step taken less than ten seconds after such a stop is listed as not read
+(:func:`~quadruped_control.analysis.steps.response_ends`). ``--simulated`` runs the protocol on the tank plant
+of TRUTH_YAML instead (the robot's own closed loop, experiment gains, rate-limited servos, through
+:func:`~.trial.trial_simulation`): what the test would show of a plant whose values are known.
 
 Each step's response (:func:`~quadruped_control.analysis.steps.step_response`): the paper's settling time
 within 6 deg, the same within 2 deg, the overshoot past the new setpoint, and how well the tilt before it was
@@ -51,7 +53,8 @@ from quadruped_common.config import ParameterError, config_path
 from quadruped_common.so3 import rpy_to_rot
 from quadruped_control.control.setpoint_sequence import STEP_TEST
 from quadruped_control.analysis.bag_report import BagReportError, attitude_rpy, read_bags
-from quadruped_control.analysis.steps import Step, StepResponse, agrees, find_steps, step_response
+from quadruped_control.analysis.steps import (HOLD_CHECK, Step, StepResponse, agrees, find_steps, response_ends,
+                                              step_response)
 from quadruped_control.sim.simulation import SimulationError
 from quadruped_control.studies import StudyError
 from quadruped_control.studies.ensemble import DEFAULT_FOLDER, disturbance_overrides, member_tanks, tank_files
@@ -70,15 +73,25 @@ PROTOCOL: Tuple[Tuple[Tuple[float, float, float], float], ...] = tuple((hold.rpy
 
 class StepRecord:
     """Attitudes (roll, pitch, yaw, rad) at times ``t`` (s from the record's start, sorted) with the setpoint's
-    steps; ``source`` names it."""
+    steps; ``source`` names it. ``ends``, one per step, says where its response ends (None: not read, see
+    :func:`~quadruped_control.analysis.steps.response_ends`); by default each runs to the next step or the
+    record's end."""
 
-    def __init__(self, t: np.ndarray, rpy: np.ndarray, steps: List[Step], source: str) -> None:
+    def __init__(self, t: np.ndarray, rpy: np.ndarray, steps: List[Step], source: str,
+                 ends: Optional[List[Optional[float]]] = None) -> None:
         self.t, self.rpy, self.steps, self.source = t, rpy, steps, source
+        self.ends = response_ends(steps, (), float(t[-1])) if ends is None else list(ends)
+        if len(self.ends) != len(steps):
+            raise ValueError("a step record needs one end per step (%d steps, %d ends)" % (len(steps), len(self.ends)))
 
     def responses(self) -> List[Tuple[Step, StepResponse]]:
-        """Each step's response, to the next step or the record's end."""
-        ends = [step.time for step in self.steps[1:]] + [float(self.t[-1])]
-        return [(step, step_response(self.t, self.rpy, step, end)) for step, end in zip(self.steps, ends)]
+        """The response of each step that is read, to its end."""
+        return [(step, step_response(self.t, self.rpy, step, end)) for step, end in zip(self.steps, self.ends)
+                if end is not None]
+
+    def unread(self) -> List[Step]:
+        """The steps taken too soon after the controller stopped acting to be read."""
+        return [step for step, end in zip(self.steps, self.ends) if end is None]
 
 
 def step_test_spec(tank_yaml: str, seed: int, overrides: Tuple[Tuple[str, Any], ...], noise_deg: float,
@@ -119,27 +132,32 @@ def run_sequence(spec: TrialSpec, sequence: Sequence[Tuple[Sequence[float], floa
 
 def record_from_bag(paths: Sequence[str], source: str) -> StepRecord:
     """The steps of a recorded run (module docstring): the IMU's attitude (Z-Y-X, REP 103) and the setpoint
-    of each /controller_state step while the controller was armed; StudyError if the bag lacks either."""
+    of each /controller_state message while the controller was acting (armed and not holding its safe pose);
+    each step's response ends where the controller stopped acting, and a step taken soon after such a stop is
+    not read (:func:`~quadruped_control.analysis.steps.response_ends`). StudyError if the bag lacks either
+    stream."""
     data = read_bags(paths)
     if len(data.imu_t) < 2 or len(data.state_t) < 2:
         raise StudyError("step_test: %s needs /imu/data and /controller_state (got %d and %d messages)"
                          % (source, len(data.imu_t), len(data.state_t)))
     imu_t, rpy = attitude_rpy(data.imu_t, data.imu_q)
-    armed = np.asarray(data.state_armed, dtype=bool)
-    state_t, setpoint_rpy = attitude_rpy(np.asarray(data.state_t, dtype=float)[armed],
-                                         np.asarray(data.state_setpoint, dtype=float).reshape(-1, 4)[armed])
+    all_state_t = np.asarray(data.state_t, dtype=float)
+    acting = np.asarray(data.state_armed, dtype=bool) & ~np.asarray(data.state_holding, dtype=bool)
+    state_t, setpoint_rpy = attitude_rpy(all_state_t[acting],
+                                         np.asarray(data.state_setpoint, dtype=float).reshape(-1, 4)[acting])
     if imu_t.size < 2 or state_t.size < 2:
         raise StudyError("step_test: %s has fewer than two usable %s samples"
-                         % (source, "/imu/data" if imu_t.size < 2 else "armed /controller_state"))
+                         % (source, "/imu/data" if imu_t.size < 2 else "acting (armed, not holding) /controller_state"))
     start = float(imu_t[0])
     times = imu_t - start
     # a step the IMU's record ends at or before has no response to read (the recorder stopped first)
     steps = [step for step in find_steps(state_t - start, setpoint_rpy)
              if np.count_nonzero(times >= step.time) >= 2]
     if not steps:
-        raise StudyError("step_test: the setpoint of %s never changed while the controller was armed and the IMU "
-                         "recording" % source)
-    return StepRecord(times, rpy, steps, source)
+        raise StudyError("step_test: the setpoint of %s never changed while the controller was acting (armed, not "
+                         "holding) and the IMU recording" % source)
+    stops = all_state_t[~acting & np.isfinite(all_state_t)] - start
+    return StepRecord(times, rpy, steps, source, response_ends(steps, stops, float(times[-1])))
 
 
 def record_sequence(record: StepRecord) -> Tuple[List[float], List[float], List[Tuple[List[float], float]]]:
@@ -170,18 +188,21 @@ def model_run(job: Tuple[str, List[float], List[float], List[Tuple[List[float], 
 
 def _model_responses(run: Dict[str, Any], responses: Sequence[Tuple[Step, StepResponse]]) -> List[Dict[str, Any]]:
     """A model's run (:func:`model_run`) read step by step as the record is: per step of the record, the
-    model's response to its own step at that time (its stepped angle from the step on, for the figure)."""
+    model's response to its own step at that time, for no longer than the record's (which a stop of the
+    controller may cut short), with its stepped angle from the step on, for the figure."""
     name = run["tank_yaml"]
     if "failed" in run:
         return [{"tank_yaml": name, "failed": run["failed"]} for _ in responses]
     record: StepRecord = run["record"]
-    own = record.responses()
+    own = list(zip(record.steps, record.ends))
     out = []
-    for step, _ in responses:
+    for step, robot in responses:
         # the model's own step nearest in time: its holds are whole control periods, the record's are not
-        match = min(own, key=lambda pair: abs(pair[0].time - step.time))
-        out.append({"tank_yaml": name, "response": match[1].as_dict(),
-                    "series": _series(record, match[0], match[1].duration)})
+        match, end = min(own, key=lambda pair: abs(pair[0].time - step.time))
+        own_end = float(record.t[-1]) if end is None else end  # a model's run never stops acting
+        response = step_response(record.t, record.rpy, match, min(own_end, match.time + robot.duration))
+        out.append({"tank_yaml": name, "response": response.as_dict(),
+                    "series": _series(record, match, response.duration)})
     return out
 
 
@@ -225,6 +246,12 @@ def _text(report: Dict[str, Any]) -> str:
               "not counted):" % report["single_axis_steps"], ""]
     for name, count in zip(models, report["agreement"]):
         lines.append("- %s: %d" % (name, count))
+    if report.get("unread_steps"):
+        lines += ["", "Not read: %d step(s) taken less than %g s after the controller stopped acting (disarmed or "
+                  "holding its safe pose), at %s s. A response the controller stopped acting in is read up to the "
+                  "stop, and each model's for as long." % (len(report["unread_steps"]), HOLD_CHECK,
+                                                          ", ".join("%.1f" % step["time"]
+                                                                    for step in report["unread_steps"]))]
     if report.get("truth"):
         lines += ["", "Simulated record: %s (seed %d, tank disturbance %s)."
                   % (report["truth"]["tank_yaml"], report["seed"], report["truth"]["disturbance"] or "none")]
@@ -338,6 +365,8 @@ def main(argv: Optional[Sequence[str]] = None) -> int:
         "source": record.source, "seconds": float(record.t[-1]), "seed": args.seed,
         "tank_overrides": [list(item) for item in overrides], "models": names, "steps": steps,
         "agreement": agreement, "single_axis_steps": sum(step.single_axis for step, _ in responses)}
+    report["unread_steps"] = [{"time": step.time, "before": list(step.before), "after": list(step.after)}
+                              for step in record.unread()]
     if args.simulated:
         report["truth"] = {"tank_yaml": os.path.basename(args.simulated),
                            "disturbance": list(args.tank_disturbance) if args.tank_disturbance else None}

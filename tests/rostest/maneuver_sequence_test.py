@@ -4,7 +4,8 @@
 Listens to /controller_state (the setpoint the controller steers to, every control step, stamped in simulated
 time). Passes when the setpoint goes from level to roll 10 deg for 4 s and then to pitch 5 deg, never to
 anything else (the bad sequence's node published nothing), and both maneuver nodes have ended: the good one
-after its last hold, the bad one at once.
+after its last hold, the bad one at once. During the roll hold the test disarms the controller for a second and
+arms it again: the sequence keeps its schedule, and the maneuver node logs the stop and the return (/rosout).
 """
 import math
 import sys
@@ -15,6 +16,8 @@ import numpy as np
 import rosnode
 import rospy
 import rostest
+from rosgraph_msgs.msg import Log
+from std_srvs.srv import SetBool
 
 from quadruped_common.so3 import quat_to_rot, rot_to_rpy
 from underwater_quadruped.msg import ControllerState
@@ -27,7 +30,14 @@ class ManeuverSequenceTest(unittest.TestCase):
         rospy.init_node("maneuver_sequence_test", anonymous=True)
         self.lock = threading.Lock()
         self.changes = []  # (stamp s, setpoint rpy deg) at each change of the setpoint
+        self.maneuver_log = []  # what /maneuver logged
         rospy.Subscriber("controller_state", ControllerState, self.on_state, queue_size=100)
+        rospy.Subscriber("/rosout", Log, self.on_log, queue_size=100)
+
+    def on_log(self, msg):
+        if msg.name == "/maneuver":
+            with self.lock:
+                self.maneuver_log.append((msg.level, msg.msg))
 
     def on_state(self, msg):
         s = msg.setpoint
@@ -38,9 +48,18 @@ class ManeuverSequenceTest(unittest.TestCase):
 
     def test_each_setpoint_is_held_as_long_as_the_sequence_says_and_the_nodes_end(self):
         deadline = rospy.Time.now() + rospy.Duration(120.0)
+        interrupted = False
         while not rospy.is_shutdown() and rospy.Time.now() < deadline:
             with self.lock:
                 done = [rpy for _, rpy in self.changes] == [LEVEL, ROLL_10, PITCH_5]
+                rolling = [rpy for _, rpy in self.changes] == [LEVEL, ROLL_10]
+            if rolling and not interrupted:
+                interrupted = True
+                arm = rospy.ServiceProxy("/attitude_controller/arm", SetBool)
+                rospy.wait_for_service("/attitude_controller/arm", timeout=10.0)
+                arm(False)
+                rospy.sleep(1.0)
+                arm(True)
             nodes = rosnode.get_node_names()
             if done and "/maneuver" not in nodes and "/maneuver_bad" not in nodes:
                 break
@@ -54,6 +73,14 @@ class ManeuverSequenceTest(unittest.TestCase):
         nodes = rosnode.get_node_names()
         self.assertNotIn("/maneuver", nodes, "the maneuver node did not end after its sequence")
         self.assertNotIn("/maneuver_bad", nodes, "the maneuver node given a bad sequence did not end")
+        self.assertTrue(interrupted, "the roll hold was never seen, so the controller was never disarmed")
+        with self.lock:
+            log = list(self.maneuver_log)
+        warnings = [text for level, text in log if level == Log.WARN]
+        self.assertTrue(any("stopped acting during setpoint 1 (disarmed)" in text for text in warnings),
+                        "the maneuver node did not warn of the disarm: %r" % (log,))
+        self.assertTrue(any("acts again during setpoint 1" in text for _, text in log),
+                        "the maneuver node did not log the controller's return: %r" % (log,))
 
 
 if __name__ == "__main__":

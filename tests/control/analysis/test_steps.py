@@ -80,3 +80,24 @@ def test_find_steps_keeps_real_changes_and_ignores_republished_setpoints() -> No
     (0.0, 0.9, True), (0.0, 1.1, False)])  # below the 0.5 s floor a time counts as 0.5 s
 def test_two_settling_times_agree_within_a_factor_two_or_when_neither_settles(model, robot, expected) -> None:
     assert steps.agrees(model, robot) is expected
+
+
+def _roll_step(time: float) -> steps.Step:
+    return steps.Step(time, (45.0 * DEG, 0.0, 0.0), (33.0 * DEG, 0.0, 0.0))
+
+
+def test_a_response_ends_at_the_next_step_the_records_end_or_the_first_stop_after_it() -> None:
+    sequence = [_roll_step(100.0), _roll_step(200.0), _roll_step(300.0)]
+    assert steps.response_ends(sequence, [], 350.0) == [200.0, 300.0, 350.0]
+    # disarmed at 250 s: the second step's response stops there, the third is read in full
+    assert steps.response_ends(sequence, [250.0, 250.01, 250.02], 350.0) == [200.0, 250.0, 350.0]
+
+
+def test_a_step_soon_after_a_stop_is_not_read() -> None:
+    sequence = [_roll_step(100.0), _roll_step(200.0)]
+    # a hold within HOLD_CHECK before the second step, and one at the first step's instant
+    ends = steps.response_ends(sequence, [200.0 - steps.HOLD_CHECK + 0.5], 300.0)
+    assert ends == [200.0 - steps.HOLD_CHECK + 0.5, None]
+    assert steps.response_ends(sequence, [100.0], 300.0) == [None, 300.0]
+    # a stop earlier than HOLD_CHECK before the step leaves it whole
+    assert steps.response_ends(sequence, [100.0 - steps.HOLD_CHECK - 0.5], 300.0) == [200.0, 300.0]

@@ -50,9 +50,10 @@ def test_a_simulated_sequence_records_each_setpoint_change_as_a_step_at_its_time
     assert rounded == [(list(map(float, setpoint)), seconds) for setpoint, seconds in SHORT]
 
 
-def _write(path: str, record, setpoint_of, armed: bool = True, imu: bool = True) -> None:
+def _write(path: str, record, setpoint_of, armed=True, imu: bool = True) -> None:
     """``record`` as the robot's bag would hold it: /imu/data (unless not ``imu``) and a /controller_state
-    (``armed`` or not) at its samples, stamped from 1000 s, with the setpoint ``setpoint_of(t)`` (rad)."""
+    (``armed`` or not, or ``armed(t)``: holding when not) at its samples, stamped from 1000 s, with the setpoint
+    ``setpoint_of(t)`` (rad)."""
     store = typestore()
     Header, Time = store.types["std_msgs/msg/Header"], store.types["builtin_interfaces/msg/Time"]
     Quaternion, Vector3 = store.types["geometry_msgs/msg/Quaternion"], store.types["geometry_msgs/msg/Vector3"]
@@ -74,9 +75,10 @@ def _write(path: str, record, setpoint_of, armed: bool = True, imu: bool = True)
             if imu:
                 writer.write(imu_c, ns, store.serialize_ros1(sample, Imu.__msgtype__))
             sx, sy, sz, sw = rot_to_quat(rpy_to_rot(*setpoint_of(float(t))))
+            acting = bool(armed(float(t)) if callable(armed) else armed)
             state = State(header=header, setpoint=Quaternion(x=sx, y=sy, z=sz, w=sw), attitude_error=zero3,
                           geodesic_error=0.0, torque_command=zero3, torque_saturated=zero3, integral=zero3,
-                          torque_estimated=zero3, armed=armed, holding=not armed, hold_reason="",
+                          torque_estimated=zero3, armed=acting, holding=not acting, hold_reason="",
                           pair_phase=np.zeros(2, dtype=np.uint8), pair_phase_time=np.zeros(2),
                           foot_targets=[Point(x=0.0, y=0.0, z=0.0)] * 4)
             writer.write(state_c, ns, store.serialize_ros1(state, STATE_TYPE))
@@ -117,13 +119,35 @@ def test_a_step_the_record_ends_on_is_left_out(tmp_path) -> None:
     assert len(read.responses()) == 1
 
 
+def test_a_stop_of_the_controller_cuts_the_step_it_falls_in_and_leaves_out_the_next(tmp_path, monkeypatch) -> None:
+    record = _simulated()
+    path = str(tmp_path / "held.bag")
+    # the safe pose held from 25 s to 27 s: inside the second step (20 s), and 8 s before the third (35 s)
+    _write(path, record, _setpoint_of(), armed=lambda t: not 25.0 <= t < 27.0)
+    read = st.record_from_bag([path], "held.bag")
+    assert [round(step.time, 2) for step in read.steps] == [0.01, 20.0, 35.0]
+    assert [round(step.time, 2) for step in read.unread()] == [35.0]
+    responses = read.responses()
+    assert [round(r.duration, 2) for _, r in responses] == [19.99, 5.0]
+    # each model's response to the cut step is read for as long as the record's; the report names the unread step
+    monkeypatch.chdir(tmp_path)
+    out = str(tmp_path / "out")
+    assert st.main([path, "--compare", MEMBER_00, "--out", out]) == 0
+    with open(os.path.join(out, "step_test.json")) as stream:
+        report = json.load(stream)
+    assert [round(entry["models"][0]["response"]["duration"], 1) for entry in report["steps"]] == [20.0, 5.0]
+    assert [round(step["time"], 2) for step in report["unread_steps"]] == [35.0]
+    with open(os.path.join(out, "step_test.md")) as stream:
+        assert "Not read: 1 step(s)" in stream.read()
+
+
 def test_a_bag_whose_setpoint_never_changes_or_lacks_a_stream_is_refused(tmp_path) -> None:
     record = _simulated(sequence=(((0.0, 0.0, 0.0), 3.0),))
     path = str(tmp_path / "still.bag")
     _write(path, record, lambda t: np.zeros(3))
-    with pytest.raises(StudyError, match="never changed while the controller was armed"):
+    with pytest.raises(StudyError, match="never changed while the controller was acting"):
         st.record_from_bag([path], "still.bag")
-    for name, kwargs, message in (("unarmed.bag", {"armed": False}, "armed /controller_state"),
+    for name, kwargs, message in (("unarmed.bag", {"armed": False}, r"acting \(armed, not holding\) /controller_state"),
                                   ("no_imu.bag", {"imu": False}, "needs /imu/data and /controller_state")):
         path = str(tmp_path / name)
         _write(path, record, _setpoint_of(), **kwargs)
