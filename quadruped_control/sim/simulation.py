@@ -441,6 +441,11 @@ class ClosedLoopSimulation:
         self._rng = np.random.default_rng(self.seed)
         self.k = 0
         self.holds = 0
+        # The last sample :meth:`run` recorded: (step k, plant state, measured R and omega, the controller's
+        # output or None). The next step at the same k uses them, so a run continued by another draws no second
+        # measurement and steps the controller once per period, as one longer run would.
+        self._last_sample: Optional[Tuple[int, RigidBodyState, np.ndarray, np.ndarray,
+                                          Optional[ControllerOutput]]] = None
 
     @property
     def time(self) -> float:
@@ -449,9 +454,13 @@ class ClosedLoopSimulation:
 
     def set_setpoint(self, setpoint_R: ArrayLike) -> None:
         """A new setpoint R_d from the next step on (ValueError unless a rotation), as the ROS node takes one
-        mid-run; the controller keeps its integral (the paper does not reset it)."""
+        mid-run; the controller keeps its integral (the paper does not reset it). Between two runs, the step at the
+        first run's last sample is controlled again with the new setpoint, on the same measurement: at h = 0 the
+        controller's integral and stroke clock stay where they were, and only its output changes."""
         self.setpoint_R = _rotation(setpoint_R, "setpoint_R")
         self.controller.set_setpoint(self.setpoint_R)
+        if self._last_sample is not None:
+            self._last_sample = self._last_sample[:4] + (None,)
 
     def _reported(self, rotation: np.ndarray) -> np.ndarray:
         """The attitude the IMU reports, noise apart: the true one, or with the heading a residual field at
@@ -463,6 +472,17 @@ class ClosedLoopSimulation:
         return imu_measurement(self._rng, self._reported(state.rotation), state.omega, self.attitude_noise,
                                self.gyro_noise)
 
+    def _control(self, t: float, R: np.ndarray, omega: np.ndarray) -> ControllerOutput:
+        """The controller's output at ``t`` for a measurement: its hold state if it is off or rejects the
+        measurement (counted in :attr:`holds`), as the ROS node does."""
+        if not self.controller_enabled:
+            return self.controller.hold(t, "controller off")
+        try:
+            return self.controller.step(t, R, omega)
+        except ValueError as exc:
+            self.holds += 1
+            return self.controller.hold(t, "bad measurement: %s" % exc)
+
     def step(self) -> Tuple[RigidBodyState, ControllerOutput]:
         """One control period: measure at t_k, control, hold the joint targets until t_k+1.
 
@@ -471,15 +491,13 @@ class ClosedLoopSimulation:
         """
         t = self.time
         state = self.plant._state  # noqa: SLF001 (read-only use; the plant never mutates states)
-        R, omega = self._measure(state)
-        if not self.controller_enabled:
-            output = self.controller.hold(t, "controller off")
+        last, self._last_sample = self._last_sample, None
+        if last is not None and last[0] == self.k and last[1] is state:
+            _, _, R, omega, carried = last
+            output = self._control(t, R, omega) if carried is None else carried
         else:
-            try:
-                output = self.controller.step(t, R, omega)
-            except ValueError as exc:
-                self.holds += 1
-                output = self.controller.hold(t, "bad measurement: %s" % exc)
+            R, omega = self._measure(state)
+            output = self._control(t, R, omega)
         targets = output.joint_targets
         plant = self.plant
         # The controller guarantees (4, 3) finite targets; a target inside its servo range is finite.
@@ -517,15 +535,11 @@ class ClosedLoopSimulation:
             times.append(self.time)
             if i < steps:
                 state, output = step()
-            else:  # last sample: measure and record, do not advance
+            else:  # last sample: measure and record, do not advance (the next step, if any, starts from it)
                 state = self.plant._state  # noqa: SLF001
                 R, w = self._measure(state)
-                try:
-                    if not self.controller_enabled:
-                        raise ValueError("controller off")
-                    output = self.controller.step(self.time, R, w)
-                except ValueError as exc:
-                    output = self.controller.hold(self.time, "bad measurement: %s" % exc)
+                output = self._control(self.time, R, w)
+                self._last_sample = (self.k, state, R, w, output)
             states.append(state)
             records.append(output.state)
             targets.append(output.joint_targets)

@@ -206,6 +206,40 @@ def test_closed_loop_is_deterministic_for_a_seed() -> None:
     assert not np.array_equal(a.rotation, c.rotation)
 
 
+def test_a_run_continued_by_another_is_the_same_as_one_longer_run() -> None:
+    whole = ClosedLoopSimulation(ROBOT, CONFIG, "ideal", np.eye(3), rpy_to_rot(0.3, 0.3, 0.3), seed=3,
+                                 attitude_noise=0.01, gyro_noise=0.01).run(3.0)
+    sim = ClosedLoopSimulation(ROBOT, CONFIG, "ideal", np.eye(3), rpy_to_rot(0.3, 0.3, 0.3), seed=3,
+                               attitude_noise=0.01, gyro_noise=0.01)
+    calls = []
+    real_step = sim.controller.step
+    sim.controller.step = lambda t, R, w: calls.append(t) or real_step(t, R, w)  # type: ignore[method-assign]
+    first, second = sim.run(1.0), sim.run(2.0)
+    # the second run starts at the first's last sample: that measurement and output, not a second draw or step
+    np.testing.assert_array_equal(np.concatenate([first.rotation, second.rotation[1:]]), whole.rotation)
+    np.testing.assert_array_equal(np.concatenate([first.joint_targets, second.joint_targets[1:]]),
+                                  whole.joint_targets)
+    assert len(calls) == len(set(calls)) == 301  # once per period, 0 .. 3 s
+
+
+def test_a_setpoint_changed_between_runs_controls_the_shared_sample_again_without_a_new_measurement() -> None:
+    sim = ClosedLoopSimulation(ROBOT, CONFIG, "ideal", seed=5, attitude_noise=0.01, gyro_noise=0.01)
+    first = sim.run(1.0)
+    seen = []
+    real_step = sim.controller.step
+    sim.controller.step = lambda t, R, w: seen.append((t, np.array(R))) or real_step(t, R, w)  # type: ignore
+    last = sim._last_sample
+    sim.set_setpoint(rpy_to_rot(0.2, 0.0, 0.0))
+    result = sim.run(0.5)
+    # the step at 1 s is controlled again on the measurement the first run's last sample drew
+    assert seen[0][0] == pytest.approx(1.0) and seen[1][0] > 1.0
+    np.testing.assert_array_equal(seen[0][1], last[2])
+    assert len(seen) == 51
+    # the shared sample is recorded in each run with the setpoint then in force
+    np.testing.assert_array_equal(result.rotation[0], first.rotation[-1])
+    assert not np.allclose(result.tau_cmd[0], first.tau_cmd[-1])
+
+
 def test_closed_loop_records_consistent_arrays_and_turns_towards_setpoint() -> None:
     result = _short_run(0, 0.0, duration=5.0)
     n = 501
