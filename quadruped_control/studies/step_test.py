@@ -19,8 +19,9 @@ publishes the setpoints in turn once the controller is armed, README "The step t
 parts joined by commas) with ``/imu/data`` and ``/controller_state``, read by
 :func:`quadruped_control.analysis.bag_report.read_bags`; the steps are the changes of the controller's setpoint
 while it was acting, armed and not holding its safe pose (:func:`~quadruped_control.analysis.steps.find_steps`), so
-any single-axis sequence is read, not only this one; a step's response ends where the controller stopped acting,
-and a step taken less than ten seconds after such a stop is listed as not read
+any single-axis sequence is read, not only this one; once the controller has first acted (its start-up hold
+apart), a step's response ends where it stopped acting, and a step taken less than ten seconds after such a
+stop is listed as not read
 (:func:`~quadruped_control.analysis.steps.response_ends`). ``--simulated`` runs the protocol on the tank plant
 of TRUTH_YAML instead (the robot's own closed loop, experiment gains, rate-limited servos, through
 :func:`~.trial.trial_simulation`): what the test would show of a plant whose values are known.
@@ -133,8 +134,8 @@ def run_sequence(spec: TrialSpec, sequence: Sequence[Tuple[Sequence[float], floa
 def record_from_bag(paths: Sequence[str], source: str) -> StepRecord:
     """The steps of a recorded run (module docstring): the IMU's attitude (Z-Y-X, REP 103) and the setpoint
     of each /controller_state message while the controller was acting (armed and not holding its safe pose);
-    each step's response ends where the controller stopped acting, and a step taken soon after such a stop is
-    not read (:func:`~quadruped_control.analysis.steps.response_ends`). StudyError if the bag lacks either
+    once it has first acted, each step's response ends where it stopped acting, and a step taken soon after such
+    a stop is not read (:func:`~quadruped_control.analysis.steps.response_ends`). StudyError if the bag lacks either
     stream."""
     data = read_bags(paths)
     if len(data.imu_t) < 2 or len(data.state_t) < 2:
@@ -156,7 +157,8 @@ def record_from_bag(paths: Sequence[str], source: str) -> StepRecord:
     if not steps:
         raise StudyError("step_test: the setpoint of %s never changed while the controller was acting (armed, not "
                          "holding) and the IMU recording" % source)
-    stops = all_state_t[~acting & np.isfinite(all_state_t)] - start
+    # a hold or disarm before the controller first acted is the run's start, not a stop in the test
+    stops = all_state_t[~acting & np.isfinite(all_state_t) & (all_state_t > np.min(all_state_t[acting]))] - start
     return StepRecord(times, rpy, steps, source, response_ends(steps, stops, float(times[-1])))
 
 

@@ -141,6 +141,16 @@ def test_a_stop_of_the_controller_cuts_the_step_it_falls_in_and_leaves_out_the_n
         assert "Not read: 1 step(s)" in stream.read()
 
 
+def test_the_hold_before_the_controller_first_acts_is_the_start_not_a_stop(tmp_path) -> None:
+    record = _simulated()
+    path = str(tmp_path / "start.bag")
+    # held from the start to 15 s (as the start-up hold): the step at 20 s comes 5 s after it and is read
+    _write(path, record, _setpoint_of(), armed=lambda t: t >= 15.0)
+    read = st.record_from_bag([path], "start.bag")
+    assert [round(step.time, 2) for step in read.steps] == [20.0, 35.0] and read.unread() == []
+    assert [round(r.duration, 2) for _, r in read.responses()] == [15.0, 15.0]
+
+
 def test_a_bag_whose_setpoint_never_changes_or_lacks_a_stream_is_refused(tmp_path) -> None:
     record = _simulated(sequence=(((0.0, 0.0, 0.0), 3.0),))
     path = str(tmp_path / "still.bag")
