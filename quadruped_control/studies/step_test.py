@@ -21,10 +21,9 @@ parts joined by commas) with ``/imu/data`` and ``/controller_state``, read by
 while it was acting, armed and not holding its safe pose (:func:`~quadruped_control.analysis.steps.find_steps`), so
 any single-axis sequence is read, not only this one; once the controller has first acted (its start-up hold
 apart), a step's response ends where it stopped acting, and a step taken less than ten seconds after such a
-stop is listed as not read
-(:func:`~quadruped_control.analysis.steps.response_ends`). ``--simulated`` runs the protocol on the tank plant
-of TRUTH_YAML instead (the robot's own closed loop, experiment gains, rate-limited servos, through
-:func:`~.trial.trial_simulation`): what the test would show of a plant whose values are known.
+stop is listed as not read (:func:`~quadruped_control.analysis.steps.response_ends`). ``--simulated`` runs the
+protocol on the tank plant of TRUTH_YAML instead (the robot's own closed loop, experiment gains, rate-limited
+servos, through :func:`~.trial.trial_simulation`): what the test would show of a plant whose values are known.
 
 Each step's response (:func:`~quadruped_control.analysis.steps.step_response`): the paper's settling time
 within 6 deg, the same within 2 deg, the overshoot past the new setpoint, and how well the tilt before it was
