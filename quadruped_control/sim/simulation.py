@@ -462,6 +462,17 @@ class ClosedLoopSimulation:
         if self._last_sample is not None:
             self._last_sample = self._last_sample[:4] + (None,)
 
+    def set_controller(self, enabled: bool, reset: bool = False) -> None:
+        """The controller on (stroking) or off (its hold state: no new strokes, the legs back at the nominal pose)
+        from the next step on, as the robot's controller acts, or holds its safe pose, mid-run; ``reset`` also
+        clears its integral and stroke state, as arming the robot does. Between two runs, the step at the first
+        run's last sample is controlled again in the new state, on the same measurement (:meth:`set_setpoint`)."""
+        self.controller_enabled = bool(enabled)
+        if reset:
+            self.controller.reset()
+        if self._last_sample is not None:
+            self._last_sample = self._last_sample[:4] + (None,)
+
     def _reported(self, rotation: np.ndarray) -> np.ndarray:
         """The attitude the IMU reports, noise apart: the true one, or with the heading a residual field at
         the IMU turns (the plant's ``imu_field_residual``, :mod:`~quadruped_control.sim.magnetic_heading`)."""

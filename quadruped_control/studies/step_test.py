@@ -29,10 +29,11 @@ Each step's response (:func:`~quadruped_control.analysis.steps.step_response`): 
 within 6 deg, the same within 2 deg, the overshoot past the new setpoint, and how well the tilt before it was
 held. Each ``--compare`` tank.yaml (default: the shipped ensemble, config/tank_ensemble) is asked what the
 record asked of the robot (:func:`record_sequence`): from rest at the record's first attitude, the same
-setpoints at the same times, so that each step finds the model with the history the robot had (its integral
-wound up by the same holds). A model agrees on a step when its settling time within 6 deg is within a factor 2
-of the robot's, or neither settles (:func:`~quadruped_control.analysis.steps.agrees`); the report counts,
-per model, the steps that change one axis it agrees on.
+setpoints at the same times, with the controller stopped where the robot's was, so that each step finds the
+model with the history the robot had (its integral wound up by the same holds). A model agrees on a step when
+its settling time within 6 deg is within a factor 2 of the robot's, or neither settles
+(:func:`~quadruped_control.analysis.steps.agrees`); the report counts, per model, the steps that change one
+axis it agrees on.
 
 Output in ``--out``: ``step_test.json`` (the command, the code's fingerprint, the steps, every model's
 responses), ``step_test.md``, and ``step_test.png`` (each step's stepped angle, the robot's beside each
@@ -62,8 +63,8 @@ from quadruped_control.studies.runner import (code_record, command_line, describ
                                               write_study_report)
 from quadruped_control.studies.trial import TrialSpec, trial_simulation
 
-__all__ = ["PROTOCOL", "StepRecord", "model_run", "record_from_bag", "record_sequence", "run_sequence",
-           "step_test_spec"]
+__all__ = ["CONTROLLER_STATES", "PROTOCOL", "Hold", "StepRecord", "controller_states", "model_run", "record_from_bag",
+           "record_sequence", "run_sequence", "step_test_spec"]
 
 #: The test's setpoints (roll, pitch, yaw in deg) and how long each is held (s), in order from level: the
 #: maneuver node's ``protocol:=step_test`` (:data:`~quadruped_control.control.setpoint_sequence.STEP_TEST`).
@@ -71,15 +72,27 @@ PROTOCOL: Tuple[Tuple[Tuple[float, float, float], float], ...] = tuple((hold.rpy
                                                                       for hold in STEP_TEST)
 
 
+#: What the controller does from a time on: strokes ("acting"), holds its safe pose ("holding": the legs back at
+#: the nominal pose, the integral kept), or is disarmed ("disarmed": cleared when it is armed again).
+CONTROLLER_STATES = ("acting", "holding", "disarmed")
+
+#: A hold of the sequence a model is asked: the setpoint (roll, pitch, yaw, deg), how long (s), and optionally
+#: the controller's state (:data:`CONTROLLER_STATES`; "acting" if left out).
+Hold = Tuple[Any, ...]
+
+
 class StepRecord:
     """Attitudes (roll, pitch, yaw, rad) at times ``t`` (s from the record's start, sorted) with the setpoint's
     steps; ``source`` names it. ``ends``, one per step, says where its response ends (None: not read, see
     :func:`~quadruped_control.analysis.steps.response_ends`); by default each runs to the next step or the
-    record's end."""
+    record's end. ``controller``: the times (s, same clock) from which the controller was in each state of
+    :data:`CONTROLLER_STATES`, in order; by default acting throughout."""
 
     def __init__(self, t: np.ndarray, rpy: np.ndarray, steps: List[Step], source: str,
-                 ends: Optional[List[Optional[float]]] = None) -> None:
+                 ends: Optional[List[Optional[float]]] = None,
+                 controller: Optional[List[Tuple[float, str]]] = None) -> None:
         self.t, self.rpy, self.steps, self.source = t, rpy, steps, source
+        self.controller = [(float(t[0]), "acting")] if not controller else list(controller)
         self.ends = response_ends(steps, (), float(t[-1])) if ends is None else list(ends)
         if len(self.ends) != len(steps):
             raise ValueError("a step record needs one end per step (%d steps, %d ends)" % (len(steps), len(self.ends)))
@@ -107,16 +120,27 @@ def step_test_spec(tank_yaml: str, seed: int, overrides: Tuple[Tuple[str, Any], 
                      robot_yaml=robot_yaml, tank_overrides=overrides, attitude_noise_deg=noise_deg, quiet=True)
 
 
-def run_sequence(spec: TrialSpec, sequence: Sequence[Tuple[Sequence[float], float]], source: str) -> StepRecord:
-    """The closed loop of ``spec`` taken through ``sequence`` (setpoint rpy in deg, seconds held) from its
-    start, as the robot is by the setpoints published in turn: the record of the attitude the IMU reports
-    and the setpoint's steps. SimulationError if the loop cannot go on."""
+def run_sequence(spec: TrialSpec, sequence: Sequence[Hold], source: str) -> StepRecord:
+    """The closed loop of ``spec`` taken through ``sequence`` (setpoint rpy in deg, seconds held, and the
+    controller's state if given: :data:`Hold`) from its start, as the robot is by the setpoints published in
+    turn: the record of the attitude the IMU reports and the setpoint's steps. A hold "holding" or "disarmed"
+    turns the controller off (its hold state: the model's legs stop at the nominal pose, where a disarmed
+    robot's servos go limp), and acting after "disarmed" clears it, as arming does. SimulationError if the loop
+    cannot go on."""
     sim = trial_simulation(spec)
     times: List[np.ndarray] = []
     angles: List[np.ndarray] = []
     steps: List[Step] = []
+    states: List[Tuple[float, str]] = []
     current = np.radians(spec.setpoint_rpy_deg)
-    for setpoint_deg, seconds in sequence:
+    for hold in sequence:
+        setpoint_deg, seconds = hold[0], hold[1]
+        state = hold[2] if len(hold) > 2 else "acting"
+        if state not in CONTROLLER_STATES:
+            raise ValueError("a hold's controller state must be one of %s, got %r" % (CONTROLLER_STATES, state))
+        if not states or states[-1][1] != state:
+            sim.set_controller(state == "acting", reset=bool(states) and states[-1][1] == "disarmed")
+            states.append((sim.time, state))
         setpoint = np.radians(setpoint_deg)
         # a step acts from the instant the setpoint changes (find_steps' rule for what counts as one)
         steps += find_steps([sim.time - sim.dt, sim.time], [current, setpoint])
@@ -127,7 +151,14 @@ def run_sequence(spec: TrialSpec, sequence: Sequence[Tuple[Sequence[float], floa
         first = 0 if not times else 1
         times.append(result.t[first:])
         angles.append(result.rpy[first:])
-    return StepRecord(np.concatenate(times), np.concatenate(angles), steps, source)
+    return StepRecord(np.concatenate(times), np.concatenate(angles), steps, source, controller=states)
+
+
+def controller_states(t: np.ndarray, armed: np.ndarray, holding: np.ndarray) -> List[Tuple[float, str]]:
+    """The times (sorted ``t``) from which the controller was in each state of :data:`CONTROLLER_STATES`, from
+    its samples' armed and holding flags: one entry per change, the first at ``t[0]``."""
+    names = np.where(~armed, "disarmed", np.where(holding, "holding", "acting"))
+    return [(float(t[k]), str(names[k])) for k in range(t.size) if k == 0 or names[k] != names[k - 1]]
 
 
 def record_from_bag(paths: Sequence[str], source: str) -> StepRecord:
@@ -142,7 +173,8 @@ def record_from_bag(paths: Sequence[str], source: str) -> StepRecord:
                          % (source, len(data.imu_t), len(data.state_t)))
     imu_t, rpy = attitude_rpy(data.imu_t, data.imu_q)
     all_state_t = np.asarray(data.state_t, dtype=float)
-    acting = np.asarray(data.state_armed, dtype=bool) & ~np.asarray(data.state_holding, dtype=bool)
+    armed, holding = np.asarray(data.state_armed, dtype=bool), np.asarray(data.state_holding, dtype=bool)
+    acting = armed & ~holding
     state_t, setpoint_rpy = attitude_rpy(all_state_t[acting],
                                          np.asarray(data.state_setpoint, dtype=float).reshape(-1, 4)[acting])
     if imu_t.size < 2 or state_t.size < 2:
@@ -158,22 +190,41 @@ def record_from_bag(paths: Sequence[str], source: str) -> StepRecord:
                          "holding) and the IMU recording" % source)
     # a hold or disarm before the controller first acted is the run's start, not a stop in the test
     stops = all_state_t[~acting & np.isfinite(all_state_t) & (all_state_t > np.min(all_state_t[acting]))] - start
-    return StepRecord(times, rpy, steps, source, response_ends(steps, stops, float(times[-1])))
+    order = np.argsort(all_state_t, kind="stable")
+    order = order[np.isfinite(all_state_t[order])]
+    states = controller_states(all_state_t[order] - start, armed[order], holding[order])
+    return StepRecord(times, rpy, steps, source, response_ends(steps, stops, float(times[-1])), states)
 
 
-def record_sequence(record: StepRecord) -> Tuple[List[float], List[float], List[Tuple[List[float], float]]]:
+def record_sequence(record: StepRecord) -> Tuple[List[float], List[float], List[Hold]]:
     """What the record asked of the robot, for a model to be asked the same: its first attitude and the
-    setpoint before its first step (deg), then the setpoints (deg) with how long each was held, from the
-    record's start to its end (a first step at the start is the first setpoint, held from there)."""
+    setpoint before its first step (deg), then the holds (:data:`Hold`) from the record's start to its end: the
+    setpoint (deg), how long, and the controller's state, a new hold at each step and at each change of the
+    controller's state (a first step at the start is the first setpoint, held from there)."""
     start = [math.degrees(float(v)) for v in record.rpy[0]]
     first = [math.degrees(v) for v in record.steps[0].before]
-    times = [step.time for step in record.steps] + [float(record.t[-1])]
-    sequence = [(first, times[0] - float(record.t[0]))]
-    sequence += [([math.degrees(v) for v in step.after], end - step.time) for step, end in zip(record.steps, times[1:])]
-    return start, first, [(setpoint, seconds) for setpoint, seconds in sequence if seconds > 0.0]
+    t0, t_end = float(record.t[0]), float(record.t[-1])
+    changes = [step.time for step in record.steps] + [time for time, _ in record.controller]
+    boundaries = sorted({t0, t_end} | {time for time in changes if t0 < time < t_end})
+    sequence: List[Hold] = []
+    for begin, end in zip(boundaries[:-1], boundaries[1:]):
+        setpoint = first
+        for step in record.steps:
+            if step.time <= begin:
+                setpoint = [math.degrees(v) for v in step.after]
+        # before the record's first controller message, the state it reports first
+        state = record.controller[0][1]
+        for time, name in record.controller:
+            if time <= begin:
+                state = name
+        if sequence and sequence[-1][0] == setpoint and sequence[-1][2] == state:
+            sequence[-1] = (setpoint, sequence[-1][1] + end - begin, state)
+        else:
+            sequence.append((setpoint, end - begin, state))
+    return start, first, sequence
 
 
-def model_run(job: Tuple[str, List[float], List[float], List[Tuple[List[float], float]], int,
+def model_run(job: Tuple[str, List[float], List[float], List[Hold], int,
                          Tuple[Tuple[str, Any], ...], float, Optional[str]]) -> Dict[str, Any]:
     """One tank.yaml asked what the record asked of the robot (:func:`record_sequence`): from rest at the
     record's first attitude, the same setpoints held as long; its steps' responses. A loop that cannot go on is

@@ -240,6 +240,29 @@ def test_a_setpoint_changed_between_runs_controls_the_shared_sample_again_withou
     assert not np.allclose(result.tau_cmd[0], first.tau_cmd[-1])
 
 
+def _held_simulation():
+    """A closed loop that acted 2 s towards roll 0.3 rad, then held 1 s with its controller off."""
+    sim = ClosedLoopSimulation(ROBOT, CONFIG, "ideal", np.eye(3), rpy_to_rot(0.3, 0.0, 0.0))
+    acting = sim.run(2.0)
+    sim.set_controller(False)
+    return sim, acting, sim.run(1.0)
+
+
+def test_the_controller_turned_off_holds_and_turned_on_cleared_starts_from_a_zero_integral() -> None:
+    sim, acting, off = _held_simulation()
+    # from the shared sample on (controlled again, off) the controller holds
+    assert not acting.holding[-1] and off.holding.all() and off.info["controller"] == "off"
+    sim.set_controller(True, reset=True)
+    _, cleared = sim.step()
+    kept_sim, _, _ = _held_simulation()
+    kept_sim.set_controller(True)
+    _, kept = kept_sim.step()
+    assert not cleared.state.holding and not kept.state.holding
+    # the hold froze the integral; arming again clears it (one period integrated), turning on alone does not
+    assert np.linalg.norm(kept.state.integral) > 0.05
+    assert np.linalg.norm(cleared.state.integral) < 0.02 * np.linalg.norm(kept.state.integral)
+
+
 def test_closed_loop_records_consistent_arrays_and_turns_towards_setpoint() -> None:
     result = _short_run(0, 0.0, duration=5.0)
     n = 501

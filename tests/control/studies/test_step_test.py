@@ -46,8 +46,9 @@ def test_a_simulated_sequence_records_each_setpoint_change_as_a_step_at_its_time
     assert [r.duration for _, r in responses] == pytest.approx([20.0, 15.0, 15.0])
     start, first, sequence = st.record_sequence(record)
     assert first == [0.0, 0.0, 0.0] and max(abs(v) for v in start) < 1e-9
-    rounded = [([round(v, 9) for v in setpoint], round(seconds, 6)) for setpoint, seconds in sequence]
-    assert rounded == [(list(map(float, setpoint)), seconds) for setpoint, seconds in SHORT]
+    rounded = [([round(v, 9) for v in setpoint], round(seconds, 6), state) for setpoint, seconds, state in sequence]
+    assert rounded == [(list(map(float, setpoint)), seconds, "acting") for setpoint, seconds in SHORT]
+    assert record.controller == [(0.0, "acting")]
 
 
 def _write(path: str, record, setpoint_of, armed=True, imu: bool = True) -> None:
@@ -129,6 +130,13 @@ def test_a_stop_of_the_controller_cuts_the_step_it_falls_in_and_leaves_out_the_n
     assert [round(step.time, 2) for step in read.unread()] == [35.0]
     responses = read.responses()
     assert [round(r.duration, 2) for _, r in responses] == [19.99, 5.0]
+    # the models are asked the same: the disarm included, as a hold of its own
+    assert [(time, state) for time, state in read.controller] == [(0.0, "acting"), (25.0, "disarmed"),
+                                                                  (27.0, "acting")]
+    start, first, sequence = st.record_sequence(read)
+    assert [(round(setpoint[0], 3), round(seconds, 2), state) for setpoint, seconds, state in sequence] == [
+        (0.0, 0.01, "acting"), (20.0, 19.99, "acting"), (12.0, 5.0, "acting"), (12.0, 2.0, "disarmed"),
+        (12.0, 8.0, "acting"), (20.0, 15.0, "acting")]
     # each model's response to the cut step is read for as long as the record's; the report names the unread step
     monkeypatch.chdir(tmp_path)
     out = str(tmp_path / "out")
@@ -139,6 +147,20 @@ def test_a_stop_of_the_controller_cuts_the_step_it_falls_in_and_leaves_out_the_n
     assert [round(step["time"], 2) for step in report["unread_steps"]] == [35.0]
     with open(os.path.join(out, "step_test.md")) as stream:
         assert "Not read: 1 step(s)" in stream.read()
+
+
+def test_a_model_asked_a_disarm_stops_stroking_and_starts_again_cleared() -> None:
+    spec = st.step_test_spec(MEMBER_05, 0, (), 0.0, None, (0.0, 0.0, 0.0))
+    sequence = (((20.0, 0.0, 0.0), 10.0, "acting"), ((20.0, 0.0, 0.0), 10.0, "disarmed"),
+                ((20.0, 0.0, 0.0), 10.0, "acting"))
+    record = st.run_sequence(spec, sequence, "disarmed")
+    assert record.controller == [(0.0, "acting"), (pytest.approx(10.0), "disarmed"), (pytest.approx(20.0), "acting")]
+    roll = np.degrees(record.rpy[:, 0])
+    at = {seconds: int(np.searchsorted(record.t, seconds)) for seconds in (10.0, 20.0, 30.0)}
+    # it turns towards 20 deg while acting, falls back towards its rest while disarmed, and turns again after
+    assert roll[at[10.0]] > 5.0 and roll[at[20.0]] < roll[at[10.0]] - 2.0 and roll[at[30.0]] > roll[at[20.0]] + 2.0
+    with pytest.raises(ValueError, match="controller state"):
+        st.run_sequence(spec, (((20.0, 0.0, 0.0), 1.0, "asleep"),), "bad")
 
 
 def test_the_hold_before_the_controller_first_acts_is_the_start_not_a_stop(tmp_path) -> None:
