@@ -33,10 +33,11 @@ from typing import Any, Dict, List, Optional, Sequence, Tuple
 
 import numpy as np
 
-from quadruped_control.analysis.metrics import AXES, SETTLING_BAND_DEG, moving_average_centered, settling_time
+from quadruped_control.analysis.metrics import (AXES, SETTLING_BAND_DEG, SETTLING_HOLD, moving_average_centered,
+                                                settling_time)
 
 __all__ = ["AGREEMENT_FACTOR", "FINE_BAND_DEG", "HOLD_CHECK", "MIN_STEP_DEG", "Step", "StepResponse", "TIME_FLOOR",
-           "agrees", "find_steps", "response_ends", "step_response"]
+           "agrees", "find_steps", "judged", "response_ends", "step_response"]
 
 #: The narrower band (deg) the test also times: the fitted members differ most in how they creep into it.
 FINE_BAND_DEG = 2.0
@@ -153,6 +154,13 @@ def step_response(t: Sequence[float], rpy: Sequence[Sequence[float]], step: Step
         settle_2=settling_time(stretch, smooth, fine),
         overshoot_deg=max(0.0, math.degrees(float(np.max(direction * smooth)))), held_error_deg=held,
         duration=float(stretch[-1]))
+
+
+def judged(response: StepResponse) -> bool:
+    """Whether a response runs long enough to be judged: at least the settling hold (30 s), without which nothing
+    settles by the paper's definition and two responses would "agree" by neither settling (a response a stop of
+    the controller cut short)."""
+    return response.duration >= SETTLING_HOLD
 
 
 def agrees(model: Optional[float], robot: Optional[float], factor: float = AGREEMENT_FACTOR) -> bool:

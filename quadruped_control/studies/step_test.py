@@ -54,8 +54,9 @@ from quadruped_common.config import ParameterError, config_path
 from quadruped_common.so3 import rpy_to_rot
 from quadruped_control.control.setpoint_sequence import STEP_TEST
 from quadruped_control.analysis.bag_report import BagReportError, attitude_rpy, read_bags
-from quadruped_control.analysis.steps import (HOLD_CHECK, Step, StepResponse, agrees, find_steps, response_ends,
-                                              step_response)
+from quadruped_control.analysis.metrics import SETTLING_HOLD
+from quadruped_control.analysis.steps import (HOLD_CHECK, Step, StepResponse, agrees, find_steps, judged,
+                                              response_ends, step_response)
 from quadruped_control.sim.simulation import SimulationError
 from quadruped_control.studies import StudyError
 from quadruped_control.studies.ensemble import DEFAULT_FOLDER, disturbance_overrides, member_tanks, tank_files
@@ -282,9 +283,9 @@ def _text(report: Dict[str, Any]) -> str:
     lines += [header, "|" + "---|" * (2 + len(models))]
     for entry in report["steps"]:
         robot = entry["record"]
-        label = "%s %g -> %g%s%s" % (robot["axis"], round(robot["before_deg"], 1), round(robot["after_deg"], 1),
+        label = "%s %g -> %g%s%s%s" % (robot["axis"], round(robot["before_deg"], 1), round(robot["after_deg"], 1),
                                      " (towards upright)" if robot["towards_upright"] else "",
-                                     "" if entry["single_axis"] else " +")
+                                     "" if entry["single_axis"] else " +", "" if entry["judged"] else " ~")
         cells = ["%s / %s, %.1f" % (_fmt(robot["settle_6"]), _fmt(robot["settle_2"]), robot["overshoot_deg"])]
         for model in entry["models"]:
             if "failed" in model:
@@ -294,8 +295,9 @@ def _text(report: Dict[str, Any]) -> str:
             cells.append("%s / %s, %.1f%s" % (_fmt(response["settle_6"]), _fmt(response["settle_2"]),
                                               response["overshoot_deg"], "" if model["agrees"] else " *"))
         lines.append("| %s | %s |" % (label, " | ".join(cells)))
-    lines += ["", "Steps each model agrees on (of the %d that change one axis; a step marked + changes more and is "
-              "not counted):" % report["single_axis_steps"], ""]
+    lines += ["", "Steps each model agrees on (of the %d that change one axis and run at least %g s; a step marked + "
+              "changes more, one marked ~ was cut short by a stop of the controller, and nothing settles in less: "
+              "neither is counted):" % (report["counted_steps"], SETTLING_HOLD), ""]
     for name, count in zip(models, report["agreement"]):
         lines.append("- %s: %d" % (name, count))
     if report.get("unread_steps"):
@@ -409,14 +411,16 @@ def main(argv: Optional[Sequence[str]] = None) -> int:
         models = [entries[k] for entries in model_responses]
         for m, model in enumerate(models):
             model["agrees"] = "response" in model and agrees(model["response"]["settle_6"], response.settle_6)
-            agreement[m] += int(model["agrees"] and step.single_axis)
+            agreement[m] += int(model["agrees"] and step.single_axis and judged(response))
         steps.append({"time": step.time, "before": list(step.before), "after": list(step.after),
-                      "single_axis": step.single_axis, "record": response.as_dict(), "models": models})
+                      "single_axis": step.single_axis, "judged": judged(response), "record": response.as_dict(),
+                      "models": models})
     report: Dict[str, Any] = {
         "study": "step_test", "command": command_line("quadruped_control.studies.step_test", argv), **code_record(),
         "source": record.source, "seconds": float(record.t[-1]), "seed": args.seed,
         "tank_overrides": [list(item) for item in overrides], "models": names, "steps": steps,
-        "agreement": agreement, "single_axis_steps": sum(step.single_axis for step, _ in responses)}
+        "agreement": agreement, "single_axis_steps": sum(step.single_axis for step, _ in responses),
+        "counted_steps": sum(step.single_axis and judged(response) for step, response in responses)}
     report["unread_steps"] = [{"time": step.time, "before": list(step.before), "after": list(step.after)}
                               for step in record.unread()]
     if args.simulated:

@@ -101,3 +101,10 @@ def test_a_step_soon_after_a_stop_is_not_read() -> None:
     assert steps.response_ends(sequence, [100.0], 300.0) == [None, 300.0]
     # a stop earlier than HOLD_CHECK before the step leaves it whole
     assert steps.response_ends(sequence, [100.0 - steps.HOLD_CHECK - 0.5], 300.0) == [200.0, 300.0]
+
+
+def test_a_response_shorter_than_the_settling_hold_is_not_judged() -> None:
+    t, rpy, step = _record(45.0, 33.0, lambda s: 12.0 * np.exp(-s / 10.0), duration=40.0)
+    assert steps.judged(steps.step_response(t, rpy, step))
+    short = steps.step_response(t, rpy, step, end=step.time + 29.0)
+    assert short.settle_6 is None and not steps.judged(short)  # it cannot settle in 29 s, whatever it does

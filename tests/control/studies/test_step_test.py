@@ -144,6 +144,9 @@ def test_a_stop_of_the_controller_cuts_the_step_it_falls_in_and_leaves_out_the_n
     with open(os.path.join(out, "step_test.json")) as stream:
         report = json.load(stream)
     assert [round(entry["models"][0]["response"]["duration"], 1) for entry in report["steps"]] == [20.0, 5.0]
+    # none runs the settling hold's 30 s, so none is judged: neither settling says nothing
+    assert [entry["judged"] for entry in report["steps"]] == [False, False] and report["counted_steps"] == 0
+    assert report["agreement"] == [0]
     assert [round(step["time"], 2) for step in report["unread_steps"]] == [35.0]
     with open(os.path.join(out, "step_test.md")) as stream:
         assert "Not read: 1 step(s)" in stream.read()
@@ -198,6 +201,7 @@ def test_the_cli_on_a_simulated_truth_agrees_with_the_truth_and_tells_another_me
     with open(os.path.join(out, "step_test.json")) as stream:
         report = json.load(stream)
     assert report["models"] == ["member_00.yaml", "member_05.yaml"] and report["single_axis_steps"] == 2
+    assert report["counted_steps"] == 2 and all(entry["judged"] for entry in report["steps"])
     assert report["command"][:3] == ["python", "-m", "quadruped_control.studies.step_test"]
     assert report["truth"] == {"tank_yaml": "member_00.yaml", "disturbance": None}
     back = report["steps"][1]
