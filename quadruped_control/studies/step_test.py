@@ -32,8 +32,8 @@ record asked of the robot (:func:`record_sequence`): from rest at the record's f
 setpoints at the same times, with the controller stopped where the robot's was, so that each step finds the
 model with the history the robot had (its integral wound up by the same holds). A model agrees on a step when
 its settling time within 6 deg is within a factor 2 of the robot's, or neither settles
-(:func:`~quadruped_control.analysis.steps.agrees`); the report counts, per model, the steps that change one
-axis it agrees on.
+(:func:`~quadruped_control.analysis.steps.agrees`); the report counts, per model, the steps it agrees on that
+change one axis and run at least the settling hold, 30 s (:func:`~quadruped_control.analysis.steps.judged`).
 
 Output in ``--out``: ``step_test.json`` (the command, the code's fingerprint, the steps, every model's
 responses), ``step_test.md``, and ``step_test.png`` (each step's stepped angle, the robot's beside each
@@ -284,8 +284,8 @@ def _text(report: Dict[str, Any]) -> str:
     for entry in report["steps"]:
         robot = entry["record"]
         label = "%s %g -> %g%s%s%s" % (robot["axis"], round(robot["before_deg"], 1), round(robot["after_deg"], 1),
-                                     " (towards upright)" if robot["towards_upright"] else "",
-                                     "" if entry["single_axis"] else " +", "" if entry["judged"] else " ~")
+                                       " (towards upright)" if robot["towards_upright"] else "",
+                                       "" if entry["single_axis"] else " +", "" if entry["judged"] else " ~")
         cells = ["%s / %s, %.1f" % (_fmt(robot["settle_6"]), _fmt(robot["settle_2"]), robot["overshoot_deg"])]
         for model in entry["models"]:
             if "failed" in model:
@@ -296,8 +296,8 @@ def _text(report: Dict[str, Any]) -> str:
                                               response["overshoot_deg"], "" if model["agrees"] else " *"))
         lines.append("| %s | %s |" % (label, " | ".join(cells)))
     lines += ["", "Steps each model agrees on (of the %d that change one axis and run at least %g s; a step marked + "
-              "changes more, one marked ~ was cut short by a stop of the controller, and nothing settles in less: "
-              "neither is counted):" % (report["counted_steps"], SETTLING_HOLD), ""]
+              "changes more, and one marked ~ runs less, cut short by a stop of the controller or the record's end, "
+              "in which nothing settles: neither is counted):" % (report["counted_steps"], SETTLING_HOLD), ""]
     for name, count in zip(models, report["agreement"]):
         lines.append("- %s: %d" % (name, count))
     if report.get("unread_steps"):
