@@ -27,7 +27,7 @@ import csv
 import math
 import time
 from dataclasses import dataclass, field
-from typing import Any, Callable, Dict, List, Mapping, Optional, Sequence, Tuple, Union
+from typing import Any, Callable, Dict, List, Mapping, NamedTuple, Optional, Sequence, Tuple, Union
 
 import numpy as np
 
@@ -401,6 +401,17 @@ def imu_measurement(rng: np.random.Generator, R: np.ndarray, omega: np.ndarray, 
     return R, omega
 
 
+class _Sample(NamedTuple):
+    """A sample :meth:`ClosedLoopSimulation.run` recorded last: at step ``k``, the plant's ``state``, the measured
+    ``R`` and ``omega``, and the controller's ``output`` (None once the setpoint or the controller changed)."""
+
+    k: int
+    state: RigidBodyState
+    R: np.ndarray
+    omega: np.ndarray
+    output: Optional[ControllerOutput]
+
+
 class ClosedLoopSimulation:
     """Controller + plant at the controller's period (the paper's RK4 with dt = 0.01 s).
 
@@ -441,11 +452,9 @@ class ClosedLoopSimulation:
         self._rng = np.random.default_rng(self.seed)
         self.k = 0
         self.holds = 0
-        # The last sample :meth:`run` recorded: (step k, plant state, measured R and omega, the controller's
-        # output or None). The next step at the same k uses them, so a run continued by another draws no second
-        # measurement and steps the controller once per period, as one longer run would.
-        self._last_sample: Optional[Tuple[int, RigidBodyState, np.ndarray, np.ndarray,
-                                          Optional[ControllerOutput]]] = None
+        # The last sample :meth:`run` recorded. The next step at the same k uses it, so a run continued by another
+        # draws no second measurement and steps the controller once per period, as one longer run would.
+        self._last_sample: Optional[_Sample] = None
 
     @property
     def time(self) -> float:
@@ -459,8 +468,7 @@ class ClosedLoopSimulation:
         controller's integral and stroke clock stay where they were, and only its output changes."""
         self.setpoint_R = _rotation(setpoint_R, "setpoint_R")
         self.controller.set_setpoint(self.setpoint_R)
-        if self._last_sample is not None:
-            self._last_sample = self._last_sample[:4] + (None,)
+        self._control_last_sample_again()
 
     def set_controller(self, enabled: bool, reset: bool = False) -> None:
         """The controller on (stroking) or off (its hold state: no new strokes, the legs back at the nominal pose)
@@ -470,8 +478,13 @@ class ClosedLoopSimulation:
         self.controller_enabled = bool(enabled)
         if reset:
             self.controller.reset()
+        self._control_last_sample_again()
+
+    def _control_last_sample_again(self) -> None:
+        """After a change of setpoint or controller between two runs: the next step controls the last run's last
+        sample again, on its measurement."""
         if self._last_sample is not None:
-            self._last_sample = self._last_sample[:4] + (None,)
+            self._last_sample = self._last_sample._replace(output=None)
 
     def _reported(self, rotation: np.ndarray) -> np.ndarray:
         """The attitude the IMU reports, noise apart: the true one, or with the heading a residual field at
@@ -503,9 +516,9 @@ class ClosedLoopSimulation:
         t = self.time
         state = self.plant._state  # noqa: SLF001 (read-only use; the plant never mutates states)
         last, self._last_sample = self._last_sample, None
-        if last is not None and last[0] == self.k and last[1] is state:
-            _, _, R, omega, carried = last
-            output = self._control(t, R, omega) if carried is None else carried
+        if last is not None and last.k == self.k and last.state is state:
+            R, omega = last.R, last.omega
+            output = self._control(t, R, omega) if last.output is None else last.output
         else:
             R, omega = self._measure(state)
             output = self._control(t, R, omega)
@@ -550,7 +563,7 @@ class ClosedLoopSimulation:
                 state = self.plant._state  # noqa: SLF001
                 R, w = self._measure(state)
                 output = self._control(self.time, R, w)
-                self._last_sample = (self.k, state, R, w, output)
+                self._last_sample = _Sample(self.k, state, R, w, output)
             states.append(state)
             records.append(output.state)
             targets.append(output.joint_targets)

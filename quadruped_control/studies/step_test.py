@@ -189,11 +189,12 @@ def record_from_bag(paths: Sequence[str], source: str) -> StepRecord:
     if not steps:
         raise StudyError("step_test: the setpoint of %s never changed while the controller was acting (armed, not "
                          "holding) and the IMU recording" % source)
-    # a hold or disarm before the controller first acted is the run's start, not a stop in the test
-    stops = all_state_t[~acting & np.isfinite(all_state_t) & (all_state_t > np.min(all_state_t[acting]))] - start
     order = np.argsort(all_state_t, kind="stable")
     order = order[np.isfinite(all_state_t[order])]
-    states = controller_states(all_state_t[order] - start, armed[order], holding[order])
+    state_times, acting_in_order = all_state_t[order] - start, acting[order]
+    states = controller_states(state_times, armed[order], holding[order])
+    # a hold or disarm before the controller first acted is the run's start, not a stop in the test
+    stops = state_times[~acting_in_order & (state_times > np.min(state_times[acting_in_order]))]
     return StepRecord(times, rpy, steps, source, response_ends(steps, stops, float(times[-1])), states)
 
 
@@ -247,13 +248,13 @@ def _model_responses(run: Dict[str, Any], responses: Sequence[Tuple[Step, StepRe
     if "failed" in run:
         return [{"tank_yaml": name, "failed": run["failed"]} for _ in responses]
     record: StepRecord = run["record"]
-    own = list(zip(record.steps, record.ends))
+    # run_sequence reads every step of a model's run (the robot's stops cut it below, by the robot's duration)
+    own: List[Tuple[Step, float]] = [(step, end) for step, end in zip(record.steps, record.ends) if end is not None]
     out = []
     for step, robot in responses:
         # the model's own step nearest in time: its holds are whole control periods, the record's are not
         match, end = min(own, key=lambda pair: abs(pair[0].time - step.time))
-        own_end = float(record.t[-1]) if end is None else end  # a model's run never stops acting
-        response = step_response(record.t, record.rpy, match, min(own_end, match.time + robot.duration))
+        response = step_response(record.t, record.rpy, match, min(end, match.time + robot.duration))
         out.append({"tank_yaml": name, "response": response.as_dict(),
                     "series": _series(record, match, response.duration)})
     return out

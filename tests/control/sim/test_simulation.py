@@ -233,7 +233,7 @@ def test_a_setpoint_changed_between_runs_controls_the_shared_sample_again_withou
     result = sim.run(0.5)
     # the step at 1 s is controlled again on the measurement the first run's last sample drew
     assert seen[0][0] == pytest.approx(1.0) and seen[1][0] > 1.0
-    np.testing.assert_array_equal(seen[0][1], last[2])
+    np.testing.assert_array_equal(seen[0][1], last.R)
     assert len(seen) == 51
     # the shared sample is recorded in each run with the setpoint then in force
     np.testing.assert_array_equal(result.rotation[0], first.rotation[-1])
