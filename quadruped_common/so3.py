@@ -100,12 +100,34 @@ def quat_normalize(q: ArrayLike) -> np.ndarray:
 def quat_to_rot(q: ArrayLike) -> np.ndarray:
     """Rotation matrix of quaternion (x, y, z, w); the quaternion is normalised first."""
     x, y, z, w = quat_normalize(q)
+    return np.array(_rotation_entries(x, y, z, w)).reshape(3, 3)
+
+
+def quaternions_to_rotations(q: ArrayLike) -> np.ndarray:
+    """(N, 3, 3) rotation matrices of (N, 4) quaternions (x, y, z, w), each normalised first (as
+    :func:`quat_to_rot`, whose equation this is); ValueError unless finite with norms of at least 1e-9."""
+    v = np.asarray(q, dtype=float)
+    if v.ndim != 2 or v.shape[1] != 4:
+        raise ValueError("quaternions must have shape (N, 4) (x, y, z, w), got %s" % (v.shape,))
+    if not np.all(np.isfinite(v)):
+        raise ValueError("quaternions have non-finite elements")
+    norm = np.linalg.norm(v, axis=1)
+    if v.shape[0] and norm.min() < _MIN_QUAT_NORM:
+        raise ValueError("quaternion norm %g is too small to define a rotation" % norm.min())
+    x, y, z, w = (v / norm[:, None]).T
+    return np.stack(_rotation_entries(x, y, z, w), axis=-1).reshape(-1, 3, 3)
+
+
+def _rotation_entries(x: Any, y: Any, z: Any, w: Any) -> Tuple[Any, ...]:
+    """The nine entries (row-major) of the rotation of the unit quaternion (x, y, z, w): floats, or arrays of
+    quaternions element by element (one equation for :func:`quat_to_rot`, per IMU sample on the robot, and
+    :func:`quaternions_to_rotations`, over a recording)."""
     xx, yy, zz = x * x, y * y, z * z
     xy, xz, yz = x * y, x * z, y * z
     wx, wy, wz = w * x, w * y, w * z
-    return np.array([[1.0 - 2.0 * (yy + zz), 2.0 * (xy - wz), 2.0 * (xz + wy)],
-                     [2.0 * (xy + wz), 1.0 - 2.0 * (xx + zz), 2.0 * (yz - wx)],
-                     [2.0 * (xz - wy), 2.0 * (yz + wx), 1.0 - 2.0 * (xx + yy)]])
+    return (1.0 - 2.0 * (yy + zz), 2.0 * (xy - wz), 2.0 * (xz + wy),
+            2.0 * (xy + wz), 1.0 - 2.0 * (xx + zz), 2.0 * (yz - wx),
+            2.0 * (xz - wy), 2.0 * (yz + wx), 1.0 - 2.0 * (xx + yy))
 
 
 def rot_to_quat(R: ArrayLike) -> np.ndarray:

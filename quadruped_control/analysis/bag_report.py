@@ -39,7 +39,7 @@ import numpy as np
 
 from quadruped_common.monitoring import STALE_IMU, hold_kind
 from quadruped_common.robot import JOINT_NAMES, load_leg_pairs
-from quadruped_common.so3 import geodesic_angle, geodesic_angles, quat_to_rot, rot_to_rpy, rotations_to_rpy
+from quadruped_common.so3 import geodesic_angle, geodesic_angles, quaternions_to_rotations, rot_to_rpy, rotations_to_rpy
 from quadruped_control.analysis.metrics import compute_metrics
 from quadruped_control.analysis.strokes import format_spread, stroke_statistics
 from quadruped_control.model.params import load_robot_params
@@ -214,7 +214,7 @@ def _read_into(data: BagData, reader) -> None:
 
 def _rotations(quaternions: Sequence[Sequence[float]]) -> np.ndarray:
     """(N, 3, 3) rotations of (x, y, z, w) quaternions, normalised first (bags hold float32-rounded ones)."""
-    return np.array([quat_to_rot(np.asarray(q) / np.linalg.norm(q)) for q in quaternions])
+    return quaternions_to_rotations(np.asarray(quaternions, dtype=float).reshape(-1, 4))
 
 
 def _trial_start(data: BagData) -> float:
@@ -354,7 +354,7 @@ def attitude_rpy(times: Sequence[float], quaternions: Sequence[Sequence[float]])
     norm = np.linalg.norm(np.nan_to_num(q, nan=0.0, posinf=0.0, neginf=0.0), axis=1)
     good = np.all(np.isfinite(q), axis=1) & np.isfinite(t) & (np.abs(norm - 1.0) < 0.1)
     t, kept = sorted_unique(t[good], q[good] / norm[good, None])
-    return t, rotations_to_rpy(np.array([quat_to_rot(row) for row in kept]).reshape(-1, 3, 3))
+    return t, rotations_to_rpy(quaternions_to_rotations(np.asarray(kept, dtype=float).reshape(-1, 4)))
 
 
 def covered_by(times: np.ndarray, grid: np.ndarray, max_gap: float) -> np.ndarray:

@@ -9,8 +9,8 @@ from hypothesis import strategies as st
 from quadruped_common import so3
 from quadruped_common.so3 import (attitude_error, exp_so3, geodesic_angle, hat, is_rotation, log_so3,
                                    orthonormalize, quat_conjugate, quat_multiply, quat_normalize,
-                                   quat_to_rot, rot_to_quat, rot_to_rpy, rot_x, rot_y, rot_z, rpy_to_rot,
-                                   vee)
+                                   quat_to_rot, quaternions_to_rotations, rot_to_quat, rot_to_rpy, rot_x, rot_y,
+                                   rot_z, rpy_to_rot, vee)
 
 finite = st.floats(-10.0, 10.0, allow_nan=False, allow_infinity=False)
 vectors = st.tuples(finite, finite, finite).map(np.array)
@@ -72,6 +72,26 @@ def test_quaternion_convention_is_scalar_last():
 def test_bad_quaternions_are_rejected(bad):
     with pytest.raises(ValueError):
         quat_to_rot(bad)
+
+
+@SETTINGS
+@given(st.lists(quats, min_size=1, max_size=8))
+def test_quaternions_to_rotations_is_quat_to_rot_row_by_row(rows):
+    many = quaternions_to_rotations(np.array(rows) * 3.0)  # not unit: each row is normalised first
+    assert many.shape == (len(rows), 3, 3)
+    for q, R in zip(rows, many):
+        np.testing.assert_allclose(R, quat_to_rot(q), rtol=0.0, atol=1e-15)
+
+
+@pytest.mark.parametrize("bad", [[[0, 0, 0, 1], [0, 0, 0, 0]], [[0, 0, 0, 1], [math.nan, 0, 0, 1]], [[0, 0, 1]],
+                                 [0, 0, 0, 1]])
+def test_quaternions_to_rotations_rejects_a_bad_row_or_shape(bad):
+    with pytest.raises(ValueError):
+        quaternions_to_rotations(bad)
+
+
+def test_quaternions_to_rotations_of_none_is_empty():
+    assert quaternions_to_rotations(np.empty((0, 4))).shape == (0, 3, 3)
 
 
 def test_rot_to_quat_rejects_non_finite():
