@@ -26,7 +26,7 @@ from __future__ import annotations
 import csv
 import math
 import time
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from typing import Any, Callable, Dict, List, Mapping, NamedTuple, Optional, Sequence, Tuple, Union
 
 import numpy as np
@@ -422,7 +422,9 @@ class ClosedLoopSimulation:
     ``attitude_noise`` (rad), ``gyro_noise`` (rad/s): IMU noise std (default 0, the paper);
     ``model``: the plant's equations of motion (default the paper's, :mod:`quadruped_control.sim.plants`);
     ``controller_enabled`` False keeps the controller in its hold state, so the legs stay at the
-    nominal pose (passive dynamics: ballast checks, physics tests).
+    nominal pose (passive dynamics: ballast checks, physics tests). Mid-run, :meth:`set_controller` turns it
+    on or off as the robot's controller acts or holds its safe pose, and :meth:`disarm` stops it as disarming
+    the robot does.
     """
 
     def __init__(self, robot: RobotParams, controller_config: ControllerConfig,
@@ -447,6 +449,7 @@ class ClosedLoopSimulation:
         self.controller = AttitudeController(robot, controller_config)
         self.controller.set_setpoint(self.setpoint_R)
         self.controller_enabled = bool(controller_enabled)
+        self.disarmed = False
         self.plant = PlantSimulator(robot, servo_model, initial_rotation=self.initial_R,
                                     restoring_offset=self.restoring_offset, dt=self.dt, model=model)
         self._rng = np.random.default_rng(self.seed)
@@ -474,10 +477,23 @@ class ClosedLoopSimulation:
         """The controller on (stroking) or off (its hold state: no new strokes, the legs back at the nominal pose)
         from the next step on, as the robot's controller acts, or holds its safe pose, mid-run; ``reset`` also
         clears its integral and stroke state, as arming the robot does. Between two runs, the step at the first
-        run's last sample is controlled again in the new state, on the same measurement (:meth:`set_setpoint`)."""
+        run's last sample is controlled again in the new state, on the same measurement (:meth:`set_setpoint`).
+        Ends a :meth:`disarm`: on, with ``reset``, is arming the robot again."""
         self.controller_enabled = bool(enabled)
+        self.disarmed = False
         if reset:
             self.controller.reset()
+        self._control_last_sample_again()
+
+    def disarm(self) -> None:
+        """The controller off as disarming the robot turns it off, from the next step on: the supervisor
+        publishes no servo commands, and the PCA9685 keeps its last pulses (the pwm_node watchdog's failsafe
+        ``hold``, config/hardware.yaml's default for every channel), so the legs stay where the last command
+        put them, mid-stroke if it came mid-stroke. Holding (:meth:`set_controller` off) retraces them to the
+        nominal pose instead, as the armed robot's safe pose does. A channel configured ``neutral`` or ``off``
+        is not modelled. Arm again with ``set_controller(True, reset=True)``."""
+        self.controller_enabled = False
+        self.disarmed = True
         self._control_last_sample_again()
 
     def _control_last_sample_again(self) -> None:
@@ -499,6 +515,9 @@ class ClosedLoopSimulation:
     def _control(self, t: float, R: np.ndarray, omega: np.ndarray) -> ControllerOutput:
         """The controller's output at ``t`` for a measurement: its hold state if it is off or rejects the
         measurement (counted in :attr:`holds`), as the ROS node does."""
+        if self.disarmed:
+            # the controller runs its hold as the supervisor's does; the servos keep the last command instead
+            return replace(self.controller.hold(t, "disarmed"), joint_targets=self.plant.last_command)
         if not self.controller_enabled:
             return self.controller.hold(t, "controller off")
         try:
@@ -605,7 +624,7 @@ class ClosedLoopSimulation:
             "clamped_joint_commands": self.plant.clamped_joints,
             "controller_holds": self.holds,
             "plant": getattr(self.plant.model, "name", "paper"),
-            "controller": "on" if self.controller_enabled else "off",
+            "controller": "disarmed" if self.disarmed else "on" if self.controller_enabled else "off",
         }
         return SimulationResult(t=t_rec, rotation=rotation, omega=omega, position=position, tau_cmd=tau_cmd, tau_sat=tau_sat,
                                 saturated=saturated, pair_phase=np.array(phases, dtype=str), holding=holding,

@@ -124,10 +124,10 @@ def step_test_spec(tank_yaml: str, seed: int, overrides: Tuple[Tuple[str, Any], 
 def run_sequence(spec: TrialSpec, sequence: Sequence[Hold], source: str) -> StepRecord:
     """The closed loop of ``spec`` taken through ``sequence`` (setpoint rpy in deg, seconds held, and the
     controller's state if given: :data:`Hold`) from its start, as the robot is by the setpoints published in
-    turn: the record of the attitude the IMU reports and the setpoint's steps. A hold "holding" or "disarmed"
-    turns the controller off (its hold state: the model's legs stop at the nominal pose, where a disarmed
-    robot's servos go limp), and acting after "disarmed" clears it, as arming does. SimulationError if the loop
-    cannot go on."""
+    turn: the record of the attitude the IMU reports and the setpoint's steps. A hold "holding" turns the
+    controller to its safe pose (the legs retrace to the nominal pose), "disarmed" stops it as disarming does
+    (the servos keep their last command: :meth:`ClosedLoopSimulation.disarm`), and acting after "disarmed"
+    clears it, as arming does. SimulationError if the loop cannot go on."""
     sim = trial_simulation(spec)
     times: List[np.ndarray] = []
     angles: List[np.ndarray] = []
@@ -140,7 +140,10 @@ def run_sequence(spec: TrialSpec, sequence: Sequence[Hold], source: str) -> Step
         if state not in CONTROLLER_STATES:
             raise ValueError("a hold's controller state must be one of %s, got %r" % (CONTROLLER_STATES, state))
         if not states or states[-1][1] != state:
-            sim.set_controller(state == "acting", reset=bool(states) and states[-1][1] == "disarmed")
+            if state == "disarmed":
+                sim.disarm()
+            else:
+                sim.set_controller(state == "acting", reset=bool(states) and states[-1][1] == "disarmed")
             states.append((sim.time, state))
         setpoint = np.radians(setpoint_deg)
         # a step acts from the instant the setpoint changes (find_steps' rule for what counts as one)

@@ -248,6 +248,33 @@ def _held_simulation():
     return sim, acting, sim.run(1.0)
 
 
+def test_a_disarm_keeps_the_last_command_where_holding_retraces_to_the_nominal_pose() -> None:
+    # disarmed mid-stroke, the robot's PCA9685 keeps its last pulses (failsafe hold); holding retraces instead
+    runs = {}
+    for name in ("disarmed", "holding"):
+        sim = ClosedLoopSimulation(ROBOT, CONFIG, "ideal", np.eye(3), rpy_to_rot(0.3, 0.0, 0.0))
+        acting = sim.run(1.03)
+        last = sim.plant.last_command
+        assert not np.allclose(last, Q0, atol=0.05)  # mid-stroke: away from the nominal pose
+        if name == "disarmed":
+            sim.disarm()
+        else:
+            sim.set_controller(False)
+        runs[name] = (acting, last, sim.run(2.0), sim)
+    acting, last, disarmed, sim = runs["disarmed"]
+    assert disarmed.holding.all() and disarmed.info["controller"] == "disarmed"
+    assert np.array_equal(disarmed.joint_targets, np.broadcast_to(last.reshape(12), disarmed.joint_targets.shape))
+    assert np.array_equal(sim.plant.last_command, last)
+    _, _, holding, _ = runs["holding"]
+    assert holding.info["controller"] == "off"
+    assert np.allclose(holding.joint_targets[-1], Q0.reshape(12))
+    assert not np.allclose(holding.joint_targets[0], Q0.reshape(12), atol=0.05)
+    # armed again (reset), it strokes from a cleared integral and the disarm is over
+    sim.set_controller(True, reset=True)
+    _, output = sim.step()
+    assert not sim.disarmed and not output.state.holding and np.linalg.norm(output.state.integral) < 0.01
+
+
 def test_the_controller_turned_off_holds_and_turned_on_cleared_starts_from_a_zero_integral() -> None:
     sim, acting, off = _held_simulation()
     # from the shared sample on (controlled again, off) the controller holds
