@@ -13,6 +13,7 @@ from quadruped_common.config import config_path
 from quadruped_common.so3 import rot_to_quat, rpy_to_rot
 from quadruped_control.control.setpoint_sequence import STEP_TEST
 from quadruped_control.sim.config_files import TANK_ENSEMBLE
+from quadruped_control.sim.simulation import ClosedLoopSimulation
 from quadruped_control.studies import StudyError
 from quadruped_control.studies import step_test as st
 
@@ -152,11 +153,16 @@ def test_a_stop_of_the_controller_cuts_the_step_it_falls_in_and_leaves_out_the_n
         assert "Not read: 1 step(s)" in stream.read()
 
 
-def test_a_model_asked_a_disarm_stops_stroking_and_starts_again_cleared() -> None:
+def test_a_model_asked_a_disarm_stops_stroking_and_starts_again_cleared(monkeypatch) -> None:
     spec = st.step_test_spec(MEMBER_05, 0, (), 0.0, None, (0.0, 0.0, 0.0))
     sequence = (((20.0, 0.0, 0.0), 10.0, "acting"), ((20.0, 0.0, 0.0), 10.0, "disarmed"),
                 ((20.0, 0.0, 0.0), 10.0, "acting"))
+    disarms = []
+    disarm = ClosedLoopSimulation.disarm
+    monkeypatch.setattr(ClosedLoopSimulation, "disarm", lambda sim: disarms.append(sim.time) or disarm(sim))
     record = st.run_sequence(spec, sequence, "disarmed")
+    # disarmed as the robot is (the servos keep their last command), not held in the safe pose
+    assert disarms == [pytest.approx(10.0)]
     assert record.controller == [(0.0, "acting"), (pytest.approx(10.0), "disarmed"), (pytest.approx(20.0), "acting")]
     roll = np.degrees(record.rpy[:, 0])
     at = {seconds: int(np.searchsorted(record.t, seconds)) for seconds in (10.0, 20.0, 30.0)}
