@@ -9,7 +9,7 @@ import pytest
 
 from quadruped_common.so3 import rot_to_quat, rpy_to_rot
 from quadruped_control.analysis.bag_report import (BagReportError, analyse, attitude_rpy, covered_by, main,
-                                                  missing_spans, read_bags, write_report)
+                                                  missing_spans, read_bags, sorted_unique, write_report)
 from tests.repo import REPO_ROOT
 
 rosbags = pytest.importorskip("rosbags")
@@ -140,6 +140,17 @@ def test_an_attitude_stream_comes_in_stamp_order_with_bad_samples_left_out():
                            (math.nan, 0.0, 0.0, 1.0), (0.0, 0.0, 0.0, 1.0)])
     assert t.tolist() == [1.0, 2.0, 5.0]  # a repeated stamp keeps its first sample, normalised
     np.testing.assert_allclose(rpy, [[0.0, 0.0, 0.0], [math.radians(30.0), 0.0, 0.0], [0.0, 0.0, 0.0]], atol=1e-12)
+
+
+def test_sorted_unique_orders_by_stamp_keeps_a_repeated_stamps_first_sample_and_keeps_the_values_type():
+    t = [3.0, 1.0, 2.0, 1.0, 0.5]
+    rows = [[30.0], [10.0], [20.0], [11.0], [5.0]]
+    times, listed = sorted_unique(t, rows)
+    assert times.tolist() == [0.5, 1.0, 2.0, 3.0] and listed == [[5.0], [10.0], [20.0], [30.0]]
+    times_a, array = sorted_unique(t, np.array(rows))
+    assert isinstance(array, np.ndarray) and array.tolist() == listed and times_a.tolist() == times.tolist()
+    empty_t, empty = sorted_unique([], np.empty((0, 4)))
+    assert empty_t.size == 0 and empty.shape == (0, 4)
 
 
 def test_a_grid_time_is_covered_inside_the_samples_span_and_not_across_a_gap():
