@@ -27,7 +27,9 @@ the interval does not hang like the robot. That static slope is not what a hang 
 and a tether's bend add to it at the body's frequencies): ``--model-hangs`` hangs each compared model in the
 simulator with the fitted push and fits it the same way, so that its stiffness is set beside the robot's as
 the same instrument reads both. The tank's push goes into tank.yaml's ``disturbance`` section (the report
-prints the lines).
+prints the lines). The legs' pose through the hang is read from the record's ``/joint_states``
+(:func:`recorded_legs`), and what it moves in each model against the nominal pose the comparisons hold them at
+is reported (:func:`legs_effect`).
 
 Output in ``--out``: ``hang.json`` (the command, the code's fingerprint, the record, the fits, the
 comparison), ``hang.md``, and ``hang.png`` (the record, and each axis's spectrum beside the fitted model's).
@@ -45,7 +47,7 @@ import numpy as np
 
 from quadruped_common.config import ParameterError, config_path
 from quadruped_common.so3 import rpy_to_rot
-from quadruped_control.analysis.bag_report import BagReportError, attitude_rpy, covered_by, read_bags
+from quadruped_control.analysis.bag_report import BagReportError, attitude_rpy, covered_by, read_bags, sorted_unique
 from quadruped_control.analysis.hang import HangFit, fit_axis, spectral_density
 from quadruped_control.model.params import RobotParams, load_robot_params
 from quadruped_control.sim.plants.tank import TankModel, TankParams, load_tank_params
@@ -55,8 +57,8 @@ from quadruped_control.studies.ensemble import DEFAULT_FOLDER, disturbance_overr
 from quadruped_control.studies.runner import code_record, command_line, warn_uncommitted, write_study_report
 from quadruped_control.studies.trial import TrialSpec, run_trial
 
-__all__ = ["AXES", "HangRecord", "check_hanging", "compare_tank", "main", "model_hang", "record_from_bag",
-           "simulated_record", "tank_push", "tilt_inertia"]
+__all__ = ["AXES", "HangRecord", "check_hanging", "compare_tank", "legs_effect", "main", "model_hang",
+           "record_from_bag", "recorded_legs", "simulated_record", "tank_push", "tilt_inertia"]
 
 #: The axes a hang measures: (name, index in roll-pitch-yaw and in the body's angular coordinates).
 AXES = (("roll", 0), ("pitch", 1))
@@ -157,13 +159,15 @@ def tilt_inertia(robot: RobotParams, tank: TankParams) -> Tuple[float, float]:
     return float(mass[3, 3]), float(mass[4, 4])
 
 
-def compare_tank(robot: RobotParams, tank: TankParams, roll: float, pitch: float) -> Dict[str, Dict[str, float]]:
+def compare_tank(robot: RobotParams, tank: TankParams, roll: float, pitch: float,
+                 legs: Optional[np.ndarray] = None) -> Dict[str, Dict[str, float]]:
     """A tank.yaml's plant at the measured hanging attitude (rad): per axis, the moment it would need held
     there (N m, body axes; TankModel.restoring_torque, its opposite) and its stiffness there (N m/rad, minus
     the slope of the moment over +-SLOPE_STEP_DEG, the tether's bend that never relaxes included; positive:
-    restores), and its tether's relaxing bend (k_r N m/rad, tau_r s), which a slow tilt does not feel."""
+    restores), and its tether's relaxing bend (k_r N m/rad, tau_r s), which a slow tilt does not feel. The
+    legs at the nominal pose, or at ``legs`` (4 x 3 joint angles, rad)."""
     model = TankModel(robot, tank)
-    q = nominal_joint_angles(robot)
+    q = nominal_joint_angles(robot) if legs is None else np.asarray(legs, dtype=float).reshape(4, 3)
     step = math.radians(SLOPE_STEP_DEG)
     out: Dict[str, Dict[str, float]] = {}
     for name, index in AXES:
@@ -175,6 +179,39 @@ def compare_tank(robot: RobotParams, tank: TankParams, roll: float, pitch: float
                      "stiffness": -(moment(step) - moment(-step)) / (2.0 * step),
                      "relaxing_stiffness": tank.tether_relaxing_stiffness,
                      "relaxation_time": tank.tether_relaxation_time}
+    return out
+
+
+def recorded_legs(times: Sequence[float], joints: Sequence[Sequence[float]], skip: float,
+                  robot: RobotParams) -> Optional[np.ndarray]:
+    """The legs' pose through a hang: each joint's median (rad, 4 x 3, JOINT_NAMES order) over the joint feedback
+    (/joint_states, which the feedback node publishes unarmed too) from ``skip`` s after its first sample, readings
+    outside the joint's servo range left out (a feedback potentiometer without its supply reads nonsense); None
+    without a reading of every joint there."""
+    t, rows = sorted_unique(times, np.asarray(joints, dtype=float).reshape(-1, 12))
+    if t.size == 0:
+        return None
+    rows = rows[t >= t[0] + skip - 1e-9]
+    limits = np.tile(robot.joint_limits.as_array(), (4, 1))  # (12, 2): low, high per joint
+    rows = np.where((rows >= limits[:, 0]) & (rows <= limits[:, 1]), rows, np.nan)
+    if rows.shape[0] == 0 or not np.all(np.any(np.isfinite(rows), axis=0)):
+        return None
+    return np.nanmedian(rows, axis=0).reshape(4, 3)
+
+
+def legs_effect(robot: RobotParams, tank: TankParams, roll: float, pitch: float,
+                legs: np.ndarray) -> Dict[str, Dict[str, float]]:
+    """What the legs' recorded pose changes against the nominal pose the comparisons and ``--model-hangs`` hold
+    them at, per axis at the hanging attitude on a tank.yaml's plant: the moment the paws and links set
+    elsewhere add (N m) and the tilt that moves the hang by at the plant's stiffness there (rad; None where the
+    plant does not restore)."""
+    nominal = compare_tank(robot, tank, roll, pitch)
+    recorded = compare_tank(robot, tank, roll, pitch, legs)
+    out = {}
+    for name, _ in AXES:
+        moment = recorded[name]["torque"] - nominal[name]["torque"]
+        stiffness = nominal[name]["stiffness"]
+        out[name] = {"moment": moment, "tilt": moment / stiffness if stiffness > 0.0 else None}
     return out
 
 
@@ -214,6 +251,31 @@ def _interval_text(value: float, interval: Optional[Tuple[float, float]], scale:
     if interval is None:
         return text + " (not pinned)"
     return "%s (%s-%s)" % (text, fmt % (interval[0] * scale), fmt % (interval[1] * scale))
+
+
+def _legs_text(report: Dict[str, Any]) -> str:
+    """The legs' pose through the hang, and what it moves in each model, against the nominal pose the
+    comparisons and the models' hangs hold them at."""
+    legs = report["legs"]
+    if legs is None:
+        return ("The legs: no joint feedback in the record (or a simulated hang); the comparisons assume them at "
+                "the nominal pose.")
+    moved = [entry["legs_as_recorded"] for entry in report["comparison"] if "why" not in entry["legs_as_recorded"]]
+    if not moved:
+        return ("The legs (the joint feedback's median after the skip) stood up to %.1f deg from the nominal pose, in "
+                "a pose the models' legs cannot take (%s); the comparisons assume them at the nominal pose."
+                % (legs["from_nominal_deg"], report["comparison"][0]["legs_as_recorded"]["why"]))
+    parts = []
+    for name, _ in AXES:
+        moments = [abs(m[name]["moment"]) for m in moved]
+        tilts = [abs(m[name]["tilt"]) for m in moved if m[name]["tilt"] is not None]
+        parts.append("%s %.3g mN m%s" % (name, 1e3 * max(moments),
+                                          ", %.2f deg" % math.degrees(max(tilts)) if tilts else ""))
+    return ("The legs (the joint feedback's median after the skip) stood up to %.1f deg from the nominal pose, where "
+            "the comparisons above and the models' hangs hold them. In the models that moves the hanging moment, and "
+            "the attitude a model would hang at, by up to: %s. Compare it with the fitted push and the hang's tilt: "
+            "a shift that is not small beside them says to repeat the hang with the legs at the nominal pose."
+            % (legs["from_nominal_deg"], "; ".join(parts)))
 
 
 def _text(report: Dict[str, Any]) -> str:
@@ -270,6 +332,7 @@ def _text(report: Dict[str, Any]) -> str:
             cells += ["%.3g" % (-side["torque"] * 1e3), "%.3g (%s)" % (side["stiffness"] * 1e3, side["verdict"])]
         cells.append("%.3g, %.3g" % (entry["roll"]["relaxing_stiffness"] * 1e3, entry["roll"]["relaxation_time"]))
         lines.append("| %s | %s |" % (entry["tank_yaml"], " | ".join(cells)))
+    lines += ["", _legs_text(report)]
     own = [entry for entry in report["comparison"] if "own_hang" in entry]
     if own:
         lines += ["", "Each model hung in the simulator with the fitted push (--model-hangs; trial seed %d) and fitted "
@@ -366,6 +429,7 @@ def main(argv: Optional[Sequence[str]] = None) -> int:
         compare = sorted(set(compare), key=compare.index)  # each file once, --tank-yaml's first
         tanks = [load_tank_params(path) for path in compare]
         tank = tanks[0]  # --tank-yaml's: the body's inertia
+        legs = None  # a simulated hang holds the legs at the nominal pose
         if args.simulated:
             truth_tank = load_tank_params(args.simulated)
             truth_tank.with_values(**dict(disturbance_overrides(args.tank_disturbance)))  # the push's bounds
@@ -380,6 +444,7 @@ def main(argv: Optional[Sequence[str]] = None) -> int:
             if not data.imu_t:
                 raise StudyError("hang: %s has no /imu/data" % args.run)
             record = record_from_bag(data.imu_t, data.imu_q, args.grid, args.max_gap, args.run)
+            legs = recorded_legs(data.joint_t, data.joint_q, args.skip, robot) if data.joint_t else None
         record = record.after(args.skip)
         inertia = dict(zip(("roll", "pitch"), tilt_inertia(robot, tank)))
         fits: Dict[str, HangFit] = {}
@@ -395,6 +460,11 @@ def main(argv: Optional[Sequence[str]] = None) -> int:
             for name, _ in AXES:
                 sides[name]["verdict"] = _verdict(sides[name]["stiffness"], interval[name])
             entry: Dict[str, Any] = {"tank_yaml": os.path.basename(path), **sides}
+            if legs is not None:
+                try:
+                    entry["legs_as_recorded"] = legs_effect(robot, model, mean["roll"], mean["pitch"], legs)
+                except ValueError as exc:  # a pose the five-bar cannot take: said, and the study goes on
+                    entry["legs_as_recorded"] = {"why": str(exc)}
             if args.model_hangs:
                 entry["own_hang"] = model_hang(path, push, record, args.skip, args.seed + 1, noise_deg, inertia,
                                                interval, args.tether, args.robot_yaml)
@@ -412,7 +482,10 @@ def main(argv: Optional[Sequence[str]] = None) -> int:
         "mean_deg": {name: math.degrees(mean[name]) for name, _ in AXES},
         "fits": {name: fits[name].as_dict() for name, _ in AXES},
         "disturbance": push,
-        "comparison": comparison, "tether": args.tether, "seed": args.seed}
+        "comparison": comparison, "tether": args.tether, "seed": args.seed,
+        "legs": None if legs is None else {
+            "joint_angles": legs.tolist(),
+            "from_nominal_deg": math.degrees(float(np.max(np.abs(legs - nominal_joint_angles(robot)))))}}
     if args.simulated:
         truth = compare_tank(robot, truth_tank, mean["roll"], mean["pitch"])
         report["truth"] = {"tank_yaml": os.path.basename(args.simulated), "torque_std": args.tank_disturbance[0],

@@ -10,6 +10,7 @@ import numpy as np
 import pytest
 
 from quadruped_common.config import config_path
+from quadruped_common.robot import JOINT_NAMES
 from quadruped_common.so3 import rot_to_quat, rpy_to_rot
 from quadruped_control.model.params import load_robot_params
 from quadruped_control.sim.plants.tank import TankModel, load_tank_params
@@ -77,7 +78,38 @@ def test_verdicts_place_a_stiffness_against_the_interval() -> None:
     assert study._verdict(2.0, None).startswith("not judged")
 
 
-def _write_imu_bag(path: str, t: np.ndarray, quaternions: np.ndarray) -> None:
+def test_the_legs_pose_through_a_hang_is_each_joints_median_after_the_skip() -> None:
+    q0 = nominal_joint_angles(ROBOT).reshape(12)
+    t = np.array([3.0, 0.0, 1.0, 2.0, 4.0])
+    rows = np.tile(q0, (5, 1))
+    rows[1] += 1.0  # the first sample, before the skip: left out
+    rows[2, 5] = math.nan  # one joint unread once: the others' median
+    rows[[0, 2, 3, 4], 2] += [0.1, 0.2, 0.2, 0.3]
+    legs = study.recorded_legs(t, rows, 0.5, ROBOT)
+    expected = q0.copy()
+    expected[2] += 0.2
+    np.testing.assert_allclose(legs, expected.reshape(4, 3))
+    rows[[0, 3], 4] = 50.0  # outside its servo range: not a reading
+    np.testing.assert_allclose(study.recorded_legs(t, rows, 0.5, ROBOT), expected.reshape(4, 3))
+    rows[:, 7] = math.nan
+    assert study.recorded_legs(t, rows, 0.5, ROBOT) is None  # a joint never read: the pose is not known
+    assert study.recorded_legs([], np.empty((0, 12)), 0.5, ROBOT) is None
+
+
+def test_legs_away_from_the_nominal_pose_move_a_models_hanging_moment() -> None:
+    tank = load_tank_params()
+    q0 = nominal_joint_angles(ROBOT)
+    same = study.legs_effect(ROBOT, tank, 0.0, 0.0, q0)
+    assert all(same[name]["moment"] == 0.0 and same[name]["tilt"] == 0.0 for name in ("roll", "pitch"))
+    moved = q0.copy()
+    moved[0, 2] += math.radians(10.0)  # leg 1's hip: its paw swings sideways
+    effect = study.legs_effect(ROBOT, tank, 0.0, 0.0, moved)
+    stiffness = study.compare_tank(ROBOT, tank, 0.0, 0.0)["roll"]["stiffness"]
+    assert effect["roll"]["moment"] != 0.0
+    assert effect["roll"]["tilt"] == pytest.approx(effect["roll"]["moment"] / stiffness)
+
+
+def _write_imu_bag(path: str, t: np.ndarray, quaternions: np.ndarray, legs: np.ndarray = None) -> None:
     pytest.importorskip("rosbags")
     from rosbags.rosbag1 import Writer
     from rosbags.typesys import Stores, get_typestore
@@ -85,20 +117,26 @@ def _write_imu_bag(path: str, t: np.ndarray, quaternions: np.ndarray) -> None:
     store = get_typestore(Stores.ROS1_NOETIC)
     Header, Time = store.types["std_msgs/msg/Header"], store.types["builtin_interfaces/msg/Time"]
     Quaternion, Vector3 = store.types["geometry_msgs/msg/Quaternion"], store.types["geometry_msgs/msg/Vector3"]
-    Imu = store.types["sensor_msgs/msg/Imu"]
+    Imu, JointState = store.types["sensor_msgs/msg/Imu"], store.types["sensor_msgs/msg/JointState"]
     cov, zero = np.zeros(9), Vector3(x=0.0, y=0.0, z=0.0)
     with Writer(path) as writer:
         connection = writer.add_connection("/imu/data", Imu.__msgtype__, typestore=store)
+        joints = writer.add_connection("/joint_states", JointState.__msgtype__, typestore=store)
         for k, (tk, (x, y, z, w)) in enumerate(zip(t, quaternions)):
             ns = 1_000_000_000_000 + int(round(tk * 1e9))
             header = Header(seq=k, stamp=Time(sec=ns // 1000000000, nanosec=ns % 1000000000), frame_id="imu_link")
+            if legs is not None and k % 5 == 0:  # the joint feedback at a fifth of the IMU's rate
+                writer.write(joints, ns, store.serialize_ros1(JointState(
+                    header=header, name=list(JOINT_NAMES), position=legs.reshape(12), velocity=np.zeros(12),
+                    effort=np.zeros(0)), JointState.__msgtype__))
             writer.write(connection, ns, store.serialize_ros1(Imu(
                 header=header, orientation=Quaternion(x=x, y=y, z=z, w=w), orientation_covariance=cov,
                 angular_velocity=zero, angular_velocity_covariance=cov, linear_acceleration=zero,
                 linear_acceleration_covariance=cov), Imu.__msgtype__))
 
 
-def test_a_simulated_hang_is_fitted_and_the_same_hang_recorded_in_a_bag_fits_the_same(tmp_path, capsys) -> None:
+def test_a_simulated_hang_is_fitted_and_the_same_hang_recorded_in_a_bag_fits_the_same(tmp_path, capsys,
+                                                                                       monkeypatch) -> None:
     out = str(tmp_path / "sim")
     common = ["--skip", "10", "--compare", config_path("tank_ensemble/member_00.yaml")]
     assert study.main(["--simulated", config_path("tank.yaml"), "--tank-disturbance", "0.005", "10",
@@ -128,11 +166,24 @@ def test_a_simulated_hang_is_fitted_and_the_same_hang_recorded_in_a_bag_fits_the
     t = np.arange(0.0, record.t[-1] + 1e-9, 0.02)
     quaternions = _quaternions(np.interp(t, record.t, record.roll), np.interp(t, record.t, record.pitch))
     bag = str(tmp_path / "hang.bag")
-    _write_imu_bag(bag, t, quaternions)
+    legs = nominal_joint_angles(ROBOT)
+    legs[0, 2] += math.radians(4.0)  # leg 1's hip 4 deg off the nominal pose through the hang
+    _write_imu_bag(bag, t, quaternions, legs)
     assert study.main([bag, "--out", str(tmp_path / "bag")] + common) == 0
     with open(os.path.join(str(tmp_path / "bag"), "hang.json")) as stream:
         from_bag = json.load(stream)
     assert "truth" not in from_bag and from_bag["source"] == bag
+    # the legs' pose is read and what it moves in each model reported; the simulated hang has no joint feedback
+    assert from_bag["legs"]["from_nominal_deg"] == pytest.approx(4.0)
+    assert all(entry["legs_as_recorded"]["roll"]["moment"] != 0.0 for entry in from_bag["comparison"])
+    assert "stood up to 4.0 deg from the nominal pose" in capsys.readouterr().out
+    assert report["legs"] is None and all("legs_as_recorded" not in entry for entry in report["comparison"])
+    # a pose a model's legs cannot take is said, and the study goes on
+    def unreachable(*_args):
+        raise ValueError("the five-bar cannot close")
+    monkeypatch.setattr(study, "legs_effect", unreachable)
+    assert study.main([bag, "--out", str(tmp_path / "bag2")] + common) == 0
+    assert "a pose the models' legs cannot take (the five-bar cannot close)" in capsys.readouterr().out
     for axis in ("roll", "pitch"):
         assert from_bag["fits"][axis]["values"]["stiffness"] == pytest.approx(
             report["fits"][axis]["values"]["stiffness"], rel=0.05)
