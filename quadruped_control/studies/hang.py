@@ -258,8 +258,8 @@ def _legs_text(report: Dict[str, Any]) -> str:
     comparisons and the models' hangs hold them at."""
     legs = report["legs"]
     if legs is None:
-        return ("The legs: no joint feedback in the record (or a simulated hang); the comparisons assume them at "
-                "the nominal pose.")
+        return ("The legs' pose is not known (the record has no joint feedback that reads every joint, or the hang "
+                "is simulated); the comparisons assume them at the nominal pose.")
     moved = [entry["legs_as_recorded"] for entry in report["comparison"] if "why" not in entry["legs_as_recorded"]]
     if not moved:
         return ("The legs (the joint feedback's median after the skip) stood up to %.1f deg from the nominal pose, in "

@@ -160,6 +160,7 @@ def test_a_simulated_hang_is_fitted_and_the_same_hang_recorded_in_a_bag_fits_the
         assert own[axis]["stiffness"] == pytest.approx(report["fits"][axis]["values"]["stiffness"], rel=0.15)
     printed = capsys.readouterr().out
     assert "disturbance:" in printed and "Truth (--simulated tank.yaml)" in printed
+    assert "The legs' pose is not known" in printed
     assert "Each model hung in the simulator with the fitted push (--model-hangs; trial seed 3)" in printed
     # the same attitude written to a bag at 50 Hz and read back gives the same fit
     record = study.simulated_record(config_path("tank.yaml"), (0.005, 10.0), 250.0, 2, 0.05, 0.1, None)
