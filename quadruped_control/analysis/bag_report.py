@@ -303,12 +303,12 @@ def analyse(data: BagData) -> Dict:
         raise BagReportError("need /imu/data and /controller_state in the bag (got %d and %d messages)"
                              % (len(data.imu_t), len(data.state_t)))
     start = _trial_start(data)
-    imu_t, imu_q = sorted_unique(data.imu_t, data.imu_q)
+    imu_t, imu_q = sorted_unique(data.imu_t, np.asarray(data.imu_q, dtype=float).reshape(-1, 4))
     keep = imu_t >= start
     if np.count_nonzero(keep) < 10:
         raise BagReportError("fewer than 10 IMU samples after the maneuver started")
     t = imu_t[keep] - start
-    R = _rotations([q for q, k in zip(imu_q, keep) if k])
+    R = _rotations(imu_q[keep])
     rpy = rotations_to_rpy(R)
     R_d = _rotations([data.state_setpoint[-1]])[0]
     geodesic = geodesic_angles(R_d, R)

@@ -444,7 +444,7 @@ def main(argv: Optional[Sequence[str]] = None) -> int:
             if not data.imu_t:
                 raise StudyError("hang: %s has no /imu/data" % args.run)
             record = record_from_bag(data.imu_t, data.imu_q, args.grid, args.max_gap, args.run)
-            legs = recorded_legs(data.joint_t, data.joint_q, args.skip, robot) if data.joint_t else None
+            legs = recorded_legs(data.joint_t, data.joint_q, args.skip, robot)
         record = record.after(args.skip)
         inertia = dict(zip(("roll", "pitch"), tilt_inertia(robot, tank)))
         fits: Dict[str, HangFit] = {}
