@@ -1,9 +1,11 @@
 # Convenience aliases; the README's two commands are scripts/run_main.sh and scripts/run_tests.sh.
-.PHONY: run test setup bench clean
+.PHONY: run test test-fast setup bench clean
 run:
 	bash scripts/run_main.sh
 test:
 	bash scripts/run_tests.sh
+test-fast:
+	bash scripts/run_tests.sh --fast
 setup:
 	bash scripts/setup.sh
 bench: setup

@@ -1,22 +1,48 @@
 #!/usr/bin/env bash
-# Runs every test: the Python 3.8 compatibility check, pytest for the pure modules, and the rostest
-# suite of the node graph. Does its own set-up first (scripts/setup.sh). Extra arguments go to pytest.
-# Ends with one summary line "N passed, N failed" over pytest and rostest.
+# Runs the tests. Does its own set-up first (scripts/setup.sh).
+#
+#   bash scripts/run_tests.sh                  the full tier (what CI runs): Python 3.8 check, lint,
+#                                              pytest, every rostest, lock-step determinism, install space
+#   bash scripts/run_tests.sh --fast [PATH..]  the fast tier, after every edit: the unit tests of common,
+#                                              drivers, model, control and analysis, no compiled kernels
+#                                              (UQ_NO_JIT=1) and no test marked slow; PATHs run instead
+#   bash scripts/run_tests.sh --rostest NAME   one rostest, tests/rostest/NAME.test
+#
+# Other arguments go to pytest. Ends with one summary line "N passed, N failed".
 set -uo pipefail
 ROOT="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"
 cd "$ROOT"
+
+usage() { awk 'NR > 1 && /^#/ { sub(/^# ?/, ""); print; next } NR > 1 { exit }' "$0"; }
+TIER=full; ROSTEST_ONLY=""
+case "${1:-}" in
+  --fast) TIER=fast; shift ;;
+  --rostest)
+    [ $# -ge 2 ] || { usage >&2; exit 2; }
+    TIER=rostest; ROSTEST_ONLY="$2"; shift 2
+    [ -f "tests/rostest/$ROSTEST_ONLY.test" ] || {
+      echo "run_tests.sh: no tests/rostest/$ROSTEST_ONLY.test; the rostests are:" \
+        "$(cd tests/rostest && ls ./*.test | sed 's|^./||; s|\.test$||' | tr '\n' ' ')" >&2; exit 2; } ;;
+  -h|--help) usage; exit 0 ;;
+esac
+
+#: the fast tier: the robot's pure code, the analysis, and the layers' and the manifest's checks
+FAST_PATHS=(tests/common tests/drivers tests/control/model tests/control/control tests/control/analysis
+            tests/test_layers.py tests/test_package_manifest.py)
+
+export UQ_WITH_TESTS=1  # on the robot, setup.sh installs the tests' packages too
 source "$ROOT/scripts/prepare.sh"
+
+if [ "$TIER" = fast ]; then
+  paths=()
+  for arg in "$@"; do case "$arg" in -*) ;; *) paths+=("$arg") ;; esac; done
+  if [ "${#paths[@]}" -eq 0 ]; then set -- "${FAST_PATHS[@]}" "$@"; fi
+  UQ_NO_JIT=1 exec python -m pytest -q -p no:cacheprovider -m "not slow" "$@"
+fi
 
 RESULTS="$ROOT/build/test_results"
 rm -rf "$RESULTS"; mkdir -p "$RESULTS"
 failures=0
-
-echo "== Python 3.8 compatibility (vermin) =="
-PY_SOURCES=(quadruped_common quadruped_control quadruped_drivers nodes cfg/AttitudeController.cfg setup.py)
-if ! vermin -q -t=3.8- --no-tips --violations --eval-annotations \
-     --exclude-regex '\.venv|build/' "${PY_SOURCES[@]}"; then
-  echo "vermin: sources need a Python newer than 3.8"; failures=$((failures + 1))
-fi
 
 # Steps that are not pytest or rostest cases each count as one case of the closing line.
 steps_passed=0; steps_failed=0
@@ -28,6 +54,14 @@ run_step() {  # run_step NAME COMMAND...: output to the console and to $RESULTS/
     steps_failed=$((steps_failed + 1)); failures=$((failures + 1)); echo "   $name: FAILED"
   fi
 }
+
+if [ "$TIER" = full ]; then
+echo "== Python 3.8 compatibility (vermin) =="
+PY_SOURCES=(quadruped_common quadruped_control quadruped_drivers nodes cfg/AttitudeController.cfg setup.py)
+if ! vermin -q -t=3.8- --no-tips --violations --eval-annotations \
+     --exclude-regex '\.venv|build/' "${PY_SOURCES[@]}"; then
+  echo "vermin: sources need a Python newer than 3.8"; failures=$((failures + 1))
+fi
 
 echo "== catkin_lint -W2 (the package, as the workspace sees it) =="
 if command -v catkin_lint >/dev/null; then
@@ -43,13 +77,20 @@ else
   echo "lint-imports: SKIPPED: not installed (requirements.txt pins import-linter)"
 fi
 
-echo "== pure core under Python 3.8 with requirements-jetson.txt =="
-run_step python38 bash tests/python38.sh
+# The Python 3.8 step runs on the second core while pytest runs on the first (both pure Python).
+echo "== the robot's code under Python 3.8 with requirements-jetson-test.txt: started beside pytest =="
+bash tests/python38.sh >"$RESULTS/python38-background.log" 2>&1 &
+python38_pid=$!
 
 echo "== pytest (pure modules) =="
 python -m pytest -q -p no:cacheprovider --junitxml="$RESULTS/pytest.xml" tests "$@"
 pytest_rc=$?
 if [ "$pytest_rc" -ne 0 ]; then failures=$((failures + 1)); fi
+
+echo "== the robot's code under Python 3.8 (tests/python38.sh) =="
+python38_rc=0; wait "$python38_pid" || python38_rc=$?
+run_step python38 bash -c 'cat "$1"; exit "$2"' _ "$RESULTS/python38-background.log" "$python38_rc"
+fi
 
 echo "== rostest (node graph) =="
 export ROS_HOME="$RESULTS/ros_home"; mkdir -p "$ROS_HOME"
@@ -77,7 +118,7 @@ PYEOF
 }
 # The lock-step closed-loop rostest saves its simulated trajectory here for the determinism check below.
 export UQ_TRAJECTORY_FILE="$RESULTS/closed_loop_trajectory.npz"
-for t in tests/rostest/*.test; do
+for t in tests/rostest/${ROSTEST_ONLY:-*}.test; do
   [ -e "$t" ] || continue
   name="$(basename "$t" .test)"
   echo "-- rostest $name"
@@ -101,6 +142,7 @@ for t in tests/rostest/*.test; do
   fi
 done
 
+if [ "$TIER" = full ]; then
 # Lock-step determinism: the closed loop again with both cores kept busy by other processes must give
 # the same simulated trajectory (to 1e-6) as the run above.
 echo "-- lock-step determinism (closed loop again under full CPU load)"
@@ -116,8 +158,11 @@ unset UQ_TRAJECTORY_FILE
 echo "== install space: catkin_make install into a temporary prefix, sim.launch from there =="
 run_step install_space bash tests/install_space.sh
 
+fi
+
 # Count pytest cases from its JUnit file so that the closing line covers the whole run.
-read -r py_passed py_failed < <(python - "$RESULTS/pytest.xml" <<'PYEOF'
+py_passed=0; py_failed=0
+[ "$TIER" = full ] && read -r py_passed py_failed < <(python - "$RESULTS/pytest.xml" <<'PYEOF'
 import sys, xml.etree.ElementTree as ET
 try:
     root = ET.parse(sys.argv[1]).getroot()

@@ -4,7 +4,7 @@
 #  1. ROS 1: on the Jetson (Ubuntu 20.04 with /opt/ros/noetic) that installation is used as is;
 #     on Debian 12 the archive's own ROS 1 packages are installed with apt (root).
 #  2. A venv (.venv) from /usr/bin/python3 with --system-site-packages, so Debian's/Noetic's rospy stays
-#     visible, holding the pinned PyPI dependencies (requirements.txt, or requirements-jetson.txt).
+#     visible, holding the pinned PyPI dependencies (requirements.txt, or requirements-jetson.txt on the robot).
 #  3. A catkin workspace OUTSIDE this tree (scripts/paths.sh: UQ_WS, default the sibling folder
 #     "<clone>_ws") whose src/ links to this tree, the one package underwater_quadruped (it also
 #     generates the messages of quadruped_msgs/msg). Outside, so that rosrun / rospack / roscd see
@@ -40,9 +40,16 @@ DEBIAN_PACKAGES=(
   catkin-lint
 )
 
+REQUIREMENTS_INCLUDED=()
 if [ -f /opt/ros/noetic/setup.bash ]; then
   ROS_FLAVOUR=noetic
-  REQUIREMENTS="$ROOT/requirements-jetson.txt"
+  # The robot installs what it runs; scripts/run_tests.sh asks for the tests' packages too.
+  if [ "${UQ_WITH_TESTS:-0}" = 1 ]; then
+    REQUIREMENTS="$ROOT/requirements-jetson-test.txt"
+    REQUIREMENTS_INCLUDED=("$ROOT/requirements-jetson.txt")
+  else
+    REQUIREMENTS="$ROOT/requirements-jetson.txt"
+  fi
 else
   ROS_FLAVOUR=debian
   REQUIREMENTS="$ROOT/requirements.txt"
@@ -63,7 +70,7 @@ else
 fi
 
 # The venv. Its python is /usr/bin/python3, the interpreter the ROS packages were built for.
-venv_key="$(hash_of "$REQUIREMENTS")-$(/usr/bin/python3 --version 2>&1)"
+venv_key="$(hash_of "$REQUIREMENTS" "${REQUIREMENTS_INCLUDED[@]}")-$(/usr/bin/python3 --version 2>&1)"
 if [ ! -x "$VENV/bin/python" ] || ! stamp_matches venv "$venv_key"; then
   log "creating venv and installing pinned dependencies from $(basename "$REQUIREMENTS")"
   rm -rf "$VENV"

@@ -1,13 +1,15 @@
 #!/usr/bin/env bash
-# CI step: the pure core's pytest under Python 3.8 (the Jetson's interpreter) with the Jetson's pinned
-# dependencies (requirements-jetson.txt), in a venv of its own (.venv38, no system site packages, so no
-# rospy: tests that need ROS skip themselves). Prints "python38: SKIPPED ..." and succeeds when no 3.8
+# CI step: the tests of what the robot imports (common, drivers, model, control, the nodes' pure parts)
+# under Python 3.8 (the Jetson's interpreter) with the Jetson's pinned dependencies
+# (requirements-jetson-test.txt), in a venv of its own (.venv38, no system site packages, so no rospy:
+# tests that need ROS skip themselves). The studies and the simulator are not on the robot: not here. Prints "python38: SKIPPED ..." and succeeds when no 3.8
 # interpreter is found: UQ_PYTHON38, python3.8 on PATH, or pyenv's $PYENV_ROOT/versions/3.8.*.
 # Extra arguments go to pytest.
 set -uo pipefail
 ROOT="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"
 VENV="$ROOT/.venv38"
-REQUIREMENTS="$ROOT/requirements-jetson.txt"
+REQUIREMENTS="$ROOT/requirements-jetson-test.txt"
+ROBOT_TESTS=(tests/common tests/drivers tests/control/model tests/control/control tests/control/ros)
 
 py38=""
 for candidate in "${UQ_PYTHON38:-}" "$(command -v python3.8 || true)" \
@@ -23,7 +25,7 @@ if [ -z "$py38" ]; then
   exit 0
 fi
 
-key="$(sha256sum "$REQUIREMENTS" | cut -d' ' -f1)-$("$py38" --version 2>&1)"
+key="$(cat "$REQUIREMENTS" "$ROOT/requirements-jetson.txt" | sha256sum | cut -d' ' -f1)-$("$py38" --version 2>&1)"
 if [ ! -x "$VENV/bin/python" ] || [ "$(cat "$VENV/.uq_stamp" 2>/dev/null)" != "$key" ]; then
   echo "python38: creating $VENV from $py38 with $(basename "$REQUIREMENTS")"
   rm -rf "$VENV"
@@ -35,7 +37,5 @@ fi
 echo "python38: $("$VENV/bin/python" --version) from $py38, $(basename "$REQUIREMENTS")"
 cd "$ROOT" || exit 1
 # The ROS environment is left out on purpose: this is what the pure core needs and nothing more.
-# Twice the main run's per-test timeout: without numba (not in the Jetson's requirements) the studies' tests
-# run their batches as plain Python, several times slower, and a loaded machine slows them again.
 env -u PYTHONPATH -u ROS_PACKAGE_PATH -u CMAKE_PREFIX_PATH PATH="$VENV/bin:/usr/bin:/bin" \
-  "$VENV/bin/python" -m pytest -q -p no:cacheprovider --timeout 1200 tests "$@"
+  "$VENV/bin/python" -m pytest -q -p no:cacheprovider "${ROBOT_TESTS[@]}" "$@"

@@ -98,6 +98,7 @@ def test_the_records_correlation_time_by_fft_is_the_direct_sums() -> None:
         assert hang._record_time(segments, 0.01) == pytest.approx(expected)
 
 
+@pytest.mark.slow
 def test_the_fit_recovers_a_known_model_inside_its_intervals() -> None:
     y = _simulate(TRUE, 0.1, 6000, seed=1) + math.radians(3.0)  # hung off level: fitted about its mean
     fit = hang.fit_axis(y, 0.1, TRUE.inertia)
@@ -146,6 +147,7 @@ def test_the_tethers_branch_is_the_plants_standard_linear_solid_and_vanishes_at_
         _exact_log_likelihood(TETHERED, [y - y.mean()], 0.2), abs=1e-3)
 
 
+@pytest.mark.slow
 def test_the_fit_with_the_tether_reaches_the_truths_likelihood_but_one_hang_does_not_pin_the_tether() -> None:
     y = _simulate(TETHERED, 0.2, 3300, seed=7)  # eleven minutes at 5 Hz
     spring = hang.fit_axis(y, 0.2, TETHERED.inertia)
