@@ -24,6 +24,7 @@ Where the files live is decided by :func:`config_dir` alone.
 from __future__ import annotations
 
 import functools
+import logging
 import math
 import os
 from typing import Any, Callable, Collection, Dict, List, Mapping, Optional, Sequence, TypeVar
@@ -71,31 +72,59 @@ PACKAGE = "underwater_quadruped"
 
 @functools.lru_cache(maxsize=None)
 def config_dir() -> str:
-    """The package's ``config/`` folder: the one place that decides where configuration files live.
+    """The package's ``config/`` folder, from the same tree as this code.
 
-    Found through the ROS package path first (rospkg, as roslaunch's ``$(find underwater_quadruped)``):
-    the source tree from a devel space, ``<prefix>/share/underwater_quadruped`` from an install space.
-    Without a ROS environment (rospkg missing, or the package not on ROS_PACKAGE_PATH: the offline
-    simulator, pytest, a laptop with only the venv) the source tree this module was imported from.
+    A source tree or devel space: ``config/`` beside the Python packages. An install space
+    (``<prefix>/lib/python3/dist-packages``): ``<prefix>/share/underwater_quadruped/config``. Only when
+    neither exists is the ROS package path asked (rospkg). When the ROS package path names another tree
+    (a second checkout or worktree with another workspace sourced), this code's own tree still wins and
+    the mismatch is logged once as a warning. ParameterError when no ``config/`` is found.
     """
-    tried = []
+    return _find_config_dir(os.path.abspath(__file__))
+
+
+def _own_config_dirs(module_file: str) -> List[str]:
+    """Where the tree that holds ``module_file`` (this module) keeps ``config/``: source tree, install space."""
+    packages = os.path.dirname(os.path.dirname(module_file))
+    candidates = [os.path.join(packages, "config")]
+    parts = packages.split(os.sep)
+    if len(parts) >= 3 and parts[-3] == "lib" and parts[-1] in ("dist-packages", "site-packages"):
+        prefix = os.sep.join(parts[:-3])
+        candidates.append(os.path.join(prefix, "share", PACKAGE, "config"))
+    return candidates
+
+
+def _ros_package_config_dir(tried: List[str]) -> Optional[str]:
+    """``config/`` of the package on ROS_PACKAGE_PATH, or None (the reason appended to ``tried``)."""
     try:
         import rospkg  # pylint: disable=import-outside-toplevel (optional: ROS's package path)
     except ImportError:
         tried.append("rospkg not importable")
-    else:
-        try:
-            candidate = os.path.join(rospkg.RosPack().get_path(PACKAGE), "config")
-        except rospkg.ResourceNotFound:
-            tried.append("package %s not on ROS_PACKAGE_PATH" % PACKAGE)
-        else:
-            if os.path.isdir(candidate):
-                return candidate
-            tried.append("%s has no config/ folder" % os.path.dirname(candidate))
-    source_tree = os.path.join(os.path.dirname(os.path.dirname(os.path.abspath(__file__))), "config")
-    if os.path.isdir(source_tree):
-        return source_tree
-    tried.append("no source tree at %s" % source_tree)
+        return None
+    try:
+        candidate = os.path.join(rospkg.RosPack().get_path(PACKAGE), "config")
+    except rospkg.ResourceNotFound:
+        tried.append("package %s not on ROS_PACKAGE_PATH" % PACKAGE)
+        return None
+    if os.path.isdir(candidate):
+        return candidate
+    tried.append("%s has no config/ folder" % os.path.dirname(candidate))
+    return None
+
+
+def _find_config_dir(module_file: str) -> str:
+    tried: List[str] = []
+    own = next((d for d in _own_config_dirs(module_file) if os.path.isdir(d)), None)
+    ros = _ros_package_config_dir(tried)
+    if own is not None:
+        if ros is not None and os.path.realpath(ros) != os.path.realpath(own):
+            logging.getLogger(__name__).warning(
+                "configuration read from %s, the tree of this code; the ROS package path names another "
+                "tree, %s, whose config/ is not used", own, ros)
+        return own
+    if ros is not None:
+        return ros
+    tried.extend("no %s" % d for d in _own_config_dirs(module_file))
     raise ParameterError("cannot find the config/ folder of %s (%s)" % (PACKAGE, "; ".join(tried)))
 
 

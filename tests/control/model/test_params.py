@@ -94,15 +94,45 @@ def fresh_config_dir():
     common.config_dir.cache_clear()
 
 
-def test_config_dir_comes_from_the_ros_package_path(tmp_path, monkeypatch, fresh_config_dir):
-    """An install space (<prefix>/share/underwater_quadruped) wins over the module's source tree."""
+def _package_tree(root):
+    """A tree holding the package's config/ (with robot.yaml) and a module path inside it."""
+    (root / "config").mkdir(parents=True)
+    (root / "config" / "robot.yaml").write_text("{}")
+    (root / "package.xml").write_text("<package format='3'><name>underwater_quadruped</name></package>")
+    return str(root / "quadruped_common" / "config.py")
+
+
+def test_config_dir_is_the_tree_of_the_code_not_another_on_the_ros_package_path(tmp_path, monkeypatch, caplog):
+    """A second checkout reads its own config/ even with another checkout's workspace sourced, and says so."""
     pytest.importorskip("rospkg")
+    mine = _package_tree(tmp_path / "mine")
+    _package_tree(tmp_path / "other")
+    monkeypatch.setenv("ROS_PACKAGE_PATH", str(tmp_path / "other"))
+    with caplog.at_level("WARNING"):
+        assert common._find_config_dir(mine) == str(tmp_path / "mine" / "config")
+    assert str(tmp_path / "other" / "config") in caplog.text
+
+
+def test_config_dir_of_an_install_space_is_its_share_folder(tmp_path, monkeypatch):
     share = tmp_path / "install" / "share" / "underwater_quadruped"
-    (share / "config").mkdir(parents=True)
-    (share / "package.xml").write_text("<package format='3'><name>underwater_quadruped</name></package>")
-    monkeypatch.setenv("ROS_PACKAGE_PATH", str(tmp_path / "install" / "share"))
-    assert fresh_config_dir() == str(share / "config")
-    assert common.config_path("robot.yaml") == str(share / "config" / "robot.yaml")
+    _package_tree(share)
+    module = tmp_path / "install" / "lib" / "python3" / "dist-packages" / "quadruped_common" / "config.py"
+    monkeypatch.setenv("ROS_PACKAGE_PATH", str(tmp_path / "nowhere"))
+    assert common._find_config_dir(str(module)) == str(share / "config")
+
+
+def test_config_dir_falls_back_to_the_ros_package_path(tmp_path, monkeypatch):
+    """Code with no config/ of its own (e.g. copied elsewhere) reads the package on ROS_PACKAGE_PATH."""
+    pytest.importorskip("rospkg")
+    _package_tree(tmp_path / "ros")
+    monkeypatch.setenv("ROS_PACKAGE_PATH", str(tmp_path / "ros"))
+    assert common._find_config_dir(str(tmp_path / "bare" / "pkg" / "m.py")) == str(tmp_path / "ros" / "config")
+
+
+def test_config_dir_missing_everywhere_is_a_parameter_error(tmp_path, monkeypatch):
+    monkeypatch.setenv("ROS_PACKAGE_PATH", str(tmp_path))
+    with pytest.raises(ParameterError, match="cannot find the config/ folder"):
+        common._find_config_dir(str(tmp_path / "bare" / "pkg" / "m.py"))
 
 
 def test_config_dir_without_ros_is_the_source_tree(tmp_path, monkeypatch, fresh_config_dir):
