@@ -122,7 +122,7 @@ def build_parser() -> argparse.ArgumentParser:
                         help="identify: parameter sets kept as the ensemble (default 8)")
     parser.add_argument("--include", nargs="+", default=[], metavar="PARAMETER",
                         help="identify: parameters fitted whatever the screening says (e.g. a candidate effect "
-                             "under test: --include wake_fraction wake_time_constant)")
+                             "under test: --include paw_wake_fraction paw_wake_time_constant)")
     parser.add_argument("--parameters", nargs="+", default=[], metavar="PARAMETER",
                         help="identify: fit exactly these parameters (the screening still runs and is "
                              "reported; to repeat an earlier run's choice with another budget)")
@@ -135,7 +135,7 @@ def build_parser() -> argparse.ArgumentParser:
                              "roll+pitch 60 with t_rec = 1.5 s must not settle (the paper needed 1.0 s there)")
     parser.add_argument("--band", type=float, default=1.0, metavar="FACTOR",
                         help="identify: count each timing term only beyond this factor of the paper's, "
-                             "max(0, |ln ratio| - ln FACTOR) (default 1: the whole log-ratio; 2 is the issue's band)")
+                             "max(0, |ln ratio| - ln FACTOR) (default 1: the whole log-ratio; 2 is the reproduction targets' band)")
     parser.add_argument("--study", choices=tuple(STUDIES),
                         default=None,
                         help="run a study (paper-experiments: Table 1's 15 experiments, default on the tank plant "
@@ -210,7 +210,7 @@ def main(argv: Optional[Sequence[str]] = None) -> int:
         if args.study == "identify" and not (math.isfinite(args.band) and args.band >= 1.0):
             parser.error("--band must be a factor >= 1 (1: the whole log-ratio), got %r" % (args.band,))
         if args.study == "identify":
-            from quadruped_control.studies.identify import PARAMETERS
+            from quadruped_control.studies.identify_parameters import PARAMETERS
             for option in ("include", "parameters"):
                 unknown = sorted(set(getattr(args, option)) - {name for name, _, _ in PARAMETERS})
                 if unknown:

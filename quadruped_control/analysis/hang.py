@@ -1,7 +1,7 @@
 """The robot hanging unpowered in its tank: a linear model of one tilt axis pushed by the tank, fitted to a
 recorded attitude by maximum likelihood (pure numpy and scipy).
 
-Why (docs/identification.md, "A tank that is not still" and "What a hang tells"): the fits to the paper's
+Why (docs/identification.md, "What the model misses, and why" and "What a hang tells"): the fits to the paper's
 Table 1 leave the restoring torque on a knife edge (five of the eight shipped members push *away* from level
 when held still), and a test tank pushes a body that has so little authority. Ten minutes of the robot
 hanging with its legs still, recorded, measure both: how stiffly it is held about the attitude it hangs at,
@@ -21,7 +21,7 @@ Model, per tilt axis (roll or pitch about the mean hanging attitude), state x = 
 
 k is the restoring stiffness about the hanging attitude (N m/rad; the slope of the tank plant's restoring
 torque, TankModel.restoring_torque), c the damping that holds for small slow motions (N m s/rad), sigma and
-tau_d the tank.yaml's ``disturbance.torque_std`` and ``.correlation_time``. The record gives the spectrum of
+tau_d the tank.yaml's ``disturbance.disturbance_torque_std`` and ``.disturbance_correlation_time``. The record gives the spectrum of
 theta, whose level and corners fix k / I, c / I, sigma / I and tau_d; I comes from the model
 (:func:`fit_axis`'s ``inertia``), so a wrong I scales k, c and sigma alike and leaves tau_d.
 

@@ -1,105 +1,93 @@
 """SO(3) attitude controller of the underwater quadruped (paper section "Attitude Controller Design").
 
-One :meth:`AttitudeController.step` (100 Hz) runs the three layers of the paper and the stroke cycle:
+:meth:`AttitudeController.step` (100 Hz) computes the orientation error, eq. (error), the control law
+with anti-windup, eq. (pid), and the saturation, eq. (sat) (:func:`control_law_f`), then advances the
+stroke scheme (:mod:`quadruped_control.control.strokes`), which latches the allocation of eq.
+(foot_speed), (foot_vel) (:mod:`quadruped_control.control.allocation`) at each power-phase start,
+integrates the foot positions, eq. (foot_integration), and solves the leg IK for the joint targets.
 
-1. Orientation error, eq. (error): [e_R]_x = 1/2 (R_d^T R - R^T R_d), recovered with the vee map
-   (:func:`quadruped_common.so3.attitude_error`), and the geodesic error angle of R_d^T R.
-2. Control law, eq. (pid):
-       tau_cmd = -K_p e_R - K_i int(e_R + K_aw Delta_sat) - K_d omega + omega x (I omega) - tau_buoyancy^B
-   with the saturation eq. (sat), tau_sat = tau_hat_cmd min(|tau_cmd|, tau_max), and the anti-windup
-   difference Delta_sat = tau_cmd - tau_sat fed back into the integrand through K_aw. The paw buoyancy
-   torque (eq. (buoy_torque)) is evaluated at the currently commanded foot positions and the measured
-   attitude.
-3. Allocation, eq. (foot_speed), (foot_vel) (:mod:`quadruped_control.control.allocation`), latched at each
-   power-phase start by the stroke scheme (:mod:`quadruped_control.control.strokes`: the paper's cycle or the
-   coordinated scheme, ``config.stroke_scheme``), Euler integration of the foot position, eq.
-   (foot_integration), and the leg IK -> joint targets (4 x 3, rad).
-
-Switching the stroke scheme at run time (:meth:`AttitudeController.set_stroke_scheme`) is smooth: the
-current scheme holds (power strokes retrace, recoveries complete, the feet return to the nominal pose;
-the record shows 'hold' with the reason), then the new scheme starts from the nominal pose.
-
-Discretisation of the integral (the paper gives the continuous law dz/dt = e_R + K_aw Delta_sat): with
-h the elapsed time of this step, c_k the P, D and feedforward terms of eq. (pid) at this step, so that
-tau_cmd,k = c_k - K_i z_k, and g = h K_aw K_i >= 0 the anti-windup loop gain of one step:
-
-* g <= 1 (every gain set of config/controller.yaml at 100 Hz; the discretisation of the first release,
-  so ``--study paper-sim`` keeps its numbers): forward in the anti-windup term,
-      z_k = z_(k-1) + h (e_R,k + K_aw Delta_sat,(k-1)),  Delta_sat,(k-1) = tau_cmd,(k-1) - sat(tau_cmd,(k-1)),
-  the saturation excess of the torque commanded over the interval that just ended (zero after start,
-  reset and hold);
-* g > 1: backward (implicit) Euler,
-      z_k = z_(k-1) + h (e_R,k + K_aw Delta_sat,k),
-  the excess of the torque this step commands. It has a closed form: with the predictor
-  u = c_k - K_i (z_(k-1) + h e_R,k), tau_cmd,k = u when |u| <= tau_max and otherwise
-  tau_cmd,k = u_hat (|u| + g tau_max) / (1 + g), i.e. Delta_sat,k = u_hat (|u| - tau_max) / (1 + g).
-
-Then z_k is clipped to the norm ``integral_limit`` (on by default). h is the actual elapsed time
-t_k - t_(k-1) clipped to [0, max_step_factor * dt]; the first step after construction/reset uses dt.
-While holding, the integral is frozen.
-
-Stability for EVERY gain and step the interfaces allow (K_p, K_i, K_d, K_aw >= 0, any h >= 0). The
-dead-zone phi(tau) = tau - sat(tau) = tau - P(tau), P the projection onto the ball |tau| <= tau_max, is
-the gradient of the convex function 1/2 dist(tau, ball)^2, so it is monotone and firmly non-expansive:
-<phi(a) - phi(b), a - b> >= |phi(a) - phi(b)|^2. Take two integral states z, z' fed the same
-measurements, d = z_(k-1) - z'_(k-1), and K_i > 0 (for K_i = 0 the integral does not act on the torque).
-
-* Forward form: d_k = d + h K_aw delta with delta = phi(a) - phi(b), a - b = -K_i d (a, b the previous
-  commands). Firm non-expansiveness gives <delta, d> <= -|delta|^2 / K_i, so
-  |d_k|^2 <= |d|^2 + (h K_aw / K_i) |delta|^2 (g - 2) <= |d|^2 for g <= 2; with g <= 1 the deviation is
-  not even reversed in sign (in saturation along a fixed direction it is multiplied by 1 - g in [0, 1]).
-  Beyond g = 2 this form diverges (e.g. K_i 20, K_aw 10 and h >= 12.5 ms: the integral passed 1e6 in
-  under a second), which is why it is used only up to g = 1.
-* Backward form: the step solves tau + g phi(tau) = u, i.e. tau_cmd,k = (I + g phi)^(-1)(u), the resolvent
-  of a monotone operator, firmly non-expansive for every g >= 0: |tau_k - tau'_k| <= |u - u'|. As
-  z_k = (c_k - tau_k) / K_i, |z_k - z'_k| <= |u - u'| / K_i = |d|.
-
-Each step is therefore non-expansive in z whichever form it takes (gains and h may change between
-steps), the clip to ``integral_limit`` is a projection onto a ball, non-expansive too, and it bounds |z|
-absolutely: no growth and no sign-alternating oscillation for any gain or step.
-
-No overflow, no NaN: step() refuses non-finite inputs and angular rates beyond ``max_angular_rate``
-(ValueError; the supervisor then holds), so with |e_R| <= 1, bounded gains (cfg bounds), |z| <=
-integral_limit, h <= max_step and the feet within the legs' reach every term of eq. (pid), the
-saturation and the allocation is bounded by a modest number (|omega x I omega| <= |I| w_max^2).
-The controller is pure Python/numpy (no ROS): the ROS node and the offline simulator wrap the same
-object. Bad measurements raise ValueError from :meth:`step` (the caller then calls :meth:`hold`); no
-output ever contains NaN, and joint targets are always within the servo ranges.
+Contract: bad measurements (non-finite, not a rotation, omega beyond ``max_angular_rate``) raise
+ValueError from :meth:`~AttitudeController.step` without changing any state, and the caller then calls
+:meth:`~AttitudeController.hold`; no output ever contains NaN; joint targets are always within the
+servo ranges; the integral stays bounded (norm ``integral_limit``) for every gain and step. Pure
+Python/numpy, no ROS: the ROS node and the offline simulator wrap the same object. The discretisation
+of the integral and the stability argument: docs/controller.md.
 """
 from __future__ import annotations
 
 import math
 from dataclasses import dataclass
-from typing import Optional, Sequence, Tuple, Union
+from typing import NamedTuple, Optional, Sequence, Tuple, Union
 
 import numpy as np
 
 # estimate_body_torque (eq. (torque_leg) from measured joint motion) lives in allocation; re-exported here.
 from quadruped_common.config import ParameterError
-from quadruped_common.jit import hypot3, jitable
+from quadruped_common.jit import jitable
 from quadruped_common.so3 import rpy_to_rot
+from quadruped_common.vec3 import ZERO, Mat3, Vec3, add, cross, mat_vec, norm, row, scale, sub, transpose_times
 from quadruped_control.control.allocation import estimate_body_torque, foot_velocity_command_f
 from quadruped_control.control.controller_config import ControllerConfig, Gains
 from quadruped_control.control.strokes import StrokeScheme, make_stroke_scheme
 from quadruped_control.model.params import RobotParams
 
 ArrayLike = Union[Sequence[float], Sequence[Sequence[float]], np.ndarray]
-Vec3 = Tuple[float, float, float]
 
 __all__ = [
     "AttitudeController",
     "ControllerOutput",
     "ControllerStateRecord",
+    "Feedforward",
+    "LawGains",
+    "LawResult",
     "control_law_f",
     "control_torque",
     "estimate_body_torque",
+    "pid_torque",
     "saturate",
+    "saturate_f",
 ]
 
 
 # --------------------------------------------------------------------------------------------------
-# Pure control-law pieces (also used by the tests)
+# The control law, eq. (error), (pid), (sat), on named quantities
 # --------------------------------------------------------------------------------------------------
+
+class LawGains(NamedTuple):
+    """The gains and limits of eq. (pid), (sat): K_p, K_i, K_d, K_aw, tau_max (N m) and the norm the
+    integral z is clipped to (s)."""
+
+    k_p: float
+    k_i: float
+    k_d: float
+    k_aw: float
+    tau_max: float
+    integral_limit: float
+
+
+class Feedforward(NamedTuple):
+    """The model terms of eq. (pid): omega x (I omega) when ``gyroscopic`` (``inertia`` I, body frame), and
+    -tau_buoyancy^B of eq. (buoy_torque) when ``buoyancy`` (``paw_net_buoyancy`` B of one paw, N)."""
+
+    gyroscopic: bool
+    inertia: Mat3
+    buoyancy: bool
+    paw_net_buoyancy: float
+
+
+class LawResult(NamedTuple):
+    """One step of :func:`control_law_f`: the error e_R of eq. (error) and the geodesic angle of R_d^T R
+    (rad), the integral z_k (s), tau_cmd of eq. (pid), tau_sat of eq. (sat) and whether it clipped, and
+    the feedforward part of tau_cmd (N m)."""
+
+    e_R: Vec3
+    geodesic: float
+    z: Vec3
+    tau_cmd: Vec3
+    tau_sat: Vec3
+    saturated: bool
+    feedforward: Vec3
+
 
 def control_torque(e_R: ArrayLike, omega: ArrayLike, integral: ArrayLike, gains: Gains,
                    inertia: Optional[ArrayLike] = None, tau_buoyancy: Optional[ArrayLike] = None) -> np.ndarray:
@@ -123,97 +111,70 @@ def control_torque(e_R: ArrayLike, omega: ArrayLike, integral: ArrayLike, gains:
 
 def saturate(tau_cmd: ArrayLike, tau_max: float) -> Tuple[np.ndarray, bool]:
     """eq. (sat): tau_sat = tau_hat_cmd min(|tau_cmd|, tau_max); returns (tau_sat, saturated)."""
-    tau = np.asarray(tau_cmd, dtype=float).reshape(3)
-    x, y, z = tau.tolist()
-    sx, sy, sz, saturated = _saturate_f(x, y, z, float(tau_max))
-    return np.array([sx, sy, sz]), saturated
+    x, y, z = np.asarray(tau_cmd, dtype=float).reshape(3).tolist()
+    tau_sat, saturated = saturate_f((x, y, z), float(tau_max))
+    return np.array(tau_sat), saturated
 
 
 @jitable
-def _saturate_f(x: float, y: float, z: float, tau_max: float) -> Tuple[float, float, float, bool]:
-    norm = hypot3(x, y, z)
-    if norm <= tau_max:
-        return x, y, z, False
-    scale = tau_max / norm
-    return x * scale, y * scale, z * scale, True
+def saturate_f(tau_cmd: Vec3, tau_max: float) -> Tuple[Vec3, bool]:
+    """eq. (sat) on floats: (tau_sat, saturated)."""
+    magnitude = norm(tau_cmd)
+    if magnitude <= tau_max:
+        return tau_cmd, False
+    return scale(tau_max / magnitude, tau_cmd), True
 
 
 @jitable
-def control_law_f(R_d: Sequence[float], R: Sequence[float], wx: float, wy: float, wz: float, z: Sequence[float],
-                  delta_sat: Sequence[float], h: float, k_p: float, k_i: float, k_d: float, k_aw: float,
-                  tau_max: float, integral_limit: float, inertia: Sequence[float], gyroscopic: bool,
-                  buoyancy: bool, feet_sum: Sequence[float], net_buoyancy: float) -> Tuple[float, ...]:
-    """One step of eq. (error), (pid) and (sat) on floats: the controller's law, the one implementation
-    (:meth:`AttitudeController.step` calls it from Python, the batched controller from compiled code).
+def pid_torque(e_R: Vec3, z: Vec3, omega: Vec3, gains: LawGains, feedforward: Vec3) -> Vec3:
+    """tau = -K_p e_R - K_i z - K_d omega + feedforward, eq. (pid), summed left to right."""
+    return add(sub(sub(scale(-gains.k_p, e_R), scale(gains.k_i, z)), scale(gains.k_d, omega)), feedforward)
 
-    ``R_d``, ``R``: setpoint and measured attitude, row-major; omega = (wx, wy, wz); ``z``: the integral
-    z_(k-1); ``delta_sat``: Delta_sat of the last command (the forward form's anti-windup term); ``h``:
-    the step; ``inertia`` row-major I for the gyroscopic feedforward; ``feet_sum``: sum of the commanded
-    foot positions for the buoyancy feedforward, ``net_buoyancy`` B of one paw. The integral's two
-    discretisations are those of the module docstring. Returns the 17 floats (e_R (3), geodesic angle,
-    z_k (3), tau_cmd (3), tau_sat (3), saturated, feedforward (3)).
+
+@jitable
+def control_law_f(R_d: Mat3, R: Mat3, omega: Vec3, z: Vec3, delta_sat: Vec3, h: float, gains: LawGains,
+                  model: Feedforward, feet_sum: Vec3) -> LawResult:
+    """One step of eq. (error), (pid) and (sat): the controller's law, the one implementation (the robot's
+    :class:`AttitudeController` runs it as Python, the simulator's batched controller compiled).
+
+    ``R_d``, ``R``: setpoint and measured attitude; ``omega``: measured rate; ``z``: the integral z_(k-1);
+    ``delta_sat``: Delta_sat = tau_cmd - tau_sat of the previous command; ``h``: the step (s); ``gains``;
+    ``model``: the feedforward terms; ``feet_sum``: sum of the commanded foot positions (for the buoyancy
+    feedforward). The integral's two
+    discretisations are those of docs/controller.md. The operations and their order are those of the
+    first release: the paper-sim limit cycles are sensitive to the last bit, and their numbers are kept.
     """
-    r00, r01, r02, r10, r11, r12, r20, r21, r22 = R[0], R[1], R[2], R[3], R[4], R[5], R[6], R[7], R[8]
-    d00, d01, d02, d10, d11, d12, d20, d21, d22 = R_d[0], R_d[1], R_d[2], R_d[3], R_d[4], R_d[5], R_d[6], R_d[7], \
-        R_d[8]
-    # eq. (error): E = R_d^T R, e_R = vee(1/2 (E - E^T)).
-    e01 = d00 * r01 + d10 * r11 + d20 * r21
-    e02 = d00 * r02 + d10 * r12 + d20 * r22
-    e10 = d01 * r00 + d11 * r10 + d21 * r20
-    e12 = d01 * r02 + d11 * r12 + d21 * r22
-    e20 = d02 * r00 + d12 * r10 + d22 * r20
-    e21 = d02 * r01 + d12 * r11 + d22 * r21
-    ex, ey, ez = 0.5 * (e21 - e12), 0.5 * (e02 - e20), 0.5 * (e10 - e01)
-    trace = (d00 * r00 + d10 * r10 + d20 * r20) + (d01 * r01 + d11 * r11 + d21 * r21) \
-        + (d02 * r02 + d12 * r12 + d22 * r22)
-    geodesic = math.atan2(hypot3(ex, ey, ez), 0.5 * (trace - 1.0))
+    # eq. (error): E = R_d^T R, e_R = 1/2 vee(E - E^T), geodesic angle of E.
+    E = transpose_times(R_d, R)
+    e_R = scale(0.5, (E.zy - E.yz, E.xz - E.zx, E.yx - E.xy))
+    geodesic = math.atan2(norm(e_R), 0.5 * ((E.xx + E.yy + E.zz) - 1.0))
 
-    # Feedforward: omega x (I omega) and -tau_buoyancy^B, eq. (pid), (buoy_torque).
-    fx = fy = fz = 0.0
-    if gyroscopic:
-        i0, i1, i2, i3, i4, i5, i6, i7, i8 = inertia[0], inertia[1], inertia[2], inertia[3], inertia[4], \
-            inertia[5], inertia[6], inertia[7], inertia[8]
-        hx, hy, hz = i0 * wx + i1 * wy + i2 * wz, i3 * wx + i4 * wy + i5 * wz, i6 * wx + i7 * wy + i8 * wz
-        fx += wy * hz - wz * hy
-        fy += wz * hx - wx * hz
-        fz += wx * hy - wy * hx
-    if buoyancy:
-        # tau_b = sum_i r_i x (R^T B z_hat) = (sum_i r_i) x (B * third row of R), at the commanded feet.
-        sx, sy, sz = feet_sum[0], feet_sum[1], feet_sum[2]
-        ux, uy, uz = net_buoyancy * r20, net_buoyancy * r21, net_buoyancy * r22
-        fx -= sy * uz - sz * uy
-        fy -= sz * ux - sx * uz
-        fz -= sx * uy - sy * ux
+    # Feedforward of eq. (pid): omega x (I omega) - tau_buoyancy^B, eq. (buoy_torque) at the commanded feet:
+    # tau_buoyancy^B = sum_i r_i x (R^T B z_hat) = (sum_i r_i) x (B * third row of R).
+    feedforward = ZERO
+    if model.gyroscopic:
+        feedforward = add(feedforward, cross(omega, mat_vec(model.inertia, omega)))
+    if model.buoyancy:
+        feedforward = sub(feedforward, cross(feet_sum, scale(model.paw_net_buoyancy, row(R, 2))))
 
-    # Integral of eq. (pid) (module docstring): forward in the anti-windup excess while the loop gain
-    # g = h K_aw K_i of one step is at most 1 (the first release's form), backward Euler beyond.
-    g = h * k_aw * k_i
+    # The integral dz/dt = e_R + K_aw Delta_sat: forward in the anti-windup excess while the loop gain
+    # g = h K_aw K_i of one step is at most 1, backward Euler in closed form beyond (docs/controller.md).
+    g = h * gains.k_aw * gains.k_i
     if g <= 1.0:
-        zx = z[0] + h * (ex + k_aw * delta_sat[0])
-        zy = z[1] + h * (ey + k_aw * delta_sat[1])
-        zz = z[2] + h * (ez + k_aw * delta_sat[2])
+        z = add(z, scale(h, add(e_R, scale(gains.k_aw, delta_sat))))
     else:
-        # Predictor z + h e_R and its command u; in saturation add h K_aw Delta_sat in closed form.
-        zx, zy, zz = z[0] + h * ex, z[1] + h * ey, z[2] + h * ez
-        ux = -k_p * ex - k_i * zx - k_d * wx + fx
-        uy = -k_p * ey - k_i * zy - k_d * wy + fy
-        uz = -k_p * ez - k_i * zz - k_d * wz + fz
-        norm_u = hypot3(ux, uy, uz)
-        if norm_u > tau_max:
-            step = h * k_aw * (norm_u - tau_max) / ((1.0 + g) * norm_u)  # h K_aw |Delta_sat| / |u|
-            zx, zy, zz = zx + step * ux, zy + step * uy, zz + step * uz
-    norm_z = hypot3(zx, zy, zz)
-    if norm_z > integral_limit:
-        scale = integral_limit / norm_z
-        zx, zy, zz = zx * scale, zy * scale, zz * scale
+        z = add(z, scale(h, e_R))  # predictor, and its command u
+        u = pid_torque(e_R, z, omega, gains, feedforward)
+        norm_u = norm(u)
+        if norm_u > gains.tau_max:  # h K_aw |Delta_sat| / |u|
+            z = add(z, scale(h * gains.k_aw * (norm_u - gains.tau_max) / ((1.0 + g) * norm_u), u))
+    norm_z = norm(z)
+    if norm_z > gains.integral_limit:
+        z = scale(gains.integral_limit / norm_z, z)
 
-    # Summed in the order of eq. (pid) as the first release did: the paper-sim limit cycles are
-    # sensitive to the last bit, and their published numbers are kept.
-    cx = -k_p * ex - k_i * zx - k_d * wx + fx
-    cy = -k_p * ey - k_i * zy - k_d * wy + fy
-    cz = -k_p * ez - k_i * zz - k_d * wz + fz
-    sx_, sy_, sz_, saturated = _saturate_f(cx, cy, cz, tau_max)  # eq. (sat)
-    return ex, ey, ez, geodesic, zx, zy, zz, cx, cy, cz, sx_, sy_, sz_, saturated, fx, fy, fz
+    tau_cmd = pid_torque(e_R, z, omega, gains, feedforward)  # eq. (pid)
+    tau_sat, saturated = saturate_f(tau_cmd, gains.tau_max)  # eq. (sat)
+    return LawResult(e_R, geodesic, z, tau_cmd, tau_sat, saturated, feedforward)
 
 
 # --------------------------------------------------------------------------------------------------
@@ -274,12 +235,13 @@ class ControllerOutput:
 # Controller
 # --------------------------------------------------------------------------------------------------
 
-def _rotation_floats(R: ArrayLike, name: str, tol: float) -> Tuple[float, ...]:
-    """R as 9 row-major floats; ValueError unless finite, 3x3, |R^T R - I| <= tol and det > 0."""
+def _rotation_floats(R: ArrayLike, name: str, tol: float) -> Mat3:
+    """R as a :class:`~quadruped_common.vec3.Mat3`; ValueError unless finite, 3x3, |R^T R - I| <= tol and
+    det > 0."""
     M = np.asarray(R, dtype=float)
     if M.shape != (3, 3):
         raise ValueError("%s must be a 3x3 rotation matrix, got shape %s" % (name, M.shape))
-    a, b, c, d, e, f, g, h, i = M.ravel().tolist()
+    a, b, c, d, e, f, g, h, i = rotation = Mat3(*M.ravel().tolist())
     if not math.isfinite(a + b + c + d + e + f + g + h + i):
         raise ValueError("%s has non-finite elements" % name)
     # Columns must be orthonormal: R^T R = I.
@@ -288,7 +250,7 @@ def _rotation_floats(R: ArrayLike, name: str, tol: float) -> Tuple[float, ...]:
     det = a * (e * i - f * h) - b * (d * i - f * g) + c * (d * h - e * g)
     if not (err <= tol and det > 0.0):
         raise ValueError("%s is not a rotation matrix (|R^T R - I| = %.3g, det = %.6g)" % (name, err, det))
-    return a, b, c, d, e, f, g, h, i
+    return rotation
 
 
 def _vector_floats(v: ArrayLike, name: str) -> Vec3:
@@ -317,16 +279,18 @@ class AttitudeController:
         inertia = np.asarray(robot.inertia, dtype=float)
         if inertia.shape != (3, 3) or not np.all(np.isfinite(inertia)):
             raise ParameterError("robot inertia must be a finite 3x3 matrix")
-        self._inertia: Tuple[float, ...] = tuple(inertia.ravel().tolist())
+        self._inertia = Mat3(*inertia.ravel().tolist())
         self._k_drag = float(robot.drag_constant)
         self._net_buoyancy = float(robot.paw_net_buoyancy)
         self._stroke = self._make_stroke(config.stroke_scheme)
         self._pending_scheme: Optional[str] = None
-        self._R_d: Tuple[float, ...] = (1.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 1.0)
+        self._R_d = Mat3(1.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 1.0)
         self._R_d_array = np.eye(3)
         self._hold_reason = ""
-        self._tau_sat: Vec3 = (0.0, 0.0, 0.0)
-        self._omega: Vec3 = (0.0, 0.0, 0.0)
+        self._law_gains_cache: Optional[Tuple[ControllerConfig, LawGains]] = None
+        self._feedforward_cache: Optional[Tuple[ControllerConfig, Feedforward]] = None
+        self._tau_sat: Vec3 = ZERO
+        self._omega: Vec3 = ZERO
         self.reset()
 
     # ---- configuration -----------------------------------------------------------------------
@@ -372,9 +336,9 @@ class AttitudeController:
 
         The integral is kept (the paper does not reset it on setpoint changes).
         """
-        floats = _rotation_floats(R_d, "setpoint R_d", self._config.rotation_tolerance)
-        self._R_d = floats
-        self._R_d_array = np.array(floats).reshape(3, 3)
+        R_d = _rotation_floats(R_d, "setpoint R_d", self._config.rotation_tolerance)
+        self._R_d = R_d
+        self._R_d_array = np.array(R_d).reshape(3, 3)
 
     def set_setpoint_rpy(self, roll: float, pitch: float, yaw: float) -> None:
         """Desired attitude from REP-103 roll, pitch, yaw in radians (R = Rz(yaw) Ry(pitch) Rx(roll))."""
@@ -412,10 +376,10 @@ class AttitudeController:
         The next step integrates over dt. If the legs are mid-stroke, the next targets jump to the
         nominal pose: call :meth:`hold` first to retract them smoothly.
         """
-        self._integral = [0.0, 0.0, 0.0]
-        self._delta_sat: Vec3 = (0.0, 0.0, 0.0)  # Delta_sat of the last command (forward form)
+        self._integral: Vec3 = ZERO  # z of eq. (pid)
+        self._delta_sat: Vec3 = ZERO  # Delta_sat of the last command (forward form)
         self._t_prev: Optional[float] = None
-        self._e_R: Vec3 = (0.0, 0.0, 0.0)
+        self._e_R: Vec3 = ZERO
         self._geodesic = 0.0
         self._hold_reason = ""
         if self._pending_scheme is not None:
@@ -424,6 +388,26 @@ class AttitudeController:
         self._stroke.reset()
 
     # ---- helpers -----------------------------------------------------------------------------
+
+    def _law_gains(self) -> LawGains:
+        """The gains and limits in force, for :func:`control_law_f` (built once per configuration)."""
+        config = self._config
+        cached = self._law_gains_cache
+        if cached is None or cached[0] is not config:
+            gains = config.gains
+            cached = self._law_gains_cache = (config, LawGains(gains.k_p, gains.k_i, gains.k_d, gains.k_aw,
+                                                                config.tau_max, config.integral_limit))
+        return cached[1]
+
+    def _feedforward(self) -> Feedforward:
+        """The feedforward switches in force and the robot's terms, for :func:`control_law_f`."""
+        config = self._config
+        cached = self._feedforward_cache
+        if cached is None or cached[0] is not config:
+            cached = self._feedforward_cache = (config, Feedforward(config.gyroscopic_feedforward, self._inertia,
+                                                                    config.buoyancy_feedforward,
+                                                                    self._net_buoyancy))
+        return cached[1]
 
     def _elapsed(self, t: float) -> float:
         """Elapsed time since the previous step/hold, clipped to [0, max_step]; dt for the first call."""
@@ -438,9 +422,8 @@ class AttitudeController:
     def _velocity_command(self, leg: int, r: Vec3, share: float = 0.25) -> Vec3:
         """eq. (foot_vel) for one leg at a power-phase start, from the latest tau_sat and omega, with the
         leg's torque tau_i = share * tau_sat (the paper: tau_sat / 4)."""
-        tx, ty, tz = self._tau_sat
-        tau_i = (share * tx, share * ty, share * tz)
-        return foot_velocity_command_f(tau_i, r, self._omega, self._k_drag, self._config.normalize_force_direction)
+        return foot_velocity_command_f(scale(share, self._tau_sat), r, self._omega, self._k_drag,
+                                       self._config.normalize_force_direction)
 
     def _output(self, t: float, h: float, tau_cmd: Vec3, tau_sat: Vec3, saturated: bool,
                 feedforward: Vec3) -> ControllerOutput:
@@ -485,38 +468,31 @@ class AttitudeController:
         if not math.isfinite(t):
             raise ValueError("time must be finite, got %r" % (t,))
         config = self._config
-        r00, r01, r02, r10, r11, r12, r20, r21, r22 = _rotation_floats(R, "attitude R", config.rotation_tolerance)
-        wx, wy, wz = _vector_floats(omega, "angular velocity omega")
+        R_measured = _rotation_floats(R, "attitude R", config.rotation_tolerance)
+        omega_measured = _vector_floats(omega, "angular velocity omega")
         w_max = config.max_angular_rate
-        if not (abs(wx) <= w_max and abs(wy) <= w_max and abs(wz) <= w_max):
-            raise ValueError("angular velocity omega %r exceeds max_angular_rate %g rad/s" % ((wx, wy, wz), w_max))
+        if not all(abs(w) <= w_max for w in omega_measured):
+            raise ValueError("angular velocity omega %r exceeds max_angular_rate %g rad/s" % (omega_measured, w_max))
         h = self._elapsed(t)
         if self._stroke.holding:
             self._hold_reason = ""
-        gains = config.gains
-        sx = sy = sz = 0.0
+        feet_sum = ZERO
         if config.buoyancy_feedforward:
-            for px, py, pz in self._stroke.positions:
-                sx += px
-                sy += py
-                sz += pz
-        z = self._integral
-        (ex, ey, ez, self._geodesic, z[0], z[1], z[2], cx, cy, cz, sx_, sy_, sz_, saturated, fx, fy,
-         fz) = control_law_f(self._R_d, (r00, r01, r02, r10, r11, r12, r20, r21, r22), wx, wy, wz, z,
-                             self._delta_sat, h, gains.k_p, gains.k_i, gains.k_d, gains.k_aw, config.tau_max,
-                             config.integral_limit, self._inertia, config.gyroscopic_feedforward,
-                             config.buoyancy_feedforward, (sx, sy, sz), self._net_buoyancy)
-        self._e_R = (ex, ey, ez)
-        self._delta_sat = (cx - sx_, cy - sy_, cz - sz_)
-        self._tau_sat = (sx_, sy_, sz_)
-        self._omega = (wx, wy, wz)
+            for foot in self._stroke.positions:
+                feet_sum = add(feet_sum, foot)
+        law = control_law_f(self._R_d, R_measured, omega_measured, self._integral, self._delta_sat, h,
+                            self._law_gains(), self._feedforward(), feet_sum)
+        self._e_R, self._geodesic, self._integral = law.e_R, law.geodesic, law.z
+        self._delta_sat = sub(law.tau_cmd, law.tau_sat)
+        self._tau_sat = law.tau_sat
+        self._omega = omega_measured
 
         # Allocation (latched at power starts), eq. (foot_integration) and IK.
         if self._pending_scheme is not None:
             self._switch_step(h)
         else:
             self._stroke.advance(h, self._velocity_command)
-        return self._output(t, h, (cx, cy, cz), (sx_, sy_, sz_), saturated, (fx, fy, fz))
+        return self._output(t, h, law.tau_cmd, law.tau_sat, law.saturated, law.feedforward)
 
     def _switch_step(self, h: float) -> None:
         """One step of a scheme switch: the old scheme holds until its feet are at the nominal pose."""
@@ -542,8 +518,8 @@ class AttitudeController:
         else:
             h = self._config.dt
         self._hold_reason = str(reason)
-        self._delta_sat = (0.0, 0.0, 0.0)
-        self._tau_sat = (0.0, 0.0, 0.0)
+        self._delta_sat = ZERO
+        self._tau_sat = ZERO
         self._stroke.hold(h)
         zero = (0.0, 0.0, 0.0)
         return self._output(t_value if math.isfinite(t_value) else (self._t_prev or 0.0), h, zero, zero, False, zero)

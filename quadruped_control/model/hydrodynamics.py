@@ -27,13 +27,14 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
-from typing import Iterable, Sequence, Tuple, Union
+from typing import Iterable, NamedTuple, Sequence, Tuple, Union
 
 import numpy as np
 
 from quadruped_common.config import ParameterError
 from quadruped_common.jit import jitable
 from quadruped_common.so3 import hat
+from quadruped_common.vec3 import Mat3
 from quadruped_control.model.params import RobotParams
 
 ArrayLike = Union[Sequence[float], Sequence[Sequence[float]], np.ndarray]
@@ -44,6 +45,7 @@ Wrench6 = Tuple[float, float, float, float, float, float]
 
 __all__ = [
     "BodyDragCoefficients",
+    "BodyDragFloats",
     "body_drag",
     "body_drag_coefficients",
     "body_drag_f",
@@ -200,14 +202,15 @@ def paw_buoyancy(r_feet_body: ArrayLike, R: ArrayLike, params: RobotParams) -> T
 
 
 @jitable
-def paw_buoyancy_f(feet: Sequence[FootRow], net_paw_buoyancy: float) -> Tuple[float, Tuple[float, ...]]:
+def paw_buoyancy_f(feet: Sequence[FootRow], net_paw_buoyancy: float) -> Tuple[float, Mat3]:
     """Fast path of :func:`paw_buoyancy`, eq. (buoy_force), (buoy_torque), on floats, for legs held over
     an integration step: (F_z, U) with F_buoyancy^W = (0, 0, F_z) and tau_buoyancy^B = U (R^T z_hat).
 
     ``feet``: rows whose first three floats are r_e,i^B (the rows of :func:`paw_drag_wrench_f`);
-    ``net_paw_buoyancy``: B_net = g rho V_s - m_s g of one paw, N. U = B_net hat(sum_i r_i) is a
-    row-major 9-tuple: the torque (sum_i r_i) x (R^T B_net z_hat) is linear in R^T z_hat, so the
-    integrator forms U once per step and the stages only multiply it by the third row of R.
+    ``net_paw_buoyancy``: B_net = g rho V_s - m_s g of one paw, N. U = B_net hat(sum_i r_i) (a
+    :class:`~quadruped_common.vec3.Mat3`): the torque (sum_i r_i) x (R^T B_net z_hat) is linear in
+    R^T z_hat, so the integrator forms U once per step and the stages only multiply it by the third row
+    of R.
     """
     sx = sy = sz = 0.0
     for foot in feet:
@@ -217,7 +220,7 @@ def paw_buoyancy_f(feet: Sequence[FootRow], net_paw_buoyancy: float) -> Tuple[fl
     sx *= net_paw_buoyancy
     sy *= net_paw_buoyancy
     sz *= net_paw_buoyancy
-    return len(feet) * net_paw_buoyancy, (0.0, -sz, sy, sz, 0.0, -sx, -sy, sx, 0.0)
+    return len(feet) * net_paw_buoyancy, Mat3(0.0, -sz, sy, sz, 0.0, -sx, -sy, sx, 0.0)
 
 
 def torso_buoyancy_torque_matrix(buoyancy: float, center_of_buoyancy: ArrayLike) -> np.ndarray:
@@ -258,6 +261,20 @@ def inertia_box(params: RobotParams) -> Tuple[float, float, float]:
     return r_x, r_y, r_z
 
 
+class BodyDragFloats(NamedTuple):
+    """:class:`BodyDragCoefficients` as floats, in the order :func:`body_drag_f` takes them: the quadratic
+    force (q_x, q_y, q_z) and torque (p_x, p_y, p_z) coefficients, then the viscous c_f and c_g."""
+
+    q_x: float
+    q_y: float
+    q_z: float
+    p_x: float
+    p_y: float
+    p_z: float
+    c_f: float
+    c_g: float
+
+
 @dataclass(frozen=True)
 class BodyDragCoefficients:
     """Coefficients of the inertia-box drag, eq. (quad) and (visc), per body axis (x, y, z).
@@ -271,9 +288,10 @@ class BodyDragCoefficients:
     visc_torque: float       # 8 pi beta r_eq^3, kg m^2 / s
 
     @property
-    def flat(self) -> Tuple[float, ...]:
+    def flat(self) -> BodyDragFloats:
         """The eight coefficients as floats, in the order :func:`body_drag_f` takes them."""
-        return tuple(self.quad_force.tolist() + self.quad_torque.tolist() + [self.visc_force, self.visc_torque])
+        return BodyDragFloats(*self.quad_force.tolist(), *self.quad_torque.tolist(), self.visc_force,
+                              self.visc_torque)
 
 
 @jitable

@@ -48,13 +48,14 @@ Decisions (see also the docstrings):
 from __future__ import annotations
 
 import math
-from typing import Any, Optional, Sequence, Tuple, Union
+from typing import Any, Dict, NamedTuple, Optional, Sequence, Tuple, Union
 
 import numpy as np
 
 from quadruped_common.jit import hypot2, jitable
 from quadruped_common.robot import LEGS, MIRROR_DIAG
 from quadruped_common.so3 import TWO_PI, hat, wrap_angle
+from quadruped_common.vec3 import Mat3
 from quadruped_control.model.params import FiveBar, RobotParams
 
 NUM_LEGS = len(LEGS)
@@ -148,13 +149,27 @@ def _closure_terms(c1: Any, s1: Any, c2: Any, s2: Any, c21: Any, a1: float, a3: 
     return e, f, g, e * e + f * f - g * g
 
 
+class LinkDirections(NamedTuple):
+    """The directions of the five-bar's four links: cos and sin of theta1 (a1), theta2 (a2), phi (a4) and
+    psi (a3)."""
+
+    cos_theta1: float
+    sin_theta1: float
+    cos_theta2: float
+    sin_theta2: float
+    cos_phi: float
+    sin_phi: float
+    cos_psi: float
+    sin_psi: float
+
+
 @jitable
 def _closure_point(theta1: float, theta2: float, a1: float, a2: float, a3: float, a4: float,
-                   c: float) -> Tuple[bool, float, float, Tuple[float, ...], float, float]:
+                   c: float) -> Tuple[bool, float, float, LinkDirections, float, float]:
     """The one implementation of the five-bar forward kinematics, eq. (fk_EFG), (fk_phi), (fk_planar), on
     floats, without raising (compiled code calls it too, :mod:`quadruped_common.jit`): ``(closes, x_d,
-    y_prime, links, disc, g)``. ``links`` = (cos theta1, sin theta1, cos theta2, sin theta2, cos phi,
-    sin phi, cos psi, sin psi) are the directions of the four links (phi of a4, psi of a3), which is all
+    y_prime, links, disc, g)``. ``links`` (:class:`LinkDirections`) are the directions of the four links
+    (phi of a4, psi of a3), which is all
     the Jacobian (:func:`_five_bar_rates_core`) needs: the angles phi and psi themselves only
     :func:`five_bar_fk` reports. ``closes`` is False where E^2 + F^2 - G^2 < 0 (the passive links cannot
     close) or the two elbows coincide (phi undefined); the other values are then meaningless, but for
@@ -169,7 +184,7 @@ def _closure_point(theta1: float, theta2: float, a1: float, a2: float, a3: float
     e, f, g, disc = _closure_terms(c1, s1, c2, s2, c2 * c1 + s2 * s1, a1, a3, c)
     # The relative tolerance only matters at the edge of the workspace; NaN fails every comparison.
     if not ((disc >= 0.0 or disc >= -_ROUND_TOL * _closure_scale(a1, a3, c)) and g >= 1e-24):
-        return False, 0.0, 0.0, (0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0), disc, g
+        return False, 0.0, 0.0, LinkDirections(0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0), disc, g
     # eq. (fk_phi): phi = 2 atan2(num, den), so cos phi = (den^2 - num^2) / r2, sin phi = 2 num den / r2
     num = -f + math.sqrt(disc if disc > 0.0 else 0.0)
     den = g - e
@@ -183,12 +198,12 @@ def _closure_point(theta1: float, theta2: float, a1: float, a2: float, a3: float
     u_x, u_y = x_d - a1 * c1, y_prime - a1 * s1  # link a3, from elbow A to the foot
     length = hypot2(u_x, u_y)
     if not length > 0.0:
-        return False, 0.0, 0.0, (0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0), disc, g
-    return True, x_d, y_prime, (c1, s1, c2, s2, c_phi, s_phi, u_x / length, u_y / length), disc, g
+        return False, 0.0, 0.0, LinkDirections(0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0), disc, g
+    return True, x_d, y_prime, LinkDirections(c1, s1, c2, s2, c_phi, s_phi, u_x / length, u_y / length), disc, g
 
 
 def _five_bar_closure(theta1: float, theta2: float, a1: float, a2: float, a3: float, a4: float,
-                      c: float) -> Tuple[float, float, Tuple[float, ...]]:
+                      c: float) -> Tuple[float, float, LinkDirections]:
     """The five-bar forward kinematics of :func:`_closure_point`, raising: the core of :func:`five_bar_fk`,
     :func:`five_bar_jacobian`, :func:`foot_position` and :func:`foot_jacobian`.
 
@@ -204,7 +219,7 @@ def _five_bar_closure(theta1: float, theta2: float, a1: float, a2: float, a3: fl
     return x_d, y_prime, links
 
 
-def _checked_closure(theta1: float, theta2: float, geometry: FiveBar) -> Tuple[float, float, Tuple[float, ...]]:
+def _checked_closure(theta1: float, theta2: float, geometry: FiveBar) -> Tuple[float, float, LinkDirections]:
     """:func:`_five_bar_closure` for the public functions: refuses non-finite angles first."""
     if not (math.isfinite(theta1) and math.isfinite(theta2)):
         raise UnreachableError("five-bar angles must be finite, got (%r, %r)" % (theta1, theta2))
@@ -224,7 +239,7 @@ def five_bar_fk(theta1: float, theta2: float, geometry: FiveBar) -> Tuple[float,
     cannot close) or if the two elbows coincide (phi undefined).
     """
     x_d, y_prime, links = _checked_closure(theta1, theta2, geometry)
-    phi, psi = math.atan2(links[5], links[4]), math.atan2(links[7], links[6])
+    phi, psi = math.atan2(links.sin_phi, links.cos_phi), math.atan2(links.sin_psi, links.cos_psi)
     return x_d, y_prime, wrap_angle(phi), wrap_angle(psi - theta1), wrap_angle(phi - theta2)
 
 
@@ -259,7 +274,7 @@ def five_bar_ik(x_d: float, y_prime: float, geometry: FiveBar) -> Tuple[float, f
 
 
 @jitable
-def _five_bar_rates_core(links: Tuple[float, ...], a1: float, a2: float) -> Tuple[bool, float, float, float, float]:
+def _five_bar_rates_core(links: LinkDirections, a1: float, a2: float) -> Tuple[bool, float, float, float, float]:
     """The one implementation of the five-bar Jacobian d(x_d, y')/d(theta1, theta2) (the five-bar block
     of eq. (J_leg), see :func:`five_bar_jacobian`), on floats, at a configuration of
     :func:`_closure_point` (its ``links``: cosines and sines of theta1, theta2, phi of a4 and psi of a3),
@@ -274,7 +289,7 @@ def _five_bar_rates_core(links: Tuple[float, ...], a1: float, a2: float) -> Tupl
     return True, k1 * s_phi, -(k2 * s_psi), -k1 * c_phi, k2 * c_psi
 
 
-def _five_bar_rates(theta1: float, theta2: float, links: Tuple[float, ...], a1: float,
+def _five_bar_rates(theta1: float, theta2: float, links: LinkDirections, a1: float,
                     a2: float) -> Tuple[float, float, float, float]:
     """:func:`_five_bar_rates_core`, raising :class:`UnreachableError` at the singularity (at the
     actuated angles theta1, theta2)."""
@@ -367,7 +382,7 @@ def foot_position(q: ArrayLike, leg: int, params: RobotParams) -> np.ndarray:
     t1, t2, t3 = _q3(q)
     x_d, y_prime, _ = _checked_closure(t1, t2, params.five_bar)
     px, py, pz = _leg_point(x_d, y_prime, math.cos(t3), math.sin(t3), params.l_y, params.l_z)
-    return np.array(_ee_body(_geometry(params)[0][leg], px, py, pz))
+    return np.array(_ee_body(_geometry(params).frames[leg], px, py, pz))
 
 
 def body_to_leg(r: ArrayLike, leg: int, params: RobotParams) -> np.ndarray:
@@ -462,18 +477,49 @@ def joint_angles(r: ArrayLike, leg: int, params: RobotParams) -> np.ndarray:
     return np.array(joint_angles_floats(rx, ry, rz, leg, params))
 
 
-# Geometry constants of the float paths (:func:`joint_angles_floats`, :func:`leg_kinematics_flat`,
-# :func:`foot_position`), cached per RobotParams object (frozen, so safe).
-_GEOMETRY_CACHE: "dict[int, Tuple[RobotParams, tuple]]" = {}
+class IkConstants(NamedTuple):
+    """The constants of :func:`ik_row`: the five-bar (a1, a2, a3, a4, c), the hip offsets (l_y, l_z), m, and
+    the servo ranges [theta_k_min, theta_k_max], rad."""
+
+    a1: float
+    a2: float
+    a3: float
+    a4: float
+    c: float
+    l_y: float
+    l_z: float
+    theta1_min: float
+    theta1_max: float
+    theta2_min: float
+    theta2_max: float
+    theta3_min: float
+    theta3_max: float
+
+
+class LegGeometry(NamedTuple):
+    """The geometry of the float paths (:func:`joint_angles_floats`, :func:`leg_kinematics_flat`,
+    :func:`foot_position`) as floats: ``frames[leg]`` = (o_x, o_y, o_z, m_x, m_y, m_z) of eq. (ee_body),
+    ``frame_rows`` the same in the order of LEGS, and the five-bar, hip and servo-range constants
+    (``ik``, as :func:`ik_row` takes them)."""
+
+    frames: Dict[int, Tuple[float, ...]]
+    frame_rows: Tuple[Tuple[float, ...], ...]
+    ik: IkConstants
+
+    @property
+    def five_bar_hip(self) -> Tuple[float, ...]:
+        """(a1, a2, a3, a4, c, l_y, l_z), as :func:`leg_row` takes them."""
+        return tuple(self.ik[:7])
+
+
+# The LegGeometry of each RobotParams object (frozen, so safe to cache).
+_GEOMETRY_CACHE: "dict[int, Tuple[RobotParams, LegGeometry]]" = {}
 #: The most recently used entry of _GEOMETRY_CACHE (rebound atomically), checked first.
-_GEOMETRY_LAST: "Tuple[Optional[RobotParams], tuple]" = (None, ())
+_GEOMETRY_LAST: "Tuple[Optional[RobotParams], Optional[LegGeometry]]" = (None, None)
 
 
-def _geometry(params: RobotParams) -> tuple:
-    """(frames, frame rows, a1, a2, a3, a4, c, l_y, l_z, low1, high1, low2, high2, low3, high3, the same 13
-    constants as one tuple) as floats: ``frames[leg]`` = (o_x, o_y, o_z, m_x, m_y, m_z) of eq. (ee_body),
-    ``frame rows`` the same in the order of LEGS, then the five-bar, hip and servo-range constants (the
-    last item is :func:`ik_row`'s ``constants``)."""
+def _geometry(params: RobotParams) -> LegGeometry:
+    """The :class:`LegGeometry` of ``params`` (cached)."""
     global _GEOMETRY_LAST
     last = _GEOMETRY_LAST
     if last[0] is params:
@@ -485,10 +531,9 @@ def _geometry(params: RobotParams) -> tuple:
     fb, limits = params.five_bar, params.joint_limits
     frames = {leg: tuple(float(x) for x in params.leg_origins[leg].tolist()) + tuple(MIRROR_DIAG[leg])
               for leg in LEGS}
-    values = (frames, tuple(frames[leg] for leg in LEGS), float(fb.a1), float(fb.a2), float(fb.a3), float(fb.a4),
-              float(fb.c), float(params.l_y), float(params.l_z)) \
-        + tuple(float(x) for x in limits.theta1 + limits.theta2 + limits.theta3)
-    values += (values[2:15],)
+    ik = IkConstants(float(fb.a1), float(fb.a2), float(fb.a3), float(fb.a4), float(fb.c), float(params.l_y),
+                     float(params.l_z), *(float(x) for x in limits.theta1 + limits.theta2 + limits.theta3))
+    values = LegGeometry(frames, tuple(frames[leg] for leg in LEGS), ik)
     if len(_GEOMETRY_CACHE) > 64:
         _GEOMETRY_CACHE.clear()
     _GEOMETRY_CACHE[id(params)] = _GEOMETRY_LAST = (params, values)
@@ -506,10 +551,10 @@ def joint_angles_floats(rx: float, ry: float, rz: float, leg: int, params: Robot
     compare the two bit for bit.
     """
     last = _GEOMETRY_LAST
-    constants = last[1] if last[0] is params else _geometry(params)
-    frame = constants[0].get(leg)
+    geometry = last[1] if last[0] is params else _geometry(params)
+    frame = geometry.frames.get(leg)
     if frame is not None:
-        reached, theta1, theta2, theta3 = ik_row(rx, ry, rz, frame, constants[15])
+        reached, theta1, theta2, theta3 = ik_row(rx, ry, rz, frame, geometry.ik)
         if reached:
             return theta1, theta2, theta3
     t1, t2, t3 = joint_angles_full((rx, ry, rz), leg, params)[:3].tolist()
@@ -518,21 +563,24 @@ def joint_angles_floats(rx: float, ry: float, rz: float, leg: int, params: Robot
 
 @jitable
 def ik_row(rx: float, ry: float, rz: float, frame: Sequence[float],
-           constants: Sequence[float]) -> Tuple[bool, float, float, float]:
+           constants: IkConstants) -> Tuple[bool, float, float, float]:
     """The one implementation of the leg IK on floats, without raising (compiled code calls it too):
     (reached, theta1, theta2, theta3) for the body-frame target (rx, ry, rz) of the leg ``frame``
-    (o_x, o_y, o_z, m_x, m_y, m_z) and the ``constants`` (a1, a2, a3, a4, c, l_y, l_z, low1, high1, low2,
-    high2, low3, high3) of :func:`_geometry`, eq. (ee_body) inverted, eq. (ik_theta3), (ik_dists),
-    (ik_alphas), (ik_theta1245), wrapped into the servo ranges [low, high]. ``reached`` False where the target is not
-    plainly reachable (the angles are then 0); :func:`joint_angles_floats` then asks
-    :func:`joint_angles_full` for the proper error (or its result for the rare rounding-boundary cases)."""
+    (o_x, o_y, o_z, m_x, m_y, m_z) and the :class:`IkConstants` ``constants``: eq. (ee_body) inverted,
+    eq. (ik_theta3), (ik_dists), (ik_alphas), (ik_theta1245), wrapped into the servo ranges. ``reached``
+    False where the target is not plainly reachable (the angles are then 0); :func:`joint_angles_floats`
+    then asks :func:`joint_angles_full` for the proper error (or its result for the rare rounding-boundary
+    cases)."""
     ox, oy, oz, mx, my, mz = frame[0], frame[1], frame[2], frame[3], frame[4], frame[5]
-    a1, a2, a3, a4, c, l_y, l_z, low1, high1, low2, high2, low3, high3 = constants
+    a1, a2, a3, a4, c = constants.a1, constants.a2, constants.a3, constants.a4, constants.c
+    low1, high1 = constants.theta1_min, constants.theta1_max
+    low2, high2 = constants.theta2_min, constants.theta2_max
+    low3, high3 = constants.theta3_min, constants.theta3_max
     x_d, y_d, z_d = mx * (rx - ox), my * (ry - oy), mz * (rz - oz)
     radius = hypot2(y_d, z_d)
-    if radius >= l_z and math.isfinite(x_d + radius):  # also rejects NaN
+    if radius >= constants.l_z and math.isfinite(x_d + radius):  # also rejects NaN
         # eq. (ik_theta3), then wrap_into_range into the hip servo range
-        theta3, y_prime = _hip_solution(y_d, z_d, radius, l_y, l_z)
+        theta3, y_prime = _hip_solution(y_d, z_d, radius, constants.l_y, constants.l_z)
         theta3 = theta3 + math.ceil((low3 - _ANGLE_TOL - theta3) / TWO_PI) * TWO_PI
         if theta3 <= high3 + _ANGLE_TOL:
             # five_bar_ik without theta4, theta5 (their arccos arguments are only range-checked)
@@ -556,19 +604,20 @@ def ik_row(rx: float, ry: float, rz: float, frame: Sequence[float],
 
 @jitable
 def _jacobian_entries(j11: float, j12: float, j21: float, j22: float, c3: float, s3: float, p_y: float, p_z: float,
-                      m_x: float, m_y: float, m_z: float) -> Tuple[float, ...]:
-    """J_P,i^B = M_i [columns], row-major: the columns are the leg-frame foot velocities of :func:`_leg_rate`
+                      m_x: float, m_y: float, m_z: float) -> Mat3:
+    """J_P,i^B = M_i [columns]: the columns are the leg-frame foot velocities of :func:`_leg_rate`
     for unit joint rates, M_i = diag(m_x, m_y, m_z) the leg's mirror (eq. (J_leg), (ee_body))."""
     a = _leg_rate(j11, j12, j21, j22, c3, s3, p_y, p_z, 1.0, 0.0, 0.0)
     b = _leg_rate(j11, j12, j21, j22, c3, s3, p_y, p_z, 0.0, 1.0, 0.0)
     d = _leg_rate(j11, j12, j21, j22, c3, s3, p_y, p_z, 0.0, 0.0, 1.0)
-    return (m_x * a[0], m_x * b[0], m_x * d[0], m_y * a[1], m_y * b[1], m_y * d[1], m_z * a[2], m_z * b[2], m_z * d[2])
+    return Mat3(m_x * a[0], m_x * b[0], m_x * d[0], m_y * a[1], m_y * b[1], m_y * d[1], m_z * a[2], m_z * b[2],
+                m_z * d[2])
 
 
 @jitable
 def leg_jacobian_row(t1: float, t2: float, t3: float, frame: Sequence[float], a1: float, a2: float, a3: float,
-                     a4: float, c: float, l_y: float, l_z: float) -> Tuple[bool, Tuple[float, ...]]:
-    """:func:`foot_jacobian` on floats, without raising (compiled code calls it too): (ok, J_P,i^B row-major)
+                     a4: float, c: float, l_y: float, l_z: float) -> Tuple[bool, Mat3]:
+    """:func:`foot_jacobian` on floats, without raising (compiled code calls it too): (ok, J_P,i^B)
     for joint angles (t1, t2, t3) and the leg ``frame`` (o_x, o_y, o_z, m_x, m_y, m_z) of :func:`_geometry`;
     ``ok`` False where the five-bar cannot close or is singular (the values are then meaningless)."""
     closes, x_d, y_prime, links, _, _ = _closure_point(t1, t2, a1, a2, a3, a4, c)
@@ -664,8 +713,9 @@ def leg_kinematics_flat(q: Sequence[Sequence[float]], q_dot: Sequence[Sequence[f
     five-bar cannot assemble, or a singular one, raises :class:`UnreachableError`.
     """
     last = _GEOMETRY_LAST
-    constants = last[1] if last[0] is params else _geometry(params)
-    _, frames, a1, a2, a3, a4, c, l_y, l_z = constants[:9]
+    geometry = last[1] if last[0] is params else _geometry(params)
+    frames = geometry.frame_rows
+    a1, a2, a3, a4, c, l_y, l_z = geometry.five_bar_hip
     out: Tuple[float, ...] = ()
     for (t1, t2, t3), (d1, d2, d3), frame in zip(q, q_dot, frames):
         ok, x, y, z, vx, vy, vz = leg_row(t1, t2, t3, d1, d2, d3, frame, a1, a2, a3, a4, c, l_y, l_z)
@@ -675,18 +725,31 @@ def leg_kinematics_flat(q: Sequence[Sequence[float]], q_dot: Sequence[Sequence[f
     return out
 
 
+class LegRow(NamedTuple):
+    """One leg of :func:`leg_row`: ``ok``, the foot r_e,i^B = (x, y, z) and its joint-induced velocity
+    J_P,i^B q_dot_i = (vx, vy, vz), body frame."""
+
+    ok: bool
+    x: float
+    y: float
+    z: float
+    vx: float
+    vy: float
+    vz: float
+
+
 @jitable
 def leg_row(t1: float, t2: float, t3: float, d1: float, d2: float, d3: float, frame: Sequence[float], a1: float,
-            a2: float, a3: float, a4: float, c: float, l_y: float, l_z: float) -> Tuple[bool, float, float, float,
-                                                                                       float, float, float]:
-    """One leg of :func:`leg_kinematics_flat`, without raising (compiled code calls it too): (ok, r_e,i^B,
-    J_P,i^B q_dot_i) for joint angles (t1, t2, t3), rates (d1, d2, d3) and the leg ``frame`` (o_x, o_y,
-    o_z, m_x, m_y, m_z) of :func:`_geometry`; ``ok`` False where the five-bar cannot close or is singular
-    (the values are then meaningless). eq. (fk_EFG), (fk_phi), (fk_planar), (fk_T), (J_leg), (ee_body)."""
+            a2: float, a3: float, a4: float, c: float, l_y: float, l_z: float) -> LegRow:
+    """One leg of :func:`leg_kinematics_flat`, without raising (compiled code calls it too): the
+    :class:`LegRow` (ok, r_e,i^B, J_P,i^B q_dot_i) for joint angles (t1, t2, t3), rates (d1, d2, d3) and
+    the leg ``frame`` (o_x, o_y, o_z, m_x, m_y, m_z) of :func:`_geometry`; ``ok`` False where the
+    five-bar cannot close or is singular (the values are then meaningless). eq. (fk_EFG), (fk_phi),
+    (fk_planar), (fk_T), (J_leg), (ee_body)."""
     closes, x_d, y_prime, links, _, _ = _closure_point(t1, t2, a1, a2, a3, a4, c)
     regular, j11, j12, j21, j22 = _five_bar_rates_core(links, a1, a2)
     c3, s3 = math.cos(t3), math.sin(t3)
     px, py, pz = _leg_point(x_d, y_prime, c3, s3, l_y, l_z)
     vx, vy, vz = _leg_rate(j11, j12, j21, j22, c3, s3, py, pz, d1, d2, d3)
     x, y, z = _ee_body(frame, px, py, pz)
-    return closes and regular, x, y, z, frame[3] * vx, frame[4] * vy, frame[5] * vz  # M_i J^L q_dot
+    return LegRow(closes and regular, x, y, z, frame[3] * vx, frame[4] * vy, frame[5] * vz)  # M_i J^L q_dot

@@ -2,7 +2,7 @@
 
 :class:`BatchSimulation` is :class:`~quadruped_control.sim.simulation.ClosedLoopSimulation` for N trials
 at once, on arrays with a leading trial axis: the controller of
-:class:`~quadruped_control.control.batch.BatchController`, each trial's servo model (the paper's ideal
+:class:`~quadruped_control.sim.batch_controller.BatchController`, each trial's servo model (the paper's ideal
 servo or the rate-limited lag, :func:`~quadruped_control.sim.servo_model.servo_batch_step`,
 with its own speed and time constant), the joint hold of
 :class:`~quadruped_control.sim.simulation.PlantSimulator` (midpoint and finite-difference rate) and the
@@ -16,9 +16,9 @@ centre-of-buoyancy offset or tank parameters, IMU noise (its own seeded generato
 engine draws, :func:`~quadruped_control.sim.simulation.imu_measurement`) and stroke scheme; the robot and
 the controller's period are shared (:class:`BatchTrial`). When every trial runs the paper's stroke scheme
 with the controller on, the controller is the compiled loop of
-:class:`~quadruped_control.control.batch.BatchController`; otherwise (the coordinated scheme, the
+:class:`~quadruped_control.sim.batch_controller.BatchController`; otherwise (the coordinated scheme, the
 controller off) it is the robot's own controller objects,
-:class:`~quadruped_control.control.batch.ControllerObjects`, and only the plant, servos and recording
+:class:`~quadruped_control.sim.batch_controller.ControllerObjects`, and only the plant, servos and recording
 are batched. ``run(..., stroke_metrics=True)`` accumulates the stroke-scheme figures as it goes
 (:class:`~quadruped_control.sim.stroke_metrics.StrokeTorqueMetrics`).
 
@@ -38,12 +38,12 @@ import numpy as np
 from quadruped_common.jit import kernel
 from quadruped_common.so3 import geodesic_f, rotations_to_rpy, rpy_f
 from quadruped_control.analysis.metrics import compute_metrics
-from quadruped_control.control.batch import BatchController, ControllerObjects
 from quadruped_control.control.controller_config import ControllerConfig
 from quadruped_control.model.params import RobotParams
+from quadruped_control.sim.batch_controller import BatchController, ControllerObjects
 from quadruped_control.sim.magnetic_heading import reported_rotation
 from quadruped_control.sim.plants.paper_batch import PaperPlantBatch
-from quadruped_control.sim.plants.tank import TankParams
+from quadruped_control.sim.plants.tank_params import TankParams
 from quadruped_control.sim.plants.tank_batch import TankPlantBatch
 from quadruped_control.sim.servo_model import ServoParams, servo_batch_step
 from quadruped_control.sim.simulation import imu_measurement
@@ -65,7 +65,7 @@ class BatchTrial:
     servo_model: str = "ideal"
     servo_params: Optional[ServoParams] = None
     restoring_offset: Optional[Sequence[float]] = None
-    #: the tank plant's parameters (:class:`~quadruped_control.sim.plants.tank.TankParams`); None: the paper plant
+    #: the tank plant's parameters (:class:`~quadruped_control.sim.plants.tank_params.TankParams`); None: the paper plant
     tank: Optional[TankParams] = None
     #: IMU noise std: attitude (rad, rotation vector) and gyro (rad/s), drawn from default_rng(seed)
     attitude_noise: float = 0.0

@@ -41,7 +41,7 @@ import numpy as np
 
 from quadruped_common.so3 import geodesic_angles
 from quadruped_control.model.params import RobotParams
-from quadruped_control.sim.plants.tank import TankParams
+from quadruped_control.sim.plants.tank_params import TankParams
 from quadruped_control.sim.plants.tank_batch import TankPlantBatch
 from quadruped_control.sim.servo_model import servo_batch_step
 

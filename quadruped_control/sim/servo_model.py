@@ -186,8 +186,8 @@ def dead_band_command(q: float, command: float, dead_band: float) -> float:
     0.1-0.9 deg at the IB53BHU's ~11 us/deg) so that it does not hunt, and its gear train adds backlash
     of the same order; the joint stops up to d short of each command and a reversal first crosses 2 d of
     command before the joint moves back (the play of a backlash), so a stroke loses a share of its
-    amplitude that grows as the stroke shrinks. (docs/identification.md, "The servos' dead band": the
-    model's strokes sweep about 20 deg of joint angle at every error, so the share stays small.)
+    amplitude that grows as the stroke shrinks. (The model's strokes sweep about 20 deg of joint angle at
+    every error, so the share stays small; docs/tank_model.md, "Candidate effects (project, off by default)".)
 
     Exact for a held command: while |e| > d the lag drives q towards q_cmd - sign(e) d, which it never
     passes, so over a step dz(e) = (q_cmd - sign(e) d) - q and :func:`rate_limited_lag_step` towards that

@@ -24,7 +24,7 @@ with the trial seeds ``--seed`` to ``--seed + N - 1`` (seed 0: the tank's own dr
 every member alike, so members differ by their parameters, not their luck). Then the report gives each
 member's counts as the median and range over its draws, the spread over every run, and the coverage: in
 how many experiments the robot's value lies inside the range of the runs (all of them, and each member's
-own draws), per metric (docs/identification.md, "The ensemble judged over draws", judges the shipped members so).
+own draws), per metric (docs/identification.md, "What the model misses, and why", judges the shipped members so).
 """
 from __future__ import annotations
 
@@ -38,7 +38,7 @@ from typing import Any, Dict, List, Optional, Sequence, Tuple
 from quadruped_common.config import ParameterError, config_path
 from quadruped_control.sim.plants import VALIDITY_NOTE, TankParams, load_tank_params
 from quadruped_control.studies import StudyError
-from quadruped_control.studies.identify import targets
+from quadruped_control.studies.identify_objective import targets
 from quadruped_control.studies.paper_experiments import (DURATION, PAPER_TABLE, case_label, comparison_rows,
                                                          experiment_specs)
 from quadruped_control.studies.runner import code_record

@@ -50,7 +50,8 @@ from quadruped_common.so3 import rpy_to_rot
 from quadruped_control.analysis.bag_report import BagReportError, attitude_rpy, covered_by, read_bags, sorted_unique
 from quadruped_control.analysis.hang import HangFit, fit_axis, spectral_density
 from quadruped_control.model.params import RobotParams, load_robot_params
-from quadruped_control.sim.plants.tank import TankModel, TankParams, load_tank_params
+from quadruped_control.sim.plants.tank import TankModel
+from quadruped_control.sim.plants.tank_params import TankParams, load_tank_params
 from quadruped_control.sim.simulation import load_simulation_settings, nominal_joint_angles
 from quadruped_control.studies import StudyError
 from quadruped_control.studies.ensemble import DEFAULT_FOLDER, disturbance_overrides, tank_files
@@ -319,8 +320,8 @@ def _text(report: Dict[str, Any]) -> str:
     else:
         lines += ["", "The tank's push for tank.yaml (the mean over %s):" % " and ".join(push["axes"]), "", "```yaml",
                   "disturbance:",
-                  "  torque_std: %.3g  # N m, from a hang (%s)" % (push["torque_std"], report["source"]),
-                  "  correlation_time: %.3g  # s" % push["correlation_time"], "```"]
+                  "  disturbance_torque_std: %.3g  # N m, from a hang (%s)" % (push["torque_std"], report["source"]),
+                  "  disturbance_correlation_time: %.3g  # s" % push["correlation_time"], "```"]
     lines += ["", "Each model at the measured attitude: the moment it would need held there (a model that hangs there "
               "needs none) and its stiffness there, against the fitted interval.", "",
               "| tank.yaml | roll: held [mN m] | roll: k [mN m/rad] | pitch: held [mN m] | pitch: k [mN m/rad] "

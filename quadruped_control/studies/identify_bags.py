@@ -30,9 +30,9 @@ body's drift on its rope or in open water, the wakes, the floating block) come f
 ``--lead-in`` s before the window, in which the plant's attitude and body rate are held to the record's
 (:func:`quadruped_control.sim.replay.replay`); 0 starts them at rest. Why: a free-floating body swims,
 and a window that starts it at rest costs 2-3 deg of its error (docs/identification.md). Fit: CMA-ES over
-the named parameters scaled into their bounds (:data:`quadruped_control.studies.identify.PARAMETERS`,
+the named parameters scaled into their bounds (:data:`quadruped_control.studies.identify_parameters.PARAMETERS`,
 with their physical reasons), from the base tank.yaml's values, seeded
-(:func:`quadruped_control.studies.identify.fit`). Reported on the training runs and the held-out runs
+(:func:`quadruped_control.studies.identify_search.fit`). Reported on the training runs and the held-out runs
 alike, beside two references: the base tank.yaml, and "still", a model that predicts no motion (the
 attitude held at each window's start). A plant that does not beat "still" on held-out runs predicts
 nothing.
@@ -75,13 +75,14 @@ from quadruped_control.analysis.bag_report import BagData, BagReportError, cover
 from quadruped_control.analysis.strokes import foot_paths
 from quadruped_control.model.params import RobotParams, load_robot_params
 from quadruped_control.sim.magnetic_heading import reported_rotation
-from quadruped_control.sim.plants.tank import TankParams, load_tank_params
+from quadruped_control.sim.plants.tank_params import TankParams, load_tank_params
 from quadruped_control.sim.replay import (Record, attitude_errors, joint_errors, replay, replay_servos,
                                           sample_index, still_errors, window_starts)
 from quadruped_control.sim.servo_model import ServoParams, load_servo_params
 from quadruped_control.studies import StudyError
-from quadruped_control.studies.identify import (BOUNDS, PARAMETERS, fit, nominal_values, tank_overrides,
-                                                update_tank_yaml)
+from quadruped_control.studies.identify_parameters import (BOUNDS, PARAMETERS, nominal_values, tank_overrides,
+                                                           update_tank_yaml)
+from quadruped_control.studies.identify_search import fit
 from quadruped_control.studies.runner import code_record, command_line, describe_source, warn_uncommitted
 
 __all__ = ["PLANT_PARAMETERS", "SERVO_FITTED", "SERVO_GRID", "SERVO_PARAMETERS", "ReplayObjective", "ServoObjective",
@@ -89,12 +90,12 @@ __all__ = ["PLANT_PARAMETERS", "SERVO_FITTED", "SERVO_GRID", "SERVO_PARAMETERS",
 
 #: The identification's parameters of the servo model: the replay drives the plant with the measured
 #: joints, so these do not enter it.
-SERVO_PARAMETERS = ("servo_speed_scale", "servo_lag_scale", "servo_load_slope", "servo_dead_band")
+SERVO_PARAMETERS = ("servo_speed_scale", "servo_lag_scale", "servo_stall_torque_inverse", "servo_dead_band")
 #: The heading the IMU reports (a residual field at it): a property of the sensor, not of the plant. The
 #: replay starts each window from the recorded attitude as if it were the true one and compares the plant's
 #: true attitude with the record, so it cannot fit them.
-SENSOR_PARAMETERS = ("imu_field_x", "imu_field_y", "imu_field_z")
-#: Every parameter of :data:`~quadruped_control.studies.identify.PARAMETERS` that the replay can fit.
+SENSOR_PARAMETERS = ("imu_field_residual_x", "imu_field_residual_y", "imu_field_residual_z")
+#: Every parameter of :data:`~quadruped_control.studies.identify_parameters.PARAMETERS` that the replay can fit.
 PLANT_PARAMETERS = tuple(name for name, _, _ in PARAMETERS if name not in SERVO_PARAMETERS + SENSOR_PARAMETERS)
 
 #: The plant's step (s): the controller's period, on which the closed-loop engines hold the joints.
@@ -256,7 +257,7 @@ class ReplayObjective:
     """The replay's objective (module docstring) over ``records``' windows of ``steps`` steps, one every
     ``stride`` samples, sampled every ``every`` steps, each after a lead-in of ``lead`` steps; parameter
     sets are partial: the rest is ``nominal`` (the base tank.yaml's values), applied to ``base``. Callable as
-    :func:`~quadruped_control.studies.identify.fit` evaluates: ``objective(sets, cases, tag)`` -> one
+    :func:`~quadruped_control.studies.identify_search.fit` evaluates: ``objective(sets, cases, tag)`` -> one
     ``{"values", "objective"}`` per set (``cases`` and ``tag`` unused: every window counts)."""
 
     def __init__(self, robot: RobotParams, base: TankParams, nominal: Dict[str, float], records: Sequence[Record],
@@ -429,7 +430,7 @@ def _records(args: argparse.Namespace, robot: RobotParams) -> Tuple[List[Record]
             [smoothed(r, args.joint_filter_hz) for r, _ in held_out], [s for _, s in training + held_out])
 
 
-#: The servo parameters the servos' half fits (:func:`fit_servos`); the load (servo_load_slope) needs the
+#: The servo parameters the servos' half fits (:func:`fit_servos`); the load (servo_stall_torque_inverse) needs the
 #: plant's joint loads and is not fitted.
 SERVO_FITTED = ("servo_speed_scale", "servo_lag_scale", "servo_dead_band")
 

@@ -43,15 +43,17 @@ import time
 from typing import Any, Dict, List, Optional, Sequence
 
 from quadruped_common.config import ParameterError
-from quadruped_control.sim.plants.tank import load_tank_params
+from quadruped_control.sim.plants.tank_params import load_tank_params
 from quadruped_control.studies import StudyError
-from quadruped_control.studies.identify import BOUNDS, GROUPS, Evaluator, fit, nominal_values
+from quadruped_control.studies.identify_objective import GROUPS, Evaluator
+from quadruped_control.studies.identify_parameters import BOUNDS, nominal_values
+from quadruped_control.studies.identify_search import fit
 from quadruped_control.studies.runner import code_record, command_line, warn_uncommitted
 
 __all__ = ["COUNTS", "check_base", "check_values", "load_report", "main", "plot_profile", "profile", "profile_point",
            "summed_targets"]
 
-#: The held-out counts of the issue's targets, summed over the folds.
+#: The held-out counts of the reproduction targets, summed over the folds.
 COUNTS = ("same_outcome", "t_s_within_2x", "t_r_within_2x", "yaw_t_s_within_2x", "yaw_t_s_reported", "cases")
 
 
@@ -160,7 +162,7 @@ def plot_profile(result: Dict[str, Any], path: str) -> None:
         line, = right.plot(values, [p["held_out"][key] for p in points], "o-", label=label)
         right.axhline(target, color=line.get_color(), ls=":", lw=1)
     right.set(xlabel=result["parameter"], ylabel="held out, of 15 (yaw: of those reported)",
-              title="held-out counts (dotted: the issue's targets)")
+              title="held-out counts (dotted: the targets)")
     right.legend(fontsize=8)
     figure.tight_layout()
     figure.savefig(path, dpi=110)

@@ -4,7 +4,7 @@
         [--controller-yaml YAML] [--gains bench] [--axes roll pitch yaw] [--errors DEG ...]
         [--duration 40] [--settle 10] [--measured AXIS ERROR_DEG TORQUE_NM] ...
 
-Why (docs/identification.md, "The loop's shape"): on the identified tank model the strokes' net torque
+Why (docs/identification.md, "What the model misses, and why"): on the identified tank model the strokes' net torque
 reaches half its largest value at 1-2 degrees of attitude error, where the experiment gains ask for a
 tenth to a sixth of the 2 N m they saturate at. Beyond a few degrees the controller acts as a relay: the model
 approaches at a steady rate and stops. The real robot overshoots and settles slowly, as a loop that stays
@@ -43,7 +43,8 @@ from quadruped_common.so3 import rpy_to_rot
 from quadruped_control.control.controller_config import ControllerConfig, load_controller_config
 from quadruped_control.model.params import RobotParams, load_robot_params
 from quadruped_control.sim.plants.clamped import ClampedTank
-from quadruped_control.sim.plants.tank import VALIDITY_NOTE, TankModel, TankParams, load_tank_params
+from quadruped_control.sim.plants.tank import VALIDITY_NOTE, TankModel
+from quadruped_control.sim.plants.tank_params import TankParams, load_tank_params
 from quadruped_control.sim.servo_model import RateLimitedServo, ServoParams, load_servo_params, tank_servo_params
 from quadruped_control.sim.simulation import ClosedLoopSimulation, nominal_joint_angles
 

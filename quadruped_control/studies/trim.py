@@ -31,7 +31,8 @@ import numpy as np
 from quadruped_common.config import ParameterError
 from quadruped_common.so3 import rpy_to_rot
 from quadruped_control.model.params import RobotParams, load_robot_params
-from quadruped_control.sim.plants.tank import VALIDITY_NOTE, TankModel, TankParams, load_tank_params
+from quadruped_control.sim.plants.tank import VALIDITY_NOTE, TankModel
+from quadruped_control.sim.plants.tank_params import TankParams, load_tank_params
 from quadruped_control.sim.simulation import nominal_joint_angles
 
 __all__ = ["AXES", "TILTS_DEG", "cob_z_for_pull", "main", "restoring_curve"]

@@ -1,6 +1,7 @@
 """Stroke schemes: how the controller's torque becomes foot motion (:class:`StrokeScheme`).
 
-- ``paper``: the paper's power/recovery cycle, unchanged (:class:`~quadruped_control.control.strokes.paper.StrokeCycle`);
+- ``paper``: the paper's power/recovery cycle, unchanged (:class:`~quadruped_control.control.strokes.paper.StrokeCycle`),
+  which runs :mod:`~quadruped_control.control.strokes.cycle`, the cycle the batched simulator runs too;
 - ``coordinated``: phase-coordinated pairs, recovery to where the next stroke has range, durations from
   path length and servo speed (:class:`~quadruped_control.control.strokes.coordinated.CoordinatedStrokes`).
 

@@ -60,8 +60,9 @@ def cubic_time_profile(u: float) -> float:
 def arc_length_segment(cumulative, count: int, a: float) -> int:
     """The segment j of a polyline with cumulative lengths ``cumulative`` (first ``count``, 0 first) that
     holds arc length ``a``, for 0 < a < length: the last j with cumulative[j] <= a (``bisect_right - 1``;
-    compiled code has no bisect, the robot's path calls :func:`bisect.bisect_right` instead: an index,
-    so both find the same one)."""
+    compiled code has no bisect: the paper's cycle, :mod:`~quadruped_control.control.strokes.cycle`, calls
+    this, :class:`StrokePath` calls :func:`bisect.bisect_right` instead: an index, so both find the same
+    one)."""
     low, high = 0, count - 1
     while high - low > 1:
         middle = (low + high) // 2
@@ -77,8 +78,8 @@ def arc_length_point(points, cumulative, j: int, a: float) -> Tuple[float, float
     """The point at arc length ``a`` on segment ``j`` (:func:`arc_length_segment`) of the polyline
     ``points`` (rows of x, y, z) with cumulative lengths ``cumulative``, interpolated linearly, and the
     index of the nearest recorded point: (x, y, z, index). The arithmetic of
-    :meth:`StrokePath.at_arc_length`, which the robot runs on its lists and the batched controller on
-    arrays, so both retrace their strokes to the same bits."""
+    :meth:`StrokePath.at_arc_length` (on lists) and of the paper's cycle
+    (:mod:`~quadruped_control.control.strokes.cycle`, on arrays), so both retrace strokes to the same bits."""
     w = (a - cumulative[j]) / (cumulative[j + 1] - cumulative[j])
     x0, y0, z0 = points[j][0], points[j][1], points[j][2]
     x1, y1, z1 = points[j + 1][0], points[j + 1][1], points[j + 1][2]
@@ -137,10 +138,12 @@ class StrokePath:
 
 
 class PairState:
-    """State of one leg pair that every scheme keeps: its ``legs``, ``phase`` and the ``time`` since the
-    phase started, the feet's ``paths`` (recovery / hold motion of each leg of the pair) and the latched
-    foot ``velocities`` of a power phase (read by :attr:`StrokeScheme.pair_phase_time` and
-    :attr:`StrokeScheme.velocity_commands`). Schemes add their own slots in a subclass."""
+    """State of one leg pair that a scheme on objects keeps (the coordinated scheme; the paper's cycle keeps
+    its state in arrays, :class:`~quadruped_control.control.strokes.cycle.CycleState`): its ``legs``,
+    ``phase`` and the ``time`` since the phase started, the feet's ``paths`` (recovery / hold motion of each
+    leg of the pair) and the latched foot ``velocities`` of a power phase (read by
+    :attr:`StrokeScheme.pair_phase_time` and :attr:`StrokeScheme.velocity_commands`). Schemes add their
+    own slots in a subclass."""
 
     __slots__ = ("legs", "phase", "time", "paths", "velocities")
 

@@ -23,6 +23,14 @@ eq. (foot_vel), and a recovery phase, in which they return to the start of the s
   (nominal) point. The reported phase is ``'hold'``. Resuming restarts the cycle cleanly: the first pair
   again waits half a recovery, the second starts a power phase as soon as its feet are back at the start.
 
+The cycle itself (start-up, power, recovery, the switch between them) is written once, in
+:mod:`quadruped_control.control.strokes.cycle`, which the batched simulator's controller runs too: this
+class keeps one trial of its :class:`~quadruped_control.control.strokes.cycle.CycleState`, solves the IK
+of the targets the cycle asks for with its own IK (:meth:`StrokeCycle.ik`, injectable; an unreachable
+target raises UnreachableError, which it reports to the cycle as not reached), evaluates the velocity
+command callback at each power start, enlarges the recorded strokes' arrays when they fill (no limit on a
+stroke's length) and adds the hold and the restart.
+
 Timing parameters changed with :meth:`StrokeCycle.set_timing` take effect at the next start of the
 phase they govern (t_pow^max at a power start, t_rec at a recovery start).
 
@@ -33,11 +41,16 @@ clips it); a zero step changes nothing.
 from __future__ import annotations
 
 import math
-from typing import Optional, Sequence, Tuple
+from typing import List, Optional, Sequence, Tuple
+
+import numpy as np
 
 from quadruped_control.control.strokes.base import (PHASE_HOLD, PHASE_POWER, PHASE_RECOVERY, TIME_EPS, IkFunction,
-                                                    PairState, StrokePath, StrokeScheme, Vec3, VelocityCommand,
-                                                    cubic_time_profile)
+                                                    StrokeScheme, Vec3, VelocityCommand)
+from quadruped_control.control.strokes.cycle import (LegSolution, LegTarget, PairSolutions, PairTargets,
+                                                     new_cycle_state, path_nearly_full, power_step, power_targets,
+                                                     recovery_step, recovery_targets, start_power, start_recovery,
+                                                     wait_at_start)
 from quadruped_control.model.kinematics import UnreachableError, joint_angles_floats
 from quadruped_control.model.params import RobotParams
 
@@ -50,17 +63,13 @@ __all__ = [
     "VelocityCommand",
 ]
 
-
-class _Pair(PairState):
-    """Phase state of one leg pair of the paper's cycle."""
-
-    __slots__ = ("t_move", "t_total", "t_pow")
-
-    def __init__(self, legs: Tuple[int, int]) -> None:
-        super().__init__(legs, PHASE_RECOVERY)
-        self.t_move = 0.0      # duration of the cubic retrace motion (recovery)
-        self.t_total = 0.0     # duration of the recovery phase (>= t_move)
-        self.t_pow = 0.0       # latched t_pow_max of the current power phase
+#: Points a recorded stroke holds at first (t_pow^max = 0.5 s at dt = 0.01 s takes 51); doubled when full.
+_INITIAL_CAPACITY = 64
+#: A target the cycle does not need solved, and one the IK cannot reach.
+_NOT_SOLVED = LegSolution(False, 0.0, 0.0, 0.0)
+_UNREACHED = LegSolution(False, 0.0, 0.0, 0.0)
+#: The one trial of the cycle state this class keeps.
+_I = 0
 
 
 class StrokeCycle(StrokeScheme):
@@ -79,7 +88,11 @@ class StrokeCycle(StrokeScheme):
         super().__init__(robot, pairs, t_rec, t_pow_max)
         self._ik_raw = ik if ik is not None else self._default_ik
         self._ik_injected = ik is not None
-        self._start(_Pair)
+        self._set_nominal(robot)
+        #: the pairs' legs, 0-based, as the cycle indexes them
+        self._legs = np.array([[leg - 1 for leg in pair] for pair in self.pairs], dtype=np.int64)
+        self._cycle = new_cycle_state(1, _INITIAL_CAPACITY, self.nominal, self.nominal_joints)
+        self.reset()
 
     # ---- configuration -----------------------------------------------------------------------
 
@@ -108,36 +121,70 @@ class StrokeCycle(StrokeScheme):
 
     def reset(self) -> None:
         """All feet at the nominal pose, cycle at its start (first pair: half recovery; second: power)."""
-        self.positions = list(self.nominal)
-        self.joints = list(self.nominal_joints)
+        cycle = self._cycle
+        cycle.positions[_I] = self.nominal
+        cycle.joints[_I] = self.nominal_joints
+        cycle.ik_fallbacks[_I] = 0
         self.holding = False
         self.hold_time = 0.0
         self._restart(fresh=True)
+        self._sync()
 
     def _restart(self, fresh: bool = False) -> None:
         """Start the cycle from the current state (feet at, or retracing towards, their start points);
         ``fresh``: discard any retract in progress (the feet are at their start points)."""
-        for index, pair in enumerate(self._pairs):
-            incomplete = (not fresh and pair.phase == PHASE_RECOVERY
-                          and pair.time < pair.t_move - TIME_EPS)
-            delay = 0.5 * self.t_rec if index == 0 else 0.0
+        cycle = self._cycle
+        for pair in range(2):
+            time, t_move = float(cycle.phase_time[_I, pair]), float(cycle.t_move[_I, pair])
+            incomplete = not fresh and not cycle.power[_I, pair] and time < t_move - TIME_EPS
+            delay = 0.5 * self.t_rec if pair == 0 else 0.0
             if incomplete:
                 # Keep retracing; the first pair additionally waits half a recovery from now.
-                pair.t_total = max(pair.t_move, pair.time + delay)
+                cycle.t_total[_I, pair] = max(t_move, time + delay)
             else:
-                pair.phase = PHASE_RECOVERY
-                pair.time = 0.0
-                pair.t_move = 0.0
-                pair.t_total = delay
-                pair.paths = [StrokePath(self.positions[leg - 1], self.joints[leg - 1]) for leg in pair.legs]
-            pair.velocities = [(0.0, 0.0, 0.0), (0.0, 0.0, 0.0)]
+                wait_at_start(cycle, _I, pair, self._legs, delay)
+
+    def _sync(self) -> None:
+        """``positions`` and ``joints`` (lists of float tuples, legs 1..4) from the cycle state."""
+        self.positions = [tuple(row) for row in self._cycle.positions[_I].tolist()]
+        self.joints = [tuple(row) for row in self._cycle.joints[_I].tolist()]
+
+    def recorded_stroke(self, leg: int) -> List[Vec3]:
+        """The recorded points of ``leg``'s current stroke (the start first)."""
+        count = int(self._cycle.path_count[_I, leg - 1])
+        return [tuple(row) for row in self._cycle.path_points[_I, leg - 1, :count].tolist()]
+
+    @property
+    def ik_fallbacks(self) -> int:
+        """Recovery points replaced by the nearest recorded one since the last reset."""
+        return int(self._cycle.ik_fallbacks[_I])
 
     @property
     def pair_phase(self) -> Tuple[str, str]:
         """Phase of each pair: 'power', 'recovery' or 'hold'."""
         if self.holding:
             return PHASE_HOLD, PHASE_HOLD
-        return self._pairs[0].phase, self._pairs[1].phase
+        power = self._cycle.power[_I]
+        return (PHASE_POWER if power[0] else PHASE_RECOVERY), (PHASE_POWER if power[1] else PHASE_RECOVERY)
+
+    @property
+    def pair_phase_time(self) -> Tuple[float, float]:
+        """Time since each pair's phase started (since the hold started while holding), s."""
+        if self.holding:
+            return self.hold_time, self.hold_time
+        return float(self._cycle.phase_time[_I, 0]), float(self._cycle.phase_time[_I, 1])
+
+    @property
+    def velocity_commands(self) -> List[Vec3]:
+        """Foot velocity commands in force per leg (legs 1..4; zero outside power phases and while
+        holding)."""
+        out: List[Vec3] = [(0.0, 0.0, 0.0)] * 4
+        if not self.holding:
+            for pair, legs in enumerate(self.pairs):
+                if self._cycle.power[_I, pair]:
+                    for leg in legs:
+                        out[leg - 1] = tuple(self._cycle.velocities[_I, leg - 1].tolist())
+        return out
 
     # ---- stepping ----------------------------------------------------------------------------
 
@@ -152,94 +199,69 @@ class StrokeCycle(StrokeScheme):
             self.holding = False
             self.hold_time = 0.0
             self._restart()
-        for pair in self._pairs:
-            if pair.phase == PHASE_POWER:
-                self._power_step(pair, dt)
+        for pair in range(2):
+            if self._cycle.power[_I, pair]:
+                if dt > 0.0:
+                    self._power_step(pair, dt)
             else:
                 self._recovery_step(pair, dt, velocity_command)
+        self._sync()
 
     def _enter_hold(self) -> None:
         """A pair in power retraces its stroke at once; both then stay at the start (nominal) points."""
-        for pair in self._pairs:
-            if pair.phase == PHASE_POWER:
-                self._start_recovery(pair)
-            pair.t_total = math.inf
+        cycle = self._cycle
+        for pair in range(2):
+            if cycle.power[_I, pair]:
+                start_recovery(cycle, _I, pair, self._legs, self.t_rec)
+            cycle.t_total[_I, pair] = math.inf
 
     def _hold_step(self, dt: float) -> None:
-        for pair in self._pairs:
+        for pair in range(2):
             self._recovery_step(pair, dt, None)
+        self._sync()
 
-    def _start_recovery(self, pair: _Pair) -> None:
-        pair.phase = PHASE_RECOVERY
-        pair.time = 0.0
-        pair.t_move = pair.t_total = self.t_rec
-        pair.velocities = [(0.0, 0.0, 0.0), (0.0, 0.0, 0.0)]
+    def _solve(self, pair: int, targets: PairTargets) -> PairSolutions:
+        """This robot's IK (:meth:`ik`) of the targets the cycle asks for; unreachable is reported."""
+        first, second = self.pairs[pair]
+        return PairSolutions(self._solve_leg(targets.first, first), self._solve_leg(targets.second, second))
 
-    def _start_power(self, pair: _Pair, velocity_command: VelocityCommand) -> None:
-        pair.phase = PHASE_POWER
-        pair.time = 0.0
-        pair.t_pow = self.t_pow_max
-        velocities = []
-        paths = []
-        for leg in pair.legs:
-            start = self.positions[leg - 1]
-            vx, vy, vz = velocity_command(leg, start)
-            vel = (float(vx), float(vy), float(vz))
-            if not (math.isfinite(vel[0]) and math.isfinite(vel[1]) and math.isfinite(vel[2])):
-                vel = (0.0, 0.0, 0.0)  # defensive: a non-finite command means no stroke
-            velocities.append(vel)
-            paths.append(StrokePath(start, self.joints[leg - 1]))
-        pair.velocities = velocities
-        pair.paths = paths
+    def _solve_leg(self, target: LegTarget, leg: int) -> LegSolution:
+        if not target.moves:
+            return _NOT_SOLVED
+        try:
+            t1, t2, t3 = self.ik((float(target.x), float(target.y), float(target.z)), leg)
+        except UnreachableError:
+            return _UNREACHED
+        return LegSolution(True, t1, t2, t3)
 
-    def _power_step(self, pair: _Pair, dt: float) -> None:
-        if dt <= 0.0:
-            return
-        pair.time += dt
-        boundary = False
-        positions, joints = self.positions, self.joints
-        for slot, leg in enumerate(pair.legs):
-            vx, vy, vz = pair.velocities[slot]
-            x, y, z = positions[leg - 1]
-            target = (x + vx * dt, y + vy * dt, z + vz * dt)  # eq. (foot_integration)
-            if target == (x, y, z):
-                continue  # zero command: no motion, the IK solution is current
-            try:
-                solution = self.ik(target, leg)
-            except UnreachableError:
-                boundary = True  # workspace boundary: keep the last reachable point
-                continue
-            positions[leg - 1] = target
-            joints[leg - 1] = solution
-            pair.paths[slot].append(target, solution)
-        if boundary or pair.time >= pair.t_pow - TIME_EPS:
-            self._start_recovery(pair)
+    def _power_step(self, pair: int, dt: float) -> None:
+        if path_nearly_full(self._cycle, _I, pair, self._legs):
+            self._grow_strokes()
+        targets = power_targets(self._cycle, _I, pair, self._legs, dt)
+        power_step(self._cycle, _I, pair, self._legs, dt, self.t_rec, targets, self._solve(pair, targets))
 
-    def _recovery_step(self, pair: _Pair, dt: float, velocity_command: Optional[VelocityCommand]) -> None:
-        pair.time += dt
-        if pair.t_move > 0.0:
-            s = cubic_time_profile(pair.time / pair.t_move)
-        else:
-            s = 1.0
-        positions, joints = self.positions, self.joints
-        done = velocity_command is not None and pair.time >= pair.t_total - TIME_EPS
-        for slot, leg in enumerate(pair.legs):
-            path = pair.paths[slot]
-            if done or s >= 1.0:
-                positions[leg - 1] = path.points[0]
-                joints[leg - 1] = path.joints[0]
-                continue
-            point, nearest = path.at_arc_length(path.length * (1.0 - s))
-            if point == positions[leg - 1]:
-                continue  # not moving (e.g. at rest between strokes): the IK solution is current
-            try:
-                solution = self.ik(point, leg)
-            except UnreachableError:
-                # The chord between two recorded (reachable) points left the workspace: use the
-                # nearest recorded point, whose IK solution is known.
-                point, solution = path.points[nearest], path.joints[nearest]
-            positions[leg - 1] = point
-            joints[leg - 1] = solution
-        if done:
-            assert velocity_command is not None
-            self._start_power(pair, velocity_command)
+    def _recovery_step(self, pair: int, dt: float, velocity_command: Optional[VelocityCommand]) -> None:
+        """A recovery step; at its end the power phase starts, unless holding (``velocity_command`` None,
+        the hold's t_total is infinite)."""
+        cycle = self._cycle
+        targets = recovery_targets(cycle, _I, pair, self._legs, dt)
+        done = recovery_step(cycle, _I, pair, self._legs, dt, targets, self._solve(pair, targets))
+        if done and velocity_command is not None:
+            commands = []
+            for leg in self.pairs[pair]:
+                vx, vy, vz = velocity_command(leg, tuple(cycle.positions[_I, leg - 1].tolist()))
+                commands.append((float(vx), float(vy), float(vz)))
+            start_power(cycle, _I, pair, self._legs, self.t_pow_max, commands[0], commands[1])
+
+    def _grow_strokes(self) -> None:
+        """Twice the points per recorded stroke (the robot's strokes have no length limit)."""
+        cycle = self._cycle
+        capacity = cycle.path_points.shape[2]
+
+        def grown(a: np.ndarray) -> np.ndarray:
+            out = np.zeros(a.shape[:2] + (2 * capacity,) + a.shape[3:], dtype=a.dtype)
+            out[:, :, :capacity] = a
+            return out
+
+        self._cycle = cycle._replace(path_points=grown(cycle.path_points), path_joints=grown(cycle.path_joints),
+                                     path_length=grown(cycle.path_length))

@@ -18,7 +18,7 @@ The grid costs about 70 000 IK evaluations (~0.6 s); results are cached per geom
 from __future__ import annotations
 
 import math
-from typing import Dict, Tuple
+from typing import Dict, Hashable, Tuple
 
 import numpy as np
 
@@ -157,15 +157,16 @@ class Workspace:
         return steps * self.cell
 
 
-def _geometry_key(robot: RobotParams) -> Tuple[float, ...]:
-    fb = robot.five_bar
+def _geometry_key(robot: RobotParams) -> Tuple[Hashable, ...]:
+    """What a leg's workspace depends on: the five-bar, the hip offsets, the servo ranges, the nominal
+    foot and the leg origin."""
     limits = robot.joint_limits
-    return (fb.a1, fb.a2, fb.a3, fb.a4, fb.c, robot.l_y, robot.l_z, *limits.theta1, *limits.theta2,
-            *limits.theta3, *np.asarray(robot.nominal_foot_leg, dtype=float).tolist(),
-            *np.asarray(robot.leg_origins[1], dtype=float).tolist())
+    return (robot.five_bar, (robot.l_y, robot.l_z), (limits.theta1, limits.theta2, limits.theta3),
+            tuple(np.asarray(robot.nominal_foot_leg, dtype=float).tolist()),
+            tuple(np.asarray(robot.leg_origins[1], dtype=float).tolist()))
 
 
-_CACHE: Dict[Tuple[float, ...], Workspace] = {}
+_CACHE: Dict[Tuple[Hashable, ...], Workspace] = {}
 
 
 def leg_workspace(robot: RobotParams, cell: float = 0.01, joint_margin: float = math.radians(5.0),

@@ -4,7 +4,7 @@
   free-floating, no added mass, centre of buoyancy on the centre of mass, torso weight and buoyancy
   balanced by the rope and left out. The default of every study that reproduces the paper's simulation.
 - ``tank``: the same forces plus the test tank's rope, torso weight and buoyancy at separate centres,
-  torso and paw added mass (:mod:`.tank`, parameters in ``config/tank.yaml``).
+  torso and paw added mass (:mod:`.tank`; its parameters, one schema: :mod:`.tank_params`, ``config/tank.yaml``).
 
 Both take their forces from :mod:`quadruped_control.model.hydrodynamics` and share the rigid-body state,
 input checks and SO(3) Runge-Kutta helpers of :mod:`.rigid_body`.
@@ -15,7 +15,8 @@ from typing import Optional
 
 from quadruped_control.model.params import RobotParams
 from quadruped_control.sim.plants.paper import FloatingBaseModel
-from quadruped_control.sim.plants.tank import VALIDITY_NOTE, TankModel, TankParams, load_tank_params
+from quadruped_control.sim.plants.tank import VALIDITY_NOTE, TankModel
+from quadruped_control.sim.plants.tank_params import TankParams, load_tank_params
 
 PLANTS = ("paper", "tank")
 

@@ -40,8 +40,8 @@ __all__ = ["PaperPlantBatch", "held_step_inputs", "leg_geometry", "leg_rows", "p
 def leg_geometry(robot: RobotParams):
     """(frames (4, 6) array, five-bar and hip constants (a1, a2, a3, a4, c, l_y, l_z)) of
     :func:`~quadruped_control.model.kinematics.leg_row`, in the order of the legs."""
-    values = _geometry(robot)
-    return np.array(values[1], dtype=float), tuple(float(x) for x in values[2:9])
+    geometry = _geometry(robot)
+    return np.array(geometry.frame_rows, dtype=float), geometry.five_bar_hip
 
 
 @jitable

@@ -1,7 +1,7 @@
 """The test-tank plant of :mod:`quadruped_control.sim.plants.tank` for N trials.
 
 :class:`TankPlantBatch` is :class:`~quadruped_control.sim.plants.tank.TankModel` for N trials, each with
-its own :class:`~quadruped_control.sim.plants.tank.TankParams` (the identification's parameter sets).
+its own :class:`~quadruped_control.sim.plants.tank_params.TankParams` (the identification's parameter sets).
 It runs the per-trial plant's own functions: a loop over the trials (:func:`tank_batch_step`, compiled by
 numba when it is installed, :mod:`quadruped_common.jit`) calls, per trial, the legs' kinematics, the paw buoyancy
 plus the torso's buoyancy moment (:func:`~quadruped_control.sim.plants.paper_batch.held_step_inputs`), the
@@ -23,7 +23,7 @@ from quadruped_common.jit import jitable, kernel, trial_step
 from quadruped_control.model.params import RobotParams
 from quadruped_control.sim.plants.paper_batch import held_step_inputs, leg_geometry, store_step_end
 from quadruped_control.sim.plants.rigid_body import RigidBodyState
-from quadruped_control.sim.plants.tank import TankModel, TankParams, TurnUnresolved
+from quadruped_control.sim.plants.tank import TankModel, TurnUnresolved
 from quadruped_control.sim.plants.tank_dynamics import (TANK_CONSTANT_FIELDS, body_wake_update,
                                                         disturbance_coefficients, disturbance_update,
                                                         floating_block_update,
@@ -31,6 +31,7 @@ from quadruped_control.sim.plants.tank_dynamics import (TANK_CONSTANT_FIELDS, bo
                                                         paw_wake_update, tank_rk4, tether_relaxation_update,
                                                         twist_relaxation_update, whole_twist, world_to_body,
                                                         wound_friction_limit)
+from quadruped_control.sim.plants.tank_params import TankParams
 
 __all__ = ["TankPlantBatch", "tank_batch_step", "tank_trial_step"]
 

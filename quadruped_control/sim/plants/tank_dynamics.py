@@ -1,4 +1,4 @@
-"""The tank plant's equations of motion, eq. (tank) of :mod:`.tank`, on floats: one source for the
+"""The tank plant's equations of motion, eq. (tank) of docs/tank_model.md, on floats: one source for the
 per-trial plant (:class:`~quadruped_control.sim.plants.tank.TankModel`, plain Python) and the batch
 (:class:`~quadruped_control.sim.plants.tank_batch.TankPlantBatch`, a loop over trials compiled by numba
 when it is installed, :mod:`quadruped_common.jit`).
@@ -9,7 +9,7 @@ when it is installed, :mod:`quadruped_common.jit`).
   :func:`wound_friction_limit`: the tank's own force laws, the paws' wake,
   the water the body's appendages set turning, the floating block the rope hangs from and the friction
   where the rope is tied to the hook, with the tether wound round it (physics and sources in
-  :mod:`.tank`'s docstring);
+  docs/tank_model.md);
 - :func:`tilt_vector`, :func:`tether_bend_torque`, :func:`tether_relaxation_update`: the tether bent where it
   leaves the body, a standard linear solid on the body's tilt;
 - :func:`disturbance_update`, :func:`world_to_body`: the torque of a tank that is not still, an
@@ -110,7 +110,7 @@ def rope_force(hook_world: Sequence[float], hook_velocity: Sequence[float], anch
 @jitable
 def appendage_damping_torque(omega: Sequence[float], linear: Sequence[float], quadratic: Sequence[float]) -> Vec3:
     """tau_appendage = -(c_lin + c_quad |omega|) omega per body axis (N m): linear plus quadratic
-    rotational damping of the legs, housings and corners the inertia box leaves out (:mod:`.tank`)."""
+    rotational damping of the legs, housings and corners the inertia box leaves out (docs/tank_model.md)."""
     return (-(linear[0] + quadratic[0] * abs(omega[0])) * omega[0],
             -(linear[1] + quadratic[1] * abs(omega[1])) * omega[1],
             -(linear[2] + quadratic[2] * abs(omega[2])) * omega[2])
@@ -134,13 +134,9 @@ def whole_twist(R: Sequence[float], reference_rotation: Sequence[float], referen
     """The rope's whole twist (rad, any number of turns) at ``R``: ``reference_twist``, its twist at the
     attitude ``reference_rotation`` a moment before, plus the :func:`rope_twist` of ``R`` from there.
 
-    A rope hanging from the hook is twisted by the body's turns about the rope, the world vertical, and not
-    by its tilts (the hook's loop bends the rope, it does not twist it): its twist is the integral of the
-    body's rate about the vertical, theta_dot = z_hat . R omega, and it counts every turn (twisted by 190 deg
-    it holds 190 deg, not -170 deg). That integral depends on the path, so no function of the attitude alone
-    is the twist: the plants carry it as state (:attr:`TankModel.twist
-    <quadruped_control.sim.plants.tank.TankModel.twist>`), with the reference moved to each step's start and
-    end, so that each step adds the twist of its own small rotation (z_hat . R omega dt to first order)."""
+    The twist is the integral of the body's rate about the world vertical, every turn counted: it depends on
+    the path, so the plants carry it as state (:attr:`TankModel.twist
+    <quadruped_control.sim.plants.tank.TankModel.twist>`), the reference moved to each step's start and end."""
     return reference_twist + rope_twist(R, reference_rotation)
 
 
@@ -150,21 +146,11 @@ def rope_torsion_torque(R: Sequence[float], R0: Sequence[float], omega: Sequence
     """Body-axes torque (N m) of a rope twisted by theta = :func:`whole_twist` (R, R0, ``reference``): the spring's
     potential k_t theta^2 / 2, a damper on the twist's rate and the relaxing branch k_r (``relaxing``) against the
     relaxed twist s (``relaxed``, held over the step, :func:`twist_relaxation_update`), tau = -(k_t theta + k_r (theta -
-    s) + c_t theta_dot) g (:mod:`.tank`, "relaxing twist"). ``R``, ``R0`` row-major (``R0`` the attitude where the twist
-    was ``reference``: the plants' step start, so that g stays the world vertical to first order in the step's
-    rotation); ``omega`` body axes.
-
-    g is the twist's gradient: theta_dot = g . omega (world axes), and with Q = R R0^T,
-    g = (Q_02, Q_12, 1 + Q_22) / (1 + Q_22) (from theta = 2 atan2(q_z, q_w) and q_dot = (0, omega) q / 2:
-    theta_dot = ((q_w q_y + q_x q_z) omega_x + (q_y q_z - q_w q_x) omega_y + (q_w^2 + q_z^2) omega_z) /
-    (q_w^2 + q_z^2)). Near R0 the torque is the gradient of k_t theta^2 / 2 (the spring does no work round
-    a closed path of attitudes there) and the damper only takes energy out. With R0 at the step's start,
-    Q stays within a step's rotation of the identity and g within O(omega dt) of z_hat: the torque is
-    -(k_t theta + c_t omega_z^W) about the world vertical, at any tilt, and the energy the rope stores,
-    k_t theta^2 / 2 with theta the integral of the vertical rate, changes by the work it does. (Measured
-    from a fixed R0 instead, g's horizontal part grows as tan(swing / 2), and a twisted rope would push the
-    tilt, without bound near a swing of 180 deg.) Past a swing of 179.9 deg from R0 (1 + Q_22 < 1e-6) the
-    twist is undefined, and the rope exerts no torsion."""
+    s) + c_t theta_dot) g, g the twist's gradient (theta_dot = g . omega, world axes; with Q = R R0^T,
+    g = (Q_02, Q_12, 1 + Q_22) / (1 + Q_22)). ``R``, ``R0`` row-major (``R0`` the attitude where the twist was
+    ``reference``: the plants' step start, so that g stays the world vertical to first order); ``omega`` body axes.
+    Past a swing of 179.9 deg from R0 the twist is undefined and the rope exerts no torsion. Derivation:
+    docs/tank_model.md, "rope torsion"."""
     q02 = R[0] * R0[6] + R[1] * R0[7] + R[2] * R0[8]
     q12 = R[3] * R0[6] + R[4] * R0[7] + R[5] * R0[8]
     level = 1.0 + R[6] * R0[6] + R[7] * R0[7] + R[8] * R0[8]
@@ -198,7 +184,7 @@ def disturbance_update(torque: Any, decay: Any, spread: Any, noise: Any) -> Any:
     tau_d) and spread = sigma sqrt(1 - decay^2) (:func:`disturbance_coefficients`), ``noise`` standard normal draws.
     Its stationary law is N(0, sigma^2) per axis and its autocorrelation exp(-|lag| / tau_d), whatever the step.
     Element-wise on numpy arrays: one trial's (3,) or a batch's (N, 3) with (N, 1) coefficients, the same
-    operations in the same order either way (the two engines agree to the bit). Physics in :mod:`.tank`
+    operations in the same order either way (the two engines agree to the bit). Physics in docs/tank_model.md
     ("disturbance")."""
     return decay * torque + spread * noise
 
@@ -237,7 +223,7 @@ def tether_bend_torque(R: Sequence[float], tether: Sequence[float]) -> Vec3:
     jacket creeps) and its relaxed tilt s, held over a step (:func:`tether_relaxation_update`). The elastic
     branch is the gradient of k_e |theta|^2 / 2: d|theta| = (theta / |theta|) . delta_phi for a rotation
     delta_phi about a horizontal world axis, and a turn about the vertical leaves |theta| as it is. Physics
-    and sources in :mod:`.tank` ("tether bend")."""
+    and sources in docs/tank_model.md ("tether bend")."""
     elastic, relaxing = tether[0], tether[1]
     tx, ty, tz = tilt_vector(R)
     mx = -elastic * tx - relaxing * (tx - tether[3])
@@ -261,7 +247,7 @@ def tether_relaxation_update(R: Sequence[float], tether: Sequence[float], dt: fl
 def paw_wake_update(feet: Sequence[Sequence[float]], wake: Any, fraction: float, time_constant: float,
                     body_share: float, bx: float, by: float, bz: float, wx: float, wy: float, wz: float, dt: float,
                     drag_feet: Any) -> None:
-    """Advance each paw's wake over a held step and write the rows its drag sees (:mod:`.tank`).
+    """Advance each paw's wake over a held step and write the rows its drag sees (docs/tank_model.md).
 
     ``wake`` (4 x 3, body axes, m/s, in place): the water each paw has set moving; it relaxes towards the
     fraction kappa of the paw's velocity that builds it, u_w,i = c_i + s_b (b + omega x r_i): the stroke's
@@ -374,17 +360,10 @@ def floating_block_update(anchor: Any, rest: Sequence[float], p: Sequence[float]
 
 @jitable
 def wound_friction_limit(limit: float, wrap: float, twist: float) -> float:
-    """The hook's Coulomb torque (N m) once the tether has wound round the rope: tau_c exp(mu_w |phi|),
-    with phi (``twist``, rad) the body's whole turn about the world vertical since the rope hung untwisted
-    (:func:`whole_twist`: past half a turn the tether goes on winding) and mu_w (``wrap``, per rad) the
-    tether's friction on the rope.
-
-    The robot's tether leaves the enclosure beside the hook (the paper, section "Robot Design": the tether
-    cable enters the main enclosure through a penetrator) and hangs along the suspension rope; each turn of
-    the body about the rope winds it round the rope and the tie. Wound strands grip what they are wound on
-    as a rope grips a capstan, by the Euler-Eytelwein (capstan) law T_1 = T_0 exp(mu phi), so the tie's
-    friction grows with the turn already made and falls back as it unwinds.
-    ``wrap`` 0 returns ``limit`` itself (today's tie, bit for bit)."""
+    """The hook's Coulomb torque (N m) once the tether has wound round the rope: tau_c exp(mu_w |phi|) (the capstan
+    law), with phi (``twist``, rad) the body's whole turn about the world vertical since the rope hung untwisted
+    (:func:`whole_twist`) and mu_w (``wrap``, per rad) the tether's friction on the rope. ``wrap`` 0 returns
+    ``limit`` itself (the unwound tie, bit for bit). Physics: docs/tank_model.md, "hook friction"."""
     if wrap == 0.0:
         return limit
     return limit * math.exp(wrap * abs(twist))
@@ -397,43 +376,18 @@ def hook_friction_update(friction: Any, limit: float, angle: float, static_ratio
                          dt: float) -> Vec3:
     """Advance the friction torque where the rope is tied to the hook over a held step, in place on
     ``friction`` (3, body axes, N m: the torque the tie exerts on the rope; the body feels its opposite),
-    and return the body-axes torque held over the step (:mod:`.tank`, "hook friction").
+    and return the body-axes torque held over the step.
 
-    Dahl's friction model (P. R. Dahl, "Solid friction damping of mechanical vibrations", AIAA J. 14
-    (1976); the presliding part of the LuGre model, Canudas de Wit et al., IEEE TAC 40 (1995)) in vector
-    form on the rotation of the body relative to the rope's lower end, about the axes across the rope:
-    d tau_f/dt = (tau_c s - |s| tau_f) / theta_p, with s the relative rate across the rope, tau_c the
-    Coulomb torque (``limit``) and theta_p the presliding angle (``angle``; Dahl's stiffness is
-    tau_c / theta_p): a spring of that stiffness for small reversals, sliding friction tau_c s / |s| after
-    a relative turn of a few theta_p. The relative rate is s = omega - R^T Omega less its component along
-    the rope, Omega = -(u x q_dot) / d the rope's own swing rate (u the unit vector from the hook q to the
-    anchor at distance d, q_dot the hook's velocity relative to the anchor); the twist along the rope is the
-    rope torsion's (:func:`rope_torsion_torque`). Solved exactly with s held over the step,
-    tau_f <- tau_c s^ + (tau_f - tau_c s^) exp(-|s| dt / theta_p), so |tau_f| never exceeds tau_c; a slack
-    rope (d <= L_0) carries no load and its tie no friction.
-
-    Static friction above the sliding one (``static_ratio`` = tau_s / tau_c > 1; 1 is Dahl's model exactly):
-    the LuGre model's Stribeck curve, g(|s|) = tau_c (1 + (tau_s / tau_c - 1) exp(-(|s| / s_s)^2)), with s_s
-    the Stribeck rate (``stribeck_rate``, rad/s), and its bristle law at Dahl's stiffness sigma_0 = tau_c /
-    theta_p: d tau_f/dt = sigma_0 (s - |s| tau_f / g(|s|)). Held over the step, tau_f <- g s^ + (tau_f -
-    g s^) exp(-sigma_0 |s| dt / g): a tie that has stuck holds up to tau_s, and once the body turns faster
-    than s_s relative to the rope it lets go to tau_c (Canudas de Wit et al. 1995, eq. (2)-(4); the stick-
-    slip of Armstrong-Helouvry et al., Automatica 30 (1994)).
-
-    A tie whose friction depends on the axis (``roll_ratio`` = tau_c,x / tau_c,y; 1 is the isotropic tie
-    exactly): the eye is a ring in one plane. A turn in the ring's plane slides the rope's loop along the
-    wire around the ring (arm mu R_e, R_e the ring's radius), a turn about the wire rolls the loop round
-    the wire's section (arm mu r_w), so the tie's Coulomb torque about the body's x (roll) axis is
-    ``roll_ratio`` times the one about the other axes: the limit is the ellipse tau_c (m_x s_x, s_y,
-    s_z) / |s|, m_x = roll_ratio, and Dahl's stiffness scales with it (theta_p stays the wire's). Sliding
-    still dissipates, tau_f . s = g |s|^-1 (m_x s_x^2 + s_y^2 + s_z^2) >= 0.
-
-    A limit that falls (``limit`` is the step's own; :func:`wound_friction_limit` shrinks as the tether
-    unwinds) caps what the tie stores at once: a stored torque beyond the most the tie now holds, r tau_c
-    on the ellipse (r = max(1, tau_s / tau_c)), slips back to it along its own direction, even with the
-    body still (s = 0), where the update above would keep it. The body's state (p, v world,
-    R row-major, omega body) is the step's start; ``anchor`` (6 floats) the rope's upper end and its
-    velocity."""
+    Dahl's model on the body's rate s relative to the rope, across the rope, with LuGre's Stribeck curve:
+    g(|s|) = tau_c (1 + (tau_s / tau_c - 1) exp(-(|s| / s_s)^2)) (``limit`` tau_c, ``static_ratio`` tau_s / tau_c,
+    ``stribeck_rate`` s_s), solved exactly with s held over the step, tau_f <- g s^ + (tau_f - g s^)
+    exp(-sigma_0 |s| dt / g), sigma_0 = tau_c / theta_p (``angle`` theta_p); ``static_ratio`` 1 is Dahl's
+    tau_f <- tau_c s^ + (tau_f - tau_c s^) exp(-|s| dt / theta_p) bit for bit. The limit is the ellipse
+    tau_c (m_x s_x, s_y, s_z) / |s| (``roll_ratio`` m_x about the body's x axis). What the tie stores beyond its
+    largest torque r tau_c (r = max(1, tau_s / tau_c)) slips back to it at once (a falling ``limit``:
+    :func:`wound_friction_limit`). A slack rope carries no friction. The body's state (p, v world, R row-major,
+    omega body) is the step's start; ``anchor`` (6 floats) the rope's upper end and its velocity. Physics and
+    sources: docs/tank_model.md, "hook friction"."""
     qx, qy, qz, qvx, qvy, qvz = _hook_motion(p[0], p[1], p[2], v[0], v[1], v[2], R, w[0], w[1], w[2], hook)
     dx, dy, dz = anchor[0] - qx, anchor[1] - qy, anchor[2] - qz
     distance = math.sqrt(dx * dx + dy * dy + dz * dz)

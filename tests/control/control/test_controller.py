@@ -445,3 +445,94 @@ def test_controller_output_arrays_match_the_stroke_state():
     out.state.e_R[:] = 9.0
     np.testing.assert_array_equal(out.state.tau_sat, before[0])
     np.testing.assert_array_equal(out.state.foot_targets, before[1])
+
+
+def _first_release_law(R_d, R, w, z, delta_sat, h, k_p, k_i, k_d, k_aw, tau_max, integral_limit, inertia,
+                       gyroscopic, buoyancy, feet_sum, net_buoyancy):
+    """The control law as the first release wrote it, component by component (the reference the named
+    form must reproduce bit for bit: the paper-sim limit cycles are sensitive to the last bit)."""
+    r00, r01, r02, r10, r11, r12, r20, r21, r22 = R
+    d00, d01, d02, d10, d11, d12, d20, d21, d22 = R_d
+    wx, wy, wz = w
+    e01 = d00 * r01 + d10 * r11 + d20 * r21
+    e02 = d00 * r02 + d10 * r12 + d20 * r22
+    e10 = d01 * r00 + d11 * r10 + d21 * r20
+    e12 = d01 * r02 + d11 * r12 + d21 * r22
+    e20 = d02 * r00 + d12 * r10 + d22 * r20
+    e21 = d02 * r01 + d12 * r11 + d22 * r21
+    ex, ey, ez = 0.5 * (e21 - e12), 0.5 * (e02 - e20), 0.5 * (e10 - e01)
+    trace = (d00 * r00 + d10 * r10 + d20 * r20) + (d01 * r01 + d11 * r11 + d21 * r21) \
+        + (d02 * r02 + d12 * r12 + d22 * r22)
+    geodesic = math.atan2(math.sqrt(ex * ex + ey * ey + ez * ez), 0.5 * (trace - 1.0))
+    fx = fy = fz = 0.0
+    if gyroscopic:
+        i0, i1, i2, i3, i4, i5, i6, i7, i8 = inertia
+        hx, hy, hz = i0 * wx + i1 * wy + i2 * wz, i3 * wx + i4 * wy + i5 * wz, i6 * wx + i7 * wy + i8 * wz
+        fx += wy * hz - wz * hy
+        fy += wz * hx - wx * hz
+        fz += wx * hy - wy * hx
+    if buoyancy:
+        sx, sy, sz = feet_sum
+        ux, uy, uz = net_buoyancy * r20, net_buoyancy * r21, net_buoyancy * r22
+        fx -= sy * uz - sz * uy
+        fy -= sz * ux - sx * uz
+        fz -= sx * uy - sy * ux
+    g = h * k_aw * k_i
+    if g <= 1.0:
+        zx = z[0] + h * (ex + k_aw * delta_sat[0])
+        zy = z[1] + h * (ey + k_aw * delta_sat[1])
+        zz = z[2] + h * (ez + k_aw * delta_sat[2])
+    else:
+        zx, zy, zz = z[0] + h * ex, z[1] + h * ey, z[2] + h * ez
+        ux = -k_p * ex - k_i * zx - k_d * wx + fx
+        uy = -k_p * ey - k_i * zy - k_d * wy + fy
+        uz = -k_p * ez - k_i * zz - k_d * wz + fz
+        norm_u = math.sqrt(ux * ux + uy * uy + uz * uz)
+        if norm_u > tau_max:
+            step = h * k_aw * (norm_u - tau_max) / ((1.0 + g) * norm_u)
+            zx, zy, zz = zx + step * ux, zy + step * uy, zz + step * uz
+    norm_z = math.sqrt(zx * zx + zy * zy + zz * zz)
+    if norm_z > integral_limit:
+        scale = integral_limit / norm_z
+        zx, zy, zz = zx * scale, zy * scale, zz * scale
+    cx = -k_p * ex - k_i * zx - k_d * wx + fx
+    cy = -k_p * ey - k_i * zy - k_d * wy + fy
+    cz = -k_p * ez - k_i * zz - k_d * wz + fz
+    norm_c = math.sqrt(cx * cx + cy * cy + cz * cz)
+    if norm_c <= tau_max:
+        sat, saturated = (cx, cy, cz), False
+    else:
+        s = tau_max / norm_c
+        sat, saturated = (cx * s, cy * s, cz * s), True
+    return (ex, ey, ez), geodesic, (zx, zy, zz), (cx, cy, cz), sat, saturated, (fx, fy, fz)
+
+
+def test_control_law_on_named_quantities_computes_the_first_release_law_bit_for_bit():
+    """control_law_f (LawGains, Feedforward, LawResult, the vec3 helpers) against the law written out
+    component by component, on random inputs through both discretisations of the integral, saturated and
+    not, with and without the feedforward terms: every float equal."""
+    from quadruped_common.vec3 import Mat3
+    from quadruped_control.control.controller import Feedforward, LawGains, LawResult, control_law_f
+
+    rng = np.random.default_rng(11)
+    inertia = tuple(np.asarray(PARAMS.inertia, dtype=float).ravel().tolist())
+    branches = set()
+    for n in range(400):
+        R_d = tuple(exp_so3(rng.normal(0.0, 1.5, 3)).ravel().tolist())
+        R = tuple(exp_so3(rng.normal(0.0, 1.5, 3)).ravel().tolist())
+        w, z, delta_sat, feet_sum = (tuple(rng.normal(0.0, s, 3).tolist()) for s in (2.0, 3.0, 2.0, 0.3))
+        h = float(rng.uniform(0.0, 0.03))
+        k_p, k_i, k_d = (float(x) for x in rng.uniform(0.0, 20.0, 3))
+        k_aw = float(rng.choice([0.0, 0.25, float(rng.uniform(0.0, 50.0))]))
+        tau_max = float(rng.uniform(0.1, 5.0)) if n % 3 else 1e3
+        integral_limit = float(rng.uniform(0.1, 5.0))
+        gyroscopic, buoyancy = bool(n % 2), bool((n // 2) % 2)
+        law = control_law_f(Mat3(*R_d), Mat3(*R), w, z, delta_sat, h,
+                            LawGains(k_p, k_i, k_d, k_aw, tau_max, integral_limit),
+                            Feedforward(gyroscopic, Mat3(*inertia), buoyancy, PARAMS.paw_net_buoyancy), feet_sum)
+        assert isinstance(law, LawResult)
+        expected = _first_release_law(R_d, R, w, z, delta_sat, h, k_p, k_i, k_d, k_aw, tau_max, integral_limit,
+                                      inertia, gyroscopic, buoyancy, feet_sum, PARAMS.paw_net_buoyancy)
+        assert tuple(law) == expected
+        branches.add((h * k_aw * k_i > 1.0, law.saturated))
+    assert branches == {(False, False), (False, True), (True, False), (True, True)}

@@ -83,7 +83,7 @@ def test_controller_never_produces_or_keeps_nan(gains, tau_max, steps):
 def test_anti_windup_update_is_non_expansive(gains, h, angle, z0, z1):
     """Two integral states fed the same measurements never move apart (controller docstring's proof)."""
     a, b = controller(gains), controller(gains)
-    a._integral, b._integral = list(z0), list(z1)
+    a._integral, b._integral = tuple(z0), tuple(z1)
     R = quat_to_rot(np.array([math.sin(angle / 2), 0.0, 0.0, math.cos(angle / 2)]))
     omega = np.array([0.3, -0.1, 0.2])
     gap = np.linalg.norm(np.subtract(z0, z1))

@@ -500,8 +500,8 @@ def test_ik_row_is_joint_angles_floats_and_compiles_to_the_same_angles():
 
     robot = PARAMS
     geometry = _geometry(robot)
-    frames = np.array(geometry[1])
-    constants = tuple(geometry[2:15])
+    frames = np.array(geometry.frame_rows)
+    constants = geometry.ik
     rng = np.random.default_rng(3)
     nominal = np.array([robot.nominal_foot_body(leg) for leg in (1, 2, 3, 4)])
     targets = nominal + rng.normal(0.0, 0.04, (300, 4, 3))  # many beyond reach

@@ -1,5 +1,5 @@
 """The batched engine (:mod:`quadruped_control.sim.batch`, with the batched controller of
-:mod:`quadruped_control.control.batch` and plant of :mod:`quadruped_control.sim.plants.paper_batch`)
+:mod:`quadruped_control.sim.batch_controller` and plant of :mod:`quadruped_control.sim.plants.paper_batch`)
 against the per-trial engine, trial by trial."""
 from __future__ import annotations
 
@@ -117,7 +117,8 @@ def test_controller_objects_batch_agrees_with_the_per_trial_engine_bit_for_bit_o
     """The coordinated scheme, IMU noise and the controller off (the robot's own controller objects
     inside the batch) against the per-trial engine: every state bit for bit over 10 s, and the stroke
     metrics of the schemes study."""
-    from quadruped_control.sim.plants.tank import TankModel, load_tank_params
+    from quadruped_control.sim.plants.tank import TankModel
+    from quadruped_control.sim.plants.tank_params import load_tank_params
     from quadruped_control.studies.trial import stroke_metrics
 
     servo_params = load_servo_params()
@@ -153,7 +154,7 @@ def test_tank_batch_agrees_with_the_per_trial_tank_plant_bit_for_bit_over_10_s(r
     and variations that switch on every candidate effect), against the per-trial engine."""
     import argparse
 
-    from quadruped_control.sim.plants.tank import load_tank_params
+    from quadruped_control.sim.plants.tank_params import load_tank_params
     from quadruped_control.studies.paper_experiments import experiment_specs
     from quadruped_control.studies.trial import trial_setup
 
@@ -211,10 +212,10 @@ def test_compiled_loops_compute_what_their_plain_python_computes(robot, plant, p
     """Each numba-compiled loop over trials against the same source run as plain Python (``py_func``,
     whose callees are the plain functions), from a mid-manoeuvre state of three trials: 150 steps of
     states and joint targets to 1e-12."""
-    from quadruped_control.control import batch as control_batch
     from quadruped_control.sim import batch as sim_batch
+    from quadruped_control.sim import batch_controller
     from quadruped_control.sim.plants import paper_batch, tank_batch
-    from quadruped_control.sim.plants.tank import load_tank_params
+    from quadruped_control.sim.plants.tank_params import load_tank_params
     from quadruped_control.sim.servo_model import load_servo_params
 
     config = load_controller_config(None, "experiment")
@@ -232,7 +233,7 @@ def test_compiled_loops_compute_what_their_plain_python_computes(robot, plant, p
     if plain == "plant":
         patched = [(paper_batch, "paper_batch_step")] if plant == "paper" else [(tank_batch, "tank_batch_step")]
     else:
-        patched = [(control_batch, "controller_batch_step"), (sim_batch, "servo_batch_step")]
+        patched = [(batch_controller, "controller_batch_step"), (sim_batch, "servo_batch_step")]
     runs = []
     for compiled in (True, False):
         if not compiled:

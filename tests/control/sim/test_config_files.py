@@ -7,7 +7,7 @@ import re
 from quadruped_common.config import config_dir, config_path
 from quadruped_control.sim.config_files import LOADERS, TANK_ENSEMBLE
 from quadruped_control.sim.plants import load_tank_params
-from quadruped_control.studies import identify as idf
+from quadruped_control.studies import identify_parameters as idp
 
 
 def test_the_ensemble_folder_holds_exactly_the_files_the_table_loads() -> None:
@@ -34,14 +34,14 @@ def test_each_member_names_what_produced_it_and_differs_from_tank_yaml_only_wher
         assert re.search(r"at commit [0-9a-f]{7}", text)
         assert "python -m quadruped_control.simulate --study identify" in text
         fitted = _fitted_parameters(text)
-        assert set(fitted) <= {p[0] for p in idf.PARAMETERS}
+        assert set(fitted) <= {p[0] for p in idp.PARAMETERS}
         tank = load_tank_params(config_path(name))
         member = dataclasses.asdict(tank)
-        fields = {field for field, _ in idf.tank_overrides({n: 1.0 for n in fitted})}
+        fields = {field for field, _ in idp.tank_overrides({n: 1.0 for n in fitted})}
         assert {field for field in base if member[field] != base[field]} <= fields, name
-        bounds = {parameter: (low, high) for parameter, low, high in idf.PARAMETERS}
+        bounds = {parameter: (low, high) for parameter, low, high in idp.PARAMETERS}
         for parameter in fitted:  # inside the bounds docs/identification.md reasons (read without clipping)
-            place = idf._PLACES[parameter]
-            value = getattr(tank, place.field)
-            value = idf._field_value(parameter, value[place.components[0]] if place.components else value)
+            spec, fit = idp.PLACES[parameter]
+            value = getattr(tank, spec.name)
+            value = idp.field_value(parameter, value[fit.components[0]] if fit.components else value)
             assert bounds[parameter][0] <= value <= bounds[parameter][1], (name, parameter, value)

@@ -82,9 +82,9 @@ def test_draws_of_a_still_tank_and_a_disturbance_out_of_bounds_are_refused_befor
         ens.member_tanks(members, (), 3)
     with pytest.raises(StudyError, match="--draws must be at least 1"):
         ens.member_tanks(members, (), 0)
-    with pytest.raises(StudyError, match="--tank-disturbance: .*disturbance_torque_std must be in"):
+    with pytest.raises(StudyError, match=r"--tank-disturbance: .*disturbance_torque_std. = 1 is outside \[0, 0.4\]"):
         ens.member_tanks(members, ens.disturbance_overrides((1.0, 10.0)), 2)
-    with pytest.raises(StudyError, match="--tank-disturbance: .*disturbance_correlation_time must be in"):
+    with pytest.raises(StudyError, match="--tank-disturbance: .*disturbance_correlation_time. must be finite"):
         ens.member_tanks(members, ens.disturbance_overrides((0.002, float("nan"))), 2)
     tanks = ens.member_tanks(members, ens.disturbance_overrides((0.002, 5.0)), 3)
     assert all(t.disturbed and t.disturbance_torque_std == 0.002 and t.disturbance_correlation_time == 5.0
@@ -108,7 +108,7 @@ def test_a_missing_empty_or_broken_ensemble_is_refused_before_any_trial(tmp_path
         ens.member_files(str(tmp_path / "missing"))
     with pytest.raises(StudyError, match="no tank.yaml files"):
         ens.member_files(str(tmp_path))
-    (tmp_path / "member.yaml").write_text("tether:\n  stiffness: -1\n")
+    (tmp_path / "member.yaml").write_text("tether:\n  tether_stiffness: -1\n")
     members = ens.member_files(str(tmp_path))
     with pytest.raises(ParameterError, match="member.yaml"):
         ens.member_tanks(members, (), 1)

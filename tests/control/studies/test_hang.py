@@ -13,7 +13,8 @@ from quadruped_common.config import config_path
 from quadruped_common.robot import JOINT_NAMES
 from quadruped_common.so3 import rot_to_quat, rpy_to_rot
 from quadruped_control.model.params import load_robot_params
-from quadruped_control.sim.plants.tank import TankModel, load_tank_params
+from quadruped_control.sim.plants.tank import TankModel
+from quadruped_control.sim.plants.tank_params import load_tank_params
 from quadruped_control.sim.simulation import nominal_joint_angles
 from quadruped_control.studies import StudyError
 from quadruped_control.studies import hang as study
@@ -204,7 +205,7 @@ def test_the_cli_refuses_what_it_cannot_fit(tmp_path, capsys) -> None:
     assert study.main([str(tmp_path / "missing.bag")] + out) == 1
     assert "no such bag" in capsys.readouterr().err
     assert study.main(["--simulated", config_path("tank.yaml"), "--tank-disturbance", "1.0", "10"] + out) == 1
-    assert "disturbance_torque_std must be in" in capsys.readouterr().err
+    assert "'disturbance_torque_std' = 1 is outside [0, 0.4]" in capsys.readouterr().err
     assert study.main(["--simulated", config_path("tank.yaml"), "--tank-disturbance", "0.001", "10",
                        "--grid", "0.015"] + out) == 1
     assert "multiple of the plant's 0.01 s step" in capsys.readouterr().err

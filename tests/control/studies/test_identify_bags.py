@@ -20,7 +20,7 @@ from quadruped_control.sim.replay import Record
 from quadruped_control.studies import StudyError
 from quadruped_control.studies import identify_bags as ib
 from quadruped_control.studies.runner import code_source
-from quadruped_control.studies.identify import nominal_values, update_tank_yaml
+from quadruped_control.studies.identify_parameters import nominal_values, update_tank_yaml
 from tests.repo import REPO_ROOT
 
 TANK = "config/tank_identified.yaml"
@@ -127,9 +127,9 @@ def test_the_servo_fit_measures_a_dead_band_from_the_commands_and_the_feedback(t
     error to the noise; the same servos without the dead band miss by several times more."""
     with open(os.path.join(REPO_ROOT, TANK)) as stream:
         text = stream.read()
-    assert "  dead_band: 0.0 " in text
+    assert "  servo_dead_band: 0.0 " in text
     truth = tmp_path / "banded.yaml"
-    truth.write_text(text.replace("  dead_band: 0.0 ", "  dead_band: 0.007 ", 1))
+    truth.write_text(text.replace("  servo_dead_band: 0.0 ", "  servo_dead_band: 0.007 ", 1))
     record = ib.simulated_record(str(truth), (45.0, 0.0, 0.0), (0.0, 0.0, 60.0), 20.0, joint_noise_deg=0.05)
     objective = ib.ServoObjective(ib.load_servo_params(), [record], 500, 500, 10)
     best = ib.fit_servos(objective)
@@ -239,27 +239,27 @@ def test_the_fit_recovers_what_a_simulated_run_was_made_with(tmp_path) -> None:
     pytest.importorskip("cma")
     truth = nominal_values(load_tank_params(TANK))
     with open(TANK) as stream:
-        base = update_tank_yaml(stream.read(), {"cob_z": 0.0, "appendage_linear_xy": 0.05,
-                                                "appendage_linear_z": truth["appendage_linear_z"]}, "moved")
+        base = update_tank_yaml(stream.read(), {"center_of_buoyancy_z": 0.0, "appendage_damping_linear_xy": 0.05,
+                                                "appendage_damping_linear_z": truth["appendage_damping_linear_z"]}, "moved")
     base_yaml = str(tmp_path / "base.yaml")
     with open(base_yaml, "w") as stream:
         stream.write(base)
     out = str(tmp_path / "out")
     assert ib.main(["--simulated", TANK, "--tank-yaml", base_yaml, "--rpy", "45", "0", "0", "--hold-out-rpy", "0",
-                    "30", "0", "--duration", "25", "--window", "5", "--stride", "2.5", "--parameters", "cob_z",
-                    "appendage_linear_xy", "--evaluations", "96", "--popsize", "8", "--out", out]) == 0
+                    "30", "0", "--duration", "25", "--window", "5", "--stride", "2.5", "--parameters", "center_of_buoyancy_z",
+                    "appendage_damping_linear_xy", "--evaluations", "96", "--popsize", "8", "--out", out]) == 0
     with open(os.path.join(out, "identify_bags.json")) as stream:
         report = json.load(stream)
-    assert report["fitted"]["cob_z"] == pytest.approx(truth["cob_z"], abs=1e-4)  # 0.1 mm of its 8 mm range
-    assert report["fitted"]["appendage_linear_xy"] == pytest.approx(truth["appendage_linear_xy"], abs=0.05)
+    assert report["fitted"]["center_of_buoyancy_z"] == pytest.approx(truth["center_of_buoyancy_z"], abs=1e-4)  # 0.1 mm of its 8 mm range
+    assert report["fitted"]["appendage_damping_linear_xy"] == pytest.approx(truth["appendage_damping_linear_xy"], abs=0.05)
     for side in ("training", "held_out"):
         s = report[side]
         assert s["windows"] == 7  # from 5 s (after the default lead-in) to 20 s
         assert s["fitted"] < 1.5 * s["truth"] and s["fitted"] < 0.2 * s["base"] and s["fitted"] < 0.2 * s["still"]
-    assert report["truth"]["values"]["cob_z"] == truth["cob_z"]
+    assert report["truth"]["values"]["center_of_buoyancy_z"] == truth["center_of_buoyancy_z"]
     assert report["code_source"] == code_source()
     fitted = load_tank_params(os.path.join(out, "tank_fitted.yaml"))
-    assert fitted.center_of_buoyancy[2] == pytest.approx(report["fitted"]["cob_z"], abs=1e-12)
+    assert fitted.center_of_buoyancy[2] == pytest.approx(report["fitted"]["center_of_buoyancy_z"], abs=1e-12)
     for name in ("identify_bags.md", "identify_bags.png"):
         assert os.path.getsize(os.path.join(out, name)) > 0
     # the same command gives the same fit
@@ -273,7 +273,7 @@ def test_a_recorded_run_is_fitted_end_to_end(run, tmp_path) -> None:
     pytest.importorskip("cma")
     _, path = run
     out = str(tmp_path / "out")
-    assert ib.main([path, "--hold-out", path, "--tank-yaml", TANK, "--parameters", "cob_z", "net_weight",
+    assert ib.main([path, "--hold-out", path, "--tank-yaml", TANK, "--parameters", "center_of_buoyancy_z", "net_weight",
                     "--window", "4", "--stride", "4", "--lead-in", "0", "--evaluations", "8", "--popsize", "4",
                     "--out", out]) == 0
     with open(os.path.join(out, "identify_bags.json")) as stream:
@@ -291,10 +291,10 @@ def test_a_recorded_run_is_fitted_end_to_end(run, tmp_path) -> None:
 
 
 @pytest.mark.parametrize("argv, message", [
-    (["--parameters", "cob_z", "servo_lag_scale"], "servo model"),
-    (["--parameters", "cob_z", "gravity"], "unknown parameter"),
-    (["--parameters", "cob_z"], "two or more"),
-    (["--parameters", "cob_z", "cob_z"], "named twice"),
+    (["--parameters", "center_of_buoyancy_z", "servo_lag_scale"], "servo model"),
+    (["--parameters", "center_of_buoyancy_z", "gravity"], "unknown parameter"),
+    (["--parameters", "center_of_buoyancy_z"], "two or more"),
+    (["--parameters", "center_of_buoyancy_z", "center_of_buoyancy_z"], "named twice"),
     (["missing.bag"], "no such bag"),
     (["--simulated", TANK], "--rpy"),
     ([], "at least one recorded run"),
@@ -306,7 +306,7 @@ def test_bad_input_is_refused(argv, message, capsys, tmp_path) -> None:
 
 def test_runs_shorter_than_a_window_are_refused(capsys, tmp_path) -> None:
     assert ib.main(["--simulated", TANK, "--rpy", "45", "0", "0", "--duration", "2", "--window", "5", "--parameters",
-                    "cob_z", "net_weight", "--out", str(tmp_path)]) == 1
+                    "center_of_buoyancy_z", "net_weight", "--out", str(tmp_path)]) == 1
     assert "no window of 5.00 s" in capsys.readouterr().err
 
 
@@ -314,7 +314,7 @@ def test_a_broken_tank_yaml_is_named(capsys, tmp_path) -> None:
     broken = tmp_path / "tank.yaml"
     broken.write_text("effects: [\n")
     assert ib.main(["--simulated", TANK, "--rpy", "45", "0", "0", "--tank-yaml", str(broken), "--parameters",
-                    "cob_z", "net_weight", "--out", str(tmp_path / "out")]) == 1
+                    "center_of_buoyancy_z", "net_weight", "--out", str(tmp_path / "out")]) == 1
     assert str(broken) in capsys.readouterr().err
 
 
@@ -333,7 +333,7 @@ def test_the_imus_heading_is_no_parameter_of_the_replay():
 
     assert not set(SENSOR_PARAMETERS) & set(PLANT_PARAMETERS)
     with pytest.raises(StudyError, match="IMU's heading"):
-        _check_parameters(["cob_z", "imu_field_z"])
+        _check_parameters(["center_of_buoyancy_z", "imu_field_residual_z"])
 
 
 def test_a_simulated_bag_records_the_heading_the_imu_reports(tmp_path) -> None:
@@ -348,7 +348,7 @@ def test_a_simulated_bag_records_the_heading_the_imu_reports(tmp_path) -> None:
         text = stream.read()
     assert "\nimu:" not in text  # the identified set's IMU reports the true heading
     truth = tmp_path / "magnetic.yaml"
-    truth.write_text(text + "\nimu:\n  field_residual: [0.1, -0.3, 0.4]\n")
+    truth.write_text(text + "\nimu:\n  imu_field_residual: [0.1, -0.3, 0.4]\n")
     record = ib.simulated_record(str(truth), (30.0, 0.0, 0.0), (0.0, 0.0, 60.0), 2.0)
     spec = TrialSpec(label="x", setpoint_rpy_deg=(30.0, 0.0, 0.0), initial_rpy_deg=(0.0, 0.0, 60.0), duration=2.0,
                      gains="experiment", servo_model="rate-limited", plant="tank", tank_yaml=str(truth))

@@ -12,7 +12,7 @@ import pytest
 
 from quadruped_control import simulate
 from quadruped_control.studies import StudyError
-from quadruped_control.studies import identify as idf
+from quadruped_control.studies import identify_objective as ido, identify_parameters as idp
 from quadruped_control.studies import profile as pro
 from quadruped_control.studies.runner import code_source
 
@@ -24,13 +24,13 @@ def tiny_report(tmp_path_factory) -> str:
     out = str(tmp_path_factory.mktemp("identify"))
     assert simulate.main(["--study", "identify", "--screen", "2", "--evaluations", "2", "--cv-evaluations", "2",
                           "--popsize", "2", "--ensemble", "1", "--duration", "0.2", "--out", out, "--quiet",
-                          "--jobs", "1", "--parameters", "cob_z", "net_weight", "servo_lag_scale"]) == 0
+                          "--jobs", "1", "--parameters", "center_of_buoyancy_z", "net_weight", "servo_lag_scale"]) == 0
     return os.path.join(out, "identify.json")
 
 
 def test_a_profile_holds_the_parameter_refits_the_others_and_predicts_every_group(tiny_report, tmp_path) -> None:
     out = str(tmp_path / "profile")
-    assert pro.main([tiny_report, "--parameter", "cob_z", "--values", "0.002", "-0.001", "--evaluations", "2",
+    assert pro.main([tiny_report, "--parameter", "center_of_buoyancy_z", "--values", "0.002", "-0.001", "--evaluations", "2",
                      "--cv-evaluations", "2", "--popsize", "2", "--out", out, "--quiet"]) == 0
     with open(tiny_report) as stream:
         report = json.load(stream)
@@ -38,16 +38,16 @@ def test_a_profile_holds_the_parameter_refits_the_others_and_predicts_every_grou
         result = json.load(stream)
     assert [p["value"] for p in result["points"]] == [0.002, -0.001]  # in the command's order
     not_fitted = {n: v for n, v in report["fit"]["best"]["values"].items()
-                  if n not in ("cob_z", "net_weight", "servo_lag_scale")}
+                  if n not in ("center_of_buoyancy_z", "net_weight", "servo_lag_scale")}
     for point in result["points"]:
         fits = [point["fit"]["best"]] + [fold["fit"] for fold in point["cross_validation"]]
         for fitted in fits:
-            assert fitted["values"]["cob_z"] == point["value"]
+            assert fitted["values"]["center_of_buoyancy_z"] == point["value"]
             for name, value in not_fitted.items():  # the report's values, untouched
                 assert fitted["values"][name] == value
         for fold in point["cross_validation"]:  # the held-out prediction is of the fold's own fit
             assert fold["prediction"]["values"] == fold["fit"]["values"]
-        assert [f["held_out"] for f in point["cross_validation"]] == list(idf.GROUPS)
+        assert [f["held_out"] for f in point["cross_validation"]] == list(ido.GROUPS)
         assert [f["prediction"]["targets"]["cases"] for f in point["cross_validation"]] == [6, 6, 3]
         assert point["held_out"] == pro.summed_targets(point["cross_validation"])
         assert point["held_out"]["cases"] == 15 and point["fit"]["best"]["targets"]["cases"] == 15
@@ -55,7 +55,7 @@ def test_a_profile_holds_the_parameter_refits_the_others_and_predicts_every_grou
             sum(f["prediction"]["objective"] for f in point["cross_validation"]))
     # the report's free fit, rerun on this code, reproduces the report's figures
     free = result["free"]
-    assert free["value"] == report["fit"]["best"]["values"]["cob_z"]
+    assert free["value"] == report["fit"]["best"]["values"]["center_of_buoyancy_z"]
     assert free["objective"] == pytest.approx(report["fit"]["best"]["objective"], abs=1e-9)
     assert free["held_out_objective"] == pytest.approx(free["report_held_out_objective"], abs=1e-9)
     assert result["command"][-1] == "--quiet" and len(result["report_sha256"]) == 64 and result["code"]
@@ -81,9 +81,9 @@ class _FakeEvaluator:
 
 
 def _report() -> Dict[str, Any]:
-    values = {"cob_z": -0.003, "net_weight": 2.0, "servo_lag_scale": 5.0, "hook_z": 0.07}
-    folds = [{"held_out": g, "fit": {"values": dict(values, net_weight=1.0 + i)}} for i, g in enumerate(idf.GROUPS)]
-    return {"study": "identify", "identified": ["cob_z", "net_weight", "servo_lag_scale"], "seed": 7,
+    values = {"center_of_buoyancy_z": -0.003, "net_weight": 2.0, "servo_lag_scale": 5.0, "hook_z": 0.07}
+    folds = [{"held_out": g, "fit": {"values": dict(values, net_weight=1.0 + i)}} for i, g in enumerate(ido.GROUPS)]
+    return {"study": "identify", "identified": ["center_of_buoyancy_z", "net_weight", "servo_lag_scale"], "seed": 7,
             "duration": 160.0, "servo_model": "rate-limited", "fit": {"best": {"values": values}},
             "cross_validation": folds}
 
@@ -98,13 +98,13 @@ def test_each_refit_starts_from_the_reports_fit_of_the_same_experiments(monkeypa
 
     monkeypatch.setattr(pro, "fit", fake_fit)
     report = _report()
-    point = pro.profile_point(_FakeEvaluator(), report, "cob_z", 0.001, 30, 20, 4, 0.1)
+    point = pro.profile_point(_FakeEvaluator(), report, "center_of_buoyancy_z", 0.001, 30, 20, 4, 0.1)
     full, *folds = calls
     assert full["names"] == ["net_weight", "servo_lag_scale"]  # the held parameter is not fitted
-    assert full["start"] == dict(report["fit"]["best"]["values"], cob_z=0.001) == full["fixed"]
+    assert full["start"] == dict(report["fit"]["best"]["values"], center_of_buoyancy_z=0.001) == full["fixed"]
     assert (full["budget"], full["seed"], full["sigma"], full["cases"]) == (30, 7, 0.1, [0, 1, 2, 3, 4])
     for call, fold in zip(folds, report["cross_validation"]):
-        assert call["start"] == dict(fold["fit"]["values"], cob_z=0.001)
+        assert call["start"] == dict(fold["fit"]["values"], center_of_buoyancy_z=0.001)
         assert (call["budget"], call["seed"]) == (20, 8)
         held = _FakeEvaluator().cases([fold["held_out"]])
         assert call["cases"] == [k for k in range(5) if k not in held]  # trained without the held-out group
@@ -112,37 +112,37 @@ def test_each_refit_starts_from_the_reports_fit_of_the_same_experiments(monkeypa
 
 
 def test_a_profile_that_leaves_one_parameter_to_fit_is_refused_by_name() -> None:
-    report = dict(_report(), identified=["cob_z", "net_weight"])
-    with pytest.raises(StudyError, match="holding cob_z leaves net_weight to fit; CMA-ES fits two or more"):
-        pro.profile_point(_FakeEvaluator(), report, "cob_z", 0.0, 2, 2, 2, 0.1)
+    report = dict(_report(), identified=["center_of_buoyancy_z", "net_weight"])
+    with pytest.raises(StudyError, match="holding center_of_buoyancy_z leaves net_weight to fit; CMA-ES fits two or more"):
+        pro.profile_point(_FakeEvaluator(), report, "center_of_buoyancy_z", 0.0, 2, 2, 2, 0.1)
 
 
 @pytest.mark.parametrize("value", [0.005, -0.0041, math.nan, math.inf])
 def test_values_outside_the_bounds_are_refused(value) -> None:
-    with pytest.raises(StudyError, match=r"cob_z = .* lies outside its bounds -0.004 .. 0.004"):
-        pro.check_values("cob_z", [0.0, value])
+    with pytest.raises(StudyError, match=r"center_of_buoyancy_z = .* lies outside its bounds -0.004 .. 0.004"):
+        pro.check_values("center_of_buoyancy_z", [0.0, value])
 
 
 def test_bad_command_lines_and_reports_fail_before_any_trial(tmp_path, capsys, tiny_report) -> None:
-    for argv in (["--parameter", "wake_speed", "--values", "0"], ["--parameter", "cob_z", "--values", "0",
+    for argv in (["--parameter", "wake_speed", "--values", "0"], ["--parameter", "center_of_buoyancy_z", "--values", "0",
                                                                   "--sigma", "0"],
-                 ["--parameter", "cob_z", "--values", "0", "--evaluations", "0"], ["--parameter", "cob_z"]):
+                 ["--parameter", "center_of_buoyancy_z", "--values", "0", "--evaluations", "0"], ["--parameter", "center_of_buoyancy_z"]):
         with pytest.raises(SystemExit):
             pro.main([tiny_report, "--out", str(tmp_path / "x")] + argv)
-    assert pro.main([tiny_report, "--parameter", "cob_z", "--values", "0.01", "--out", str(tmp_path / "y")]) == 1
-    assert "cob_z = 0.01 lies outside its bounds" in capsys.readouterr().err
+    assert pro.main([tiny_report, "--parameter", "center_of_buoyancy_z", "--values", "0.01", "--out", str(tmp_path / "y")]) == 1
+    assert "center_of_buoyancy_z = 0.01 lies outside its bounds" in capsys.readouterr().err
     assert not os.path.exists(str(tmp_path / "y"))  # refused before anything ran
     missing = str(tmp_path / "none.json")
-    assert pro.main([missing, "--parameter", "cob_z", "--values", "0"]) == 1
+    assert pro.main([missing, "--parameter", "center_of_buoyancy_z", "--values", "0"]) == 1
     assert "cannot read the identification report" in capsys.readouterr().err
     other = tmp_path / "other.json"
     other.write_text(json.dumps({"study": "paper-experiments"}))
-    assert pro.main([str(other), "--parameter", "cob_z", "--values", "0"]) == 1
+    assert pro.main([str(other), "--parameter", "center_of_buoyancy_z", "--values", "0"]) == 1
     assert "is not an identification report" in capsys.readouterr().err
     partial = tmp_path / "partial.json"
     partial.write_text(json.dumps({"study": "identify", "identified": [], "fit": {}, "cross_validation": [],
                                    "seed": 0, "duration": 1.0}))
-    assert pro.main([str(partial), "--parameter", "cob_z", "--values", "0"]) == 1
+    assert pro.main([str(partial), "--parameter", "center_of_buoyancy_z", "--values", "0"]) == 1
     assert "has no 'servo_model'" in capsys.readouterr().err
 
 
@@ -151,13 +151,13 @@ def test_a_tank_yaml_other_than_the_identifications_is_refused_by_the_keys_that_
     from quadruped_common.config import config_path
 
     with open(config_path("tank.yaml")) as stream:
-        text = idf.update_tank_yaml(stream.read(), {"cob_z": 0.003, "net_weight": 2.5}, "another trim")
+        text = idp.update_tank_yaml(stream.read(), {"center_of_buoyancy_z": 0.003, "net_weight": 2.5}, "another trim")
     other = tmp_path / "other_tank.yaml"
     other.write_text(text)
     assert pro.main([tiny_report, "--parameter", "servo_lag_scale", "--values", "2", "--tank-yaml", str(other),
                      "--out", str(tmp_path / "z")]) == 1
     err = capsys.readouterr().err
-    assert "is not the tank yaml the identification started from (cob_z, net_weight differ" in err
+    assert "is not the tank yaml the identification started from (center_of_buoyancy_z, net_weight differ" in err
     assert not os.path.exists(str(tmp_path / "z"))
     broken = tmp_path / "broken.yaml"
     broken.write_text("tank: [1, 2\n")

@@ -8,7 +8,7 @@ import pytest
 from quadruped_common.config import config_path
 from quadruped_control.control.controller_config import load_controller_config
 from quadruped_control.model.params import load_robot_params
-from quadruped_control.sim.plants.tank import load_tank_params
+from quadruped_control.sim.plants.tank_params import load_tank_params
 from quadruped_control.sim.servo_model import load_servo_params, tank_servo_params
 from quadruped_control.studies import torque_map
 from quadruped_control.studies.torque_map import MapPoint
@@ -90,8 +90,8 @@ def test_cli_reports_a_bad_config(tmp_path, capsys) -> None:
     bad = tmp_path / "tank.yaml"
     with open(config_path("tank.yaml")) as stream:
         text = stream.read()
-    assert "\n  length: 0.5\n" in text
-    bad.write_text(text.replace("\n  length: 0.5\n", "\n  length: -0.5\n"))
+    assert "\n  rope_length: 0.5\n" in text
+    bad.write_text(text.replace("\n  rope_length: 0.5\n", "\n  rope_length: -0.5\n"))
     assert torque_map.main(["--tank-yaml", str(bad), "--axes", "yaw", "--errors", "1", "--duration", "12"]) == 1
     err = capsys.readouterr().err
     assert "torque_map:" in err and "length" in err

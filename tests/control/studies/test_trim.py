@@ -8,7 +8,8 @@ import pytest
 
 from quadruped_common.so3 import rpy_to_rot
 from quadruped_control.model.params import load_robot_params
-from quadruped_control.sim.plants.tank import TankModel, TankParams
+from quadruped_control.sim.plants.tank import TankModel
+from quadruped_control.sim.plants.tank_params import TankParams
 from quadruped_control.sim.simulation import nominal_joint_angles
 from quadruped_control.studies import trim
 

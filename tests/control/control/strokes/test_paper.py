@@ -277,8 +277,7 @@ def test_recovery_falls_back_to_recorded_points_when_a_chord_is_unreachable():
     run(cycle, Recorder((0.0, 0.0, -0.05)), 51)  # second pair stroke recorded, recovery started
     calls["fail"] = True
     log = run(cycle, Recorder((0.0, 0.0, -0.05)), 40)
-    pair_paths = cycle._pairs[1].paths
-    recorded = {tuple(p) for p in pair_paths[0].points}
+    recorded = set(cycle.recorded_stroke(2))  # the second pair's first leg
     for entry in log:
         assert tuple(entry[2][1]) in recorded
         assert within_limits(entry[3][1], PARAMS)
@@ -299,3 +298,21 @@ def test_joint_targets_always_reachable_and_within_limits(velocities, steps, hol
         for leg, (r, q) in enumerate(zip(cycle.foot_targets(), cycle.joint_targets()), start=1):
             assert within_limits(q, PARAMS, tol=0.0)
             np.testing.assert_allclose(joint_angles(r, leg, PARAMS), q, atol=1e-9)
+
+
+def test_a_stroke_longer_than_the_first_record_is_kept_whole_and_retraced():
+    """The robot's strokes have no length limit: the record grows past its first 64 points."""
+    cycle = StrokeCycle(PARAMS, t_rec=1.5, t_pow_max=1.5)
+    slow = (0.0, 0.0, -0.01)  # 1.5 cm in 1.5 s: inside the workspace
+    log = run(cycle, Recorder(slow), 151)
+    end = first_index(log, 1, PHASE_RECOVERY)
+    assert end == 150  # started at the first step, then 150 power steps of the second pair (legs 2, 4)
+    for leg in (2, 4):
+        stroke = cycle.recorded_stroke(leg)
+        assert len(stroke) == 151
+        assert stroke[0] == NOMINAL[leg]
+        np.testing.assert_array_equal(stroke[-1], log[end][2][leg - 1])
+        np.testing.assert_allclose(stroke[-1], np.array(NOMINAL[leg]) + 1.5 * np.array(slow), atol=1e-12)
+    log = run(cycle, Recorder(slow), 150)  # the recovery, t_rec = 1.5 s
+    for leg in (2, 4):
+        assert cycle.foot_targets()[leg - 1] == NOMINAL[leg]

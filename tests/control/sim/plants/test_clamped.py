@@ -12,7 +12,8 @@ from quadruped_control.control.controller_config import load_controller_config
 from quadruped_control.model.params import load_robot_params
 from quadruped_control.sim.plants.clamped import ClampedTank
 from quadruped_control.sim.plants.rigid_body import RigidBodyState
-from quadruped_control.sim.plants.tank import TankModel, TankParams
+from quadruped_control.sim.plants.tank import TankModel
+from quadruped_control.sim.plants.tank_params import TankParams
 from quadruped_control.sim.simulation import ClosedLoopSimulation, nominal_joint_angles
 
 

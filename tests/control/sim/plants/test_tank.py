@@ -17,8 +17,8 @@ from quadruped_control.sim.plants import TankModel, TankParams, load_tank_params
 from quadruped_control.sim.plants.added_mass import (ellipsoid_added_mass, ellipsoid_coefficients, kirchhoff_terms,
                                                  point_mass_matrix)
 from quadruped_control.sim.plants.paper import FloatingBaseModel, RigidBodyState
-from quadruped_control.sim.plants.tank import hydrostatic_wrench, rope_force, torso_ellipsoid
-from quadruped_control.sim.plants.tank_dynamics import solve_mass
+from quadruped_control.sim.plants.tank import hydrostatic_wrench, torso_ellipsoid
+from quadruped_control.sim.plants.tank_dynamics import rope_force, solve_mass
 from quadruped_control.sim.simulation import ClosedLoopSimulation, PlantSimulator, nominal_joint_angles
 
 ROBOT = load_robot_params()
@@ -132,10 +132,10 @@ def test_tank_params_are_validated() -> None:
 @pytest.mark.parametrize("edit, key", [
     (("suspension: true", "suspension: 1"), "effects.suspension"),           # a number is not a switch
     (("drag: true", "drag: 'no'"), "effects.drag"),                        # bool('no') would be True
-    (("length: 0.5", "length: true"), "suspension.length"),                 # true is not 1
-    (("stiffness: 2000.0", "stiffness: .nan"), "suspension.stiffness"),
+    (("rope_length: 0.5", "rope_length: true"), "suspension.rope_length"),   # true is not 1
+    (("rope_stiffness: 2000.0", "rope_stiffness: .nan"), "suspension.rope_stiffness"),
     (("net_weight: 1.0", "net_weight: 1.0e+300"), "hydrostatics.net_weight"),
-    (("  scale: 1.0\n  # [estimate] paws", "  scale: -1.0\n  # [estimate] paws"), "added_mass.scale"),
+    (("added_mass_scale: 1.0", "added_mass_scale: -1.0"), "added_mass.added_mass_scale"),
     (("hook: [0.0, 0.0, 0.077]", "hook: [0.0, 0.077]"), "suspension.hook"),
     (("paw_drag:", "paw_dragg:"), "paw_dragg"),                              # unknown key
 ])
@@ -328,13 +328,13 @@ def test_controller_off_holds_the_nominal_pose() -> None:
 
 def test_empty_optional_tank_section_means_defaults_but_a_wrong_type_is_refused(tmp_path) -> None:
     text = open(config_path("tank.yaml")).read()
-    assert "  speed_scale: 1.0" in text and "  stall_torque: 0.0 " in text
+    assert "  servo_speed_scale: 1.0" in text and "  servo_stall_torque: 0.0 " in text
     text = "\n".join(line for line in text.splitlines()
-                     if not line.startswith(("  stall_torque:", "  lag_scale:", "  dead_band:")))
+                     if not line.startswith(("  servo_stall_torque:", "  servo_lag_scale:", "  servo_dead_band:")))
     path = tmp_path / "tank.yaml"
-    path.write_text(text.replace("  speed_scale: 1.0", "", 1))          # 'servos:' left empty (null)
+    path.write_text(text.replace("  servo_speed_scale: 1.0", "", 1))          # 'servos:' left empty (null)
     assert load_tank_params(str(path)).servo_speed_scale == 1.0
-    path.write_text(text.replace("  speed_scale: 1.0", "", 1).replace("servos:", "servos: 3", 1))
+    path.write_text(text.replace("  servo_speed_scale: 1.0", "", 1).replace("servos:", "servos: 3", 1))
     with pytest.raises(ParameterError, match="'servos' must be a mapping"):
         load_tank_params(str(path))
 
@@ -376,7 +376,7 @@ def test_appendage_damping_slows_a_spin_as_its_law_says(linear: float, quadratic
 
 
 def test_rope_twist_is_the_rotation_about_the_vertical() -> None:
-    from quadruped_control.sim.plants.tank import rope_twist
+    from quadruped_control.sim.plants.tank_dynamics import rope_twist
     flat = lambda R: np.asarray(R).ravel().tolist()  # noqa: E731
     for yaw in (-2.5, -0.3, 0.0, 0.7, 3.0):
         for tilt in (0.0, 0.4, -1.2):
@@ -592,15 +592,15 @@ def test_a_relaxing_twist_that_never_relaxes_is_the_ropes_spring_and_one_that_re
     assert energy[-1] < 0.01 * energy[0]
 
 
-@pytest.mark.parametrize("section, key, value", [("appendage_damping", "linear", [0.0, -0.1, 0.0]),
-                                                 ("suspension", "torsion_stiffness", -1.0),
-                                                 ("suspension", "torsion_relaxing_stiffness", -1.0),
-                                                 ("suspension", "torsion_relaxation_time", 0.01),
-                                                 ("paw_wake", "fraction", 1.0),
-                                                 ("paw_wake", "time_constant", 0.0),
-                                                 ("paw_wake", "body_share", 1.5),
-                                                 ("appendage_damping", "wake_fraction", 1.0),
-                                                 ("appendage_damping", "wake_time_constant", 0.01),
+@pytest.mark.parametrize("section, key, value", [("appendage_damping", "appendage_damping_linear", [0.0, -0.1, 0.0]),
+                                                 ("suspension", "rope_torsion_stiffness", -1.0),
+                                                 ("suspension", "rope_torsion_relaxing_stiffness", -1.0),
+                                                 ("suspension", "rope_torsion_relaxation_time", 0.01),
+                                                 ("paw_wake", "paw_wake_fraction", 1.0),
+                                                 ("paw_wake", "paw_wake_time_constant", 0.0),
+                                                 ("paw_wake", "paw_wake_body_share", 1.5),
+                                                 ("appendage_damping", "body_wake_fraction", 1.0),
+                                                 ("appendage_damping", "body_wake_time_constant", 0.01),
                                                  ("suspension", "block_mass", -1.0),
                                                  ("suspension", "block_drag", -1.0),
                                                  ("suspension", "block_tie_stiffness", 1.0e4),
@@ -614,7 +614,7 @@ def test_candidate_effect_keys_are_checked(tmp_path, section, key, value) -> Non
     path.write_text(yaml.safe_dump(tree))
     with pytest.raises(ParameterError, match="%s.%s" % (section, key)):
         load_tank_params(str(path))
-    tree[section][key] = [0.0, 0.1, 0.2] if key == "linear" else 0.3
+    tree[section][key] = [0.0, 0.1, 0.2] if key == "appendage_damping_linear" else 0.3
     path.write_text(yaml.safe_dump(tree))
     params = load_tank_params(str(path))
     assert params.appendage_damping_linear == (0.0, 0.1, 0.2) or 0.3 in (
@@ -746,14 +746,14 @@ def test_paw_joint_loads_are_the_jacobian_transpose_of_the_paw_drag_and_drag_tak
     geometry = _geometry(ROBOT)
     k, body = 1.4, (0.02, -0.01, 0.03, 0.2, -0.1, 0.3)
     loads = np.zeros((4, 3))
-    assert paw_joint_loads(q, np.array(geometry[1]), tuple(geometry[2:9]), rows, k, *body, loads)
+    assert paw_joint_loads(q, np.array(geometry.frame_rows), geometry.five_bar_hip, rows, k, *body, loads)
     for leg in range(4):
         J = foot_jacobian(q[leg], leg + 1, ROBOT)
         r, c = rows[leg, :3], rows[leg, 3:]
         u = np.array(body[:3]) + np.cross(body[3:], r) + c
         np.testing.assert_allclose(loads[leg], J.T @ (-k * np.linalg.norm(u) * u), rtol=1e-12, atol=1e-15)
     still = np.zeros((4, 3))
-    paw_joint_loads(q, np.array(geometry[1]), tuple(geometry[2:9]), rows, k, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, still)
+    paw_joint_loads(q, np.array(geometry.frame_rows), geometry.five_bar_hip, rows, k, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, still)
     for leg in range(4):
         c = rows[leg, 3:]
         assert float(still[leg] @ q_dot[leg]) == pytest.approx(-k * np.linalg.norm(c) ** 3, rel=1e-12)
@@ -786,7 +786,7 @@ def test_loaded_servos_slow_the_strokes_and_no_stall_torque_is_todays_model() ->
 
 
 def test_the_tank_servos_lag_and_speed_scales_reach_the_servo_model() -> None:
-    """servos.speed_scale and servos.lag_scale of the tank scale simulation.yaml's servo (trial_setup, the
+    """servos.servo_speed_scale and servos.servo_lag_scale of the tank scale simulation.yaml's servo (trial_setup, the
     one place both engines take their servo parameters from); stall_torque and dead_band are passed on as
     they are."""
     import argparse
@@ -950,18 +950,18 @@ def test_block_parameters_are_validated() -> None:
 
 
 def test_a_servo_dead_band_is_read_from_tank_yaml_and_a_unit_slip_is_refused(tmp_path) -> None:
-    """servos.dead_band (rad) reaches TankParams; 0 (the default) is today's trajectory bit for bit; a value
+    """servos.servo_dead_band (rad) reaches TankParams; 0 (the default) is today's trajectory bit for bit; a value
     in degrees or microseconds (past 0.1 rad) or negative is refused with the key's name; a dead band
     changes a tank trial."""
     from quadruped_control.sim.servo_model import RateLimitedServo, load_servo_params, tank_servo_params
     text = open(config_path("tank.yaml")).read()
-    assert "  dead_band: 0.0 " in text and load_tank_params().servo_dead_band == 0.0
+    assert "  servo_dead_band: 0.0 " in text and load_tank_params().servo_dead_band == 0.0
     path = tmp_path / "tank.yaml"
-    path.write_text(text.replace("  dead_band: 0.0 ", "  dead_band: 0.008 ", 1))
+    path.write_text(text.replace("  servo_dead_band: 0.0 ", "  servo_dead_band: 0.008 ", 1))
     assert load_tank_params(str(path)).servo_dead_band == 0.008
     for wrong in ("0.5", "-0.001", "8"):
-        path.write_text(text.replace("  dead_band: 0.0 ", "  dead_band: %s " % wrong, 1))
-        with pytest.raises(ParameterError, match="servos.dead_band"):
+        path.write_text(text.replace("  servo_dead_band: 0.0 ", "  servo_dead_band: %s " % wrong, 1))
+        with pytest.raises(ParameterError, match="servos.servo_dead_band"):
             load_tank_params(str(path))
     with pytest.raises(ParameterError, match="servo_dead_band"):
         load_tank_params().with_values(servo_dead_band=0.2)
@@ -1223,12 +1223,12 @@ def test_a_tie_whose_limit_falls_slips_down_to_what_it_now_holds_even_with_the_b
 
 
 @pytest.mark.parametrize("values, named", [
-    ({"appendage_damping_linear": (20.0, 0.0, 0.0)}, "appendage_damping.linear[0] (x)"),
-    ({"appendage_damping_quadratic": (0.0, 0.0, 30.0)}, "appendage_damping.quadratic[2] (z)"),
-    ({"rope_torsion_damping": 60.0}, "suspension.torsion_damping"),
-    ({"rope_torsion_stiffness": 2e4}, "suspension.torsion_stiffness"),
-    ({"rope_damping": 1e4}, "suspension.damping"),
-    ({"rope_stiffness": 1e7}, "suspension.stiffness"),
+    ({"appendage_damping_linear": (20.0, 0.0, 0.0)}, "appendage_damping.appendage_damping_linear[0] (x)"),
+    ({"appendage_damping_quadratic": (0.0, 0.0, 30.0)}, "appendage_damping.appendage_damping_quadratic[2] (z)"),
+    ({"rope_torsion_damping": 60.0}, "suspension.rope_torsion_damping"),
+    ({"rope_torsion_stiffness": 1e4, "rope_torsion_relaxing_stiffness": 1e4}, "suspension.rope_torsion_stiffness"),
+    ({"rope_damping": 1e4}, "suspension.rope_damping"),
+    ({"rope_stiffness": 1e7}, "suspension.rope_stiffness"),
     ({"hook_friction_arm": 0.05, "hook_friction_angle": 0.001, "hook_friction_wrap": 1.0}, "presliding stiffness"),
     ({"net_weight": 60.0}, "hydrostatics.net_weight"),
 ])
@@ -1302,23 +1302,22 @@ def test_hook_friction_tends_to_todays_model_as_it_vanishes() -> None:
     assert 0.0 < np.abs(tiny - today).max() < 1e-9 * 180.0 / math.pi * 1e3
 
 
-@pytest.mark.parametrize("key, value, good", [("friction_arm", -0.001, 0.003), ("friction_arm", 0.06, 0.003),
-                                              ("friction_arm", "x", 0.003), ("friction_angle", 0.0, 0.003),
-                                              ("friction_angle", 0.6, 0.003), ("friction_static_ratio", 0.9, 1.6),
-                                              ("friction_static_ratio", 3.5, 1.6), ("friction_static_ratio", "x", 1.6),
-                                              ("friction_stribeck_rate", 0.0, 0.05),
-                                              ("friction_stribeck_rate", 2.0, 0.05),
-                                              ("friction_roll_ratio", 0.05, 3.0), ("friction_roll_ratio", 12.0, 0.3),
-                                              ("friction_wrap", -0.1, 0.3), ("friction_wrap", 1.5, 0.3)])
+@pytest.mark.parametrize("key, value, good", [
+    ("hook_friction_arm", -0.001, 0.003), ("hook_friction_arm", 0.06, 0.003), ("hook_friction_arm", "x", 0.003),
+    ("hook_friction_angle", 0.0, 0.003), ("hook_friction_angle", 0.6, 0.003),
+    ("hook_friction_static_ratio", 0.9, 1.6), ("hook_friction_static_ratio", 3.5, 1.6),
+    ("hook_friction_static_ratio", "x", 1.6), ("hook_friction_stribeck_rate", 0.0, 0.05),
+    ("hook_friction_stribeck_rate", 2.0, 0.05), ("hook_friction_roll_ratio", 0.05, 3.0),
+    ("hook_friction_roll_ratio", 12.0, 0.3), ("hook_friction_wrap", -0.1, 0.3), ("hook_friction_wrap", 1.5, 0.3)])
 def test_hook_friction_keys_are_checked(tmp_path, key: str, value, good: float) -> None:
-    """Each of tank.yaml's suspension.friction_* keys: a value out of its bounds is refused by name, one inside
-    reaches TankParams.hook_friction_*; the static friction and the roll ratio are off by default."""
+    """Each of tank.yaml's suspension.hook_friction_* keys: a value out of its bounds is refused by name, one inside
+    reaches TankParams; the static friction and the roll ratio are off by default."""
     import yaml
     with open(config_path("tank.yaml")) as stream:
         tree = yaml.safe_load(stream)
-    assert tree["suspension"]["friction_static_ratio"] == 1.0  # off by default
-    assert tree["suspension"]["friction_roll_ratio"] == 1.0
-    assert tree["suspension"]["friction_wrap"] == 0.0
+    assert tree["suspension"]["hook_friction_static_ratio"] == 1.0  # off by default
+    assert tree["suspension"]["hook_friction_roll_ratio"] == 1.0
+    assert tree["suspension"]["hook_friction_wrap"] == 0.0
     tree["suspension"][key] = value
     path = tmp_path / "tank.yaml"
     path.write_text(yaml.safe_dump(tree))
@@ -1327,7 +1326,7 @@ def test_hook_friction_keys_are_checked(tmp_path, key: str, value, good: float) 
     tree["suspension"][key] = good
     path.write_text(yaml.safe_dump(tree))
     params = load_tank_params(str(path))
-    assert getattr(params, "hook_" + key) == good
+    assert getattr(params, key) == good
     with pytest.raises(ParameterError, match="hook_friction_angle"):
         TankParams(hook_friction_angle=float("nan"))
     with pytest.raises(ParameterError, match="hook_friction_static_ratio"):
@@ -1340,22 +1339,23 @@ def test_hook_friction_keys_are_checked(tmp_path, key: str, value, good: float) 
         TankParams(hook_friction_wrap=float("nan"))
 
 
-@pytest.mark.parametrize("value, message", [([0.0, 0.0, 0.96], "imu.field_residual"), ([0.0, "x", 0.0], "imu.field_residual"),
-                                            ([0.7, 0.7, 0.0], "norm at most"), ([0.0, 0.0], "imu.field_residual")])
+@pytest.mark.parametrize("value, message", [([0.0, 0.0, 0.96], "imu.imu_field_residual"),
+                                            ([0.0, "x", 0.0], "imu.imu_field_residual"),
+                                            ([0.7, 0.7, 0.0], "norm at most"), ([0.0, 0.0], "imu.imu_field_residual")])
 def test_the_imu_field_residual_key_is_checked(tmp_path, value, message: str) -> None:
-    """tank.yaml's imu.field_residual: off (zeros) by default; a component past 0.95 of the earth's horizontal
+    """tank.yaml's imu.imu_field_residual: off (zeros) by default; a component past 0.95 of the earth's horizontal
     field, a norm past it (some headings would have no true one) or a malformed vector is refused."""
     import yaml
     with open(config_path("tank.yaml")) as stream:
         tree = yaml.safe_load(stream)
-    assert tree["imu"]["field_residual"] == [0.0, 0.0, 0.0]
+    assert tree["imu"]["imu_field_residual"] == [0.0, 0.0, 0.0]
     assert not load_tank_params().heading_disturbed and TankModel(load_robot_params(), load_tank_params()).imu_field_residual is None
-    tree["imu"]["field_residual"] = value
+    tree["imu"]["imu_field_residual"] = value
     path = tmp_path / "tank.yaml"
     path.write_text(yaml.safe_dump(tree))
     with pytest.raises(ParameterError, match=message):
         load_tank_params(str(path))
-    tree["imu"]["field_residual"] = [0.1, -0.4, 0.5]
+    tree["imu"]["imu_field_residual"] = [0.1, -0.4, 0.5]
     path.write_text(yaml.safe_dump(tree))
     params = load_tank_params(str(path))
     assert params.imu_field_residual == (0.1, -0.4, 0.5) and params.heading_disturbed
@@ -1440,12 +1440,12 @@ def test_the_tether_holds_a_tilt_back_then_lets_it_go_and_attach_relaxes_it() ->
                                (-(0.02 + 0.1 * math.exp(-1.0)) * roll, 0.0, 0.0), atol=1e-12)
 
 
-@pytest.mark.parametrize("key, value, message", [("stiffness", -0.01, "tether.stiffness"),
-                                                 ("stiffness", 2.5, "tether.stiffness"),
-                                                 ("relaxing_stiffness", "x", "tether.relaxing_stiffness"),
-                                                 ("relaxing_stiffness", 3.0, "tether.relaxing_stiffness"),
-                                                 ("relaxation_time", 0.05, "tether.relaxation_time"),
-                                                 ("relaxation_time", 2e4, "tether.relaxation_time"),
+@pytest.mark.parametrize("key, value, message", [("tether_stiffness", -0.01, "tether.tether_stiffness"),
+                                                 ("tether_stiffness", 2.5, "tether.tether_stiffness"),
+                                                 ("tether_relaxing_stiffness", "x", "tether.tether_relaxing_stiffness"),
+                                                 ("tether_relaxing_stiffness", 3.0, "tether.tether_relaxing_stiffness"),
+                                                 ("tether_relaxation_time", 0.05, "tether.tether_relaxation_time"),
+                                                 ("tether_relaxation_time", 2e4, "tether.tether_relaxation_time"),
                                                  ("bend", 0.1, "bend")])
 def test_the_tether_keys_are_checked(tmp_path, key: str, value, message: str) -> None:
     """tank.yaml's tether section: off by default; a value out of its bounds (a unit slip, a relaxation
@@ -1453,13 +1453,13 @@ def test_the_tether_keys_are_checked(tmp_path, key: str, value, message: str) ->
     import yaml
     with open(config_path("tank.yaml")) as stream:
         tree = yaml.safe_load(stream)
-    assert tree["tether"] == {"stiffness": 0.0, "relaxing_stiffness": 0.0, "relaxation_time": 10.0}
+    assert tree["tether"] == {"tether_stiffness": 0.0, "tether_relaxing_stiffness": 0.0, "tether_relaxation_time": 10.0}
     tree["tether"][key] = value
     path = tmp_path / "tank.yaml"
     path.write_text(yaml.safe_dump(tree))
     with pytest.raises(ParameterError, match=message):
         load_tank_params(str(path))
-    tree["tether"] = {"stiffness": 0.01, "relaxing_stiffness": 0.2, "relaxation_time": 30.0}
+    tree["tether"] = {"tether_stiffness": 0.01, "tether_relaxing_stiffness": 0.2, "tether_relaxation_time": 30.0}
     path.write_text(yaml.safe_dump(tree))
     params = load_tank_params(str(path))
     assert params.tether_stiffness == 0.01 and params.tether_relaxing_stiffness == 0.2
@@ -1578,14 +1578,15 @@ def test_the_disturbance_turns_a_free_body_as_its_torque_says() -> None:
     np.testing.assert_allclose(momentum, impulse, rtol=0.0, atol=1e-3 * np.linalg.norm(impulse))
 
 
-@pytest.mark.parametrize("key, value", [("torque_std", -0.001), ("torque_std", 1.0), ("correlation_time", 0.01),
-                                        ("seed", -1), ("seed", 1.5), ("seed", True), ("colour", 1)])
+@pytest.mark.parametrize("key, value", [("disturbance_torque_std", -0.001), ("disturbance_torque_std", 1.0),
+                                        ("disturbance_correlation_time", 0.01), ("disturbance_seed", -1),
+                                        ("disturbance_seed", 1.5), ("disturbance_seed", True), ("colour", 1)])
 def test_the_disturbance_keys_are_checked(tmp_path, key, value) -> None:
     import yaml
     with open(config_path("tank.yaml")) as stream:
         tree = yaml.safe_load(stream)
     assert load_tank_params(tree=tree).disturbance_torque_std == 0.0  # the shipped tank is still
-    tree["disturbance"] = {"torque_std": 0.003, "correlation_time": 20.0, "seed": 4}
+    tree["disturbance"] = {"disturbance_torque_std": 0.003, "disturbance_correlation_time": 20.0, "disturbance_seed": 4}
     params = load_tank_params(tree=tree)
     assert (params.disturbance_torque_std, params.disturbance_correlation_time, params.disturbance_seed) == \
         (0.003, 20.0, 4) and params.disturbed

@@ -12,7 +12,8 @@ from quadruped_common.config import ParameterError
 from quadruped_common.so3 import rpy_to_rot
 from quadruped_control.model.params import load_robot_params
 from quadruped_control.sim.plants.rigid_body import RigidBodyState
-from quadruped_control.sim.plants.tank import TankModel, TankParams, TurnUnresolved
+from quadruped_control.sim.plants.tank import TankModel, TurnUnresolved
+from quadruped_control.sim.plants.tank_params import TankParams
 from quadruped_control.sim.plants.tank_batch import TankPlantBatch
 from quadruped_control.sim.simulation import nominal_joint_angles
 
@@ -59,7 +60,8 @@ def test_a_step_longer_than_a_trial_can_resolve_is_refused_by_name() -> None:
     batch.attach(p, R)
     q, q_dot = _legs(2)
     batch.step(p, v, R, w, q, q_dot, DT)
-    with pytest.raises(ParameterError, match=r"0.03 s step cannot resolve: appendage_damping.linear\[2\]"):
+    with pytest.raises(ParameterError,
+                       match=r"0.03 s step cannot resolve: appendage_damping.appendage_damping_linear\[2\]"):
         batch.step(p, v, R, w, q, q_dot, 3.0 * DT)
 
 
