@@ -1,4 +1,4 @@
-"""Fault campaign of issue 18: the whole robot failing while it moves, on the simulated robot.
+"""Fault campaign: the whole robot failing while it moves, on the simulated robot.
 
     source scripts/env.sh   # or a sourced workspace: roslaunch and the package must be found
     .venv/bin/python benchmarks/fault_campaign.py --per-kind 20 --out out/faults          # every kind
@@ -10,7 +10,7 @@ delays), armed and in manoeuvres, and injects ``--per-kind`` faults of each kind
 Prints, per kind: injections, time to safe state (max), tracking kept during the fault, time to
 recovery (median / max), pulses outside limits on the chip, legs moved while unarmed, and messages lost
 from the bag before the fault; writes everything to ``OUT/fault_campaign.json``. Exits 1 if a target of
-the issue is missed (each listed). It takes about 2 minutes per kind at 20 injections, more for the long
+the targets are missed (each listed). It takes about 2 minutes per kind at 20 injections, more for the long
 faults (10 s link loss, CPU hogs) and the master kills (a graph each); run it on a quiet machine.
 """
 from __future__ import annotations

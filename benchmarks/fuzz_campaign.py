@@ -1,4 +1,4 @@
-"""Fault and fuzz campaigns of issue 10 ("Hardening"), at the issue's size. Prints the figures.
+"""Fault and fuzz campaigns at full size (tests/drivers/test_fault_scenarios.py runs them small). Prints the figures.
 
     .venv/bin/python benchmarks/fuzz_campaign.py --part vn100   # 300,000 mutated VN-100 packets
     .venv/bin/python benchmarks/fuzz_campaign.py --part i2c     # 36,000 faulty I2C cycles + failsafe trials

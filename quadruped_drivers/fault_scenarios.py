@@ -3,7 +3,7 @@
 The drivers under test are the real :class:`~quadruped_drivers.servo_feedback.ServoFeedbackArray` and
 :class:`~quadruped_drivers.pwm_output.ServoPwmOutput`; only the fakes are instrumented (faults injected
 on the fake bus and devices, the PCA9685's outputs checked after every write it takes, aborted ones
-included). Used with small counts by the tests and with the issue's counts by
+included). Used with small counts by the tests and with the full counts by
 ``benchmarks/fuzz_campaign.py --part i2c``.
 
 :func:`faulty_cycles` runs 100 Hz cycles (feedback read, PWM command, PWM update) with at least one

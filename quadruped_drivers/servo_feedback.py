@@ -24,7 +24,7 @@ Why not adafruit-circuitpython-ads1x15 3.0 / -tca9548a 0.7 (``docs/hardware_libr
 * ``adafruit_bus_device.I2CDevice`` locks per transaction and spins on ``try_lock`` without bound;
   a cycle must hold the bus across mux select + reads, with a bounded wait (:func:`bus_locked`).
 
-Wrong data is never reported fresh (issue 10):
+Wrong data is never reported fresh:
 
 * every mux switch is read back (one 1-byte read): a control write that was ACKed but not applied
   would otherwise make four joints report another channel's ADCs; the channel's joints go stale and

@@ -26,9 +26,9 @@ case "${1:-}" in
   -h|--help) usage; exit 0 ;;
 esac
 
-#: the fast tier: the robot's pure code, the analysis, and the layers' and the manifest's checks
+#: the fast tier: the robot's pure code, the analysis, and the README's and the layers' checks
 FAST_PATHS=(tests/common tests/drivers tests/control/model tests/control/control tests/control/analysis
-            tests/test_layers.py tests/test_package_manifest.py)
+            tests/test_readme.py tests/test_layers.py tests/test_package_manifest.py)
 
 export UQ_WITH_TESTS=1  # on the robot, setup.sh installs the tests' packages too
 source "$ROOT/scripts/prepare.sh"

@@ -1,5 +1,5 @@
 #!/usr/bin/env bash
-# Reproducible rviz screenshot of the robot for the README: docs/images/rviz.png.
+# Reproducible rviz screenshot of the robot for docs/tuning_and_recording.md: docs/images/rviz.png.
 #
 # Starts launch/rviz.launch (with description.launch: robot_description, robot_state_publisher, the
 # visualization node) on its own ROS master port under a virtual X server, publishes a fixed scene

@@ -17,7 +17,7 @@ PORT="${UQ_ROS_PORT:-11357}"
 export ROS_MASTER_URI="http://localhost:$PORT"
 LOG="$OUT/launch.log"
 # The control path (vn100_node, attitude_controller, pwm_node) runs SCHED_FIFO where allowed (root here),
-# as on the robot (README): on two shared cores it halves the loop jitter. UQ_LAUNCH_PREFIX overrides.
+# as on the robot (docs/on_the_robot.md): on two shared cores it halves the loop jitter. UQ_LAUNCH_PREFIX overrides.
 if [ -z "${UQ_LAUNCH_PREFIX+x}" ]; then
   if chrt -f 20 true 2>/dev/null; then UQ_LAUNCH_PREFIX="chrt -f 20"; else UQ_LAUNCH_PREFIX=""; fi
 fi

@@ -1,6 +1,6 @@
 """Report of a recorded run from its rosbag: the paper's metrics, a figure, and the stack's health.
 
-    python -m quadruped_control.analysis.bag_report BAG [BAG ...] --out DIR [--from-setpoint-change]
+    python -m quadruped_control.analysis.bag_report BAG [BAG ...] --out DIR [--title TITLE]
 
 Reads the bag with the pure-Python ``rosbags`` reader (no ROS installation needed: analyse the robot's
 bags on any laptop). Uses:

@@ -9,7 +9,7 @@ simulated robot's ground truth and the controller's telemetry while faults are i
 - the **commands**: the widths pwm_node was asked for (``servo_command``);
 - the **controller**: ``controller_state`` (armed, holding).
 
-Definitions (the README's fault table states the expectation of each kind in these words):
+Definitions (docs/faults.md's fault table states the expectation of each kind in these words):
 
 - *pulses outside limits*: chip rows with a channel that produces pulses (> 0) outside its joint's
   [min_us, max_us] (plus half a chip tick of quantisation).

@@ -1,7 +1,7 @@
 """A setpoint step test read as Table 1 is read (pure numpy): how long the body takes to settle after the
 setpoint of one tilt axis steps from a held attitude, towards upright or away from it.
 
-The test (docs/identification.md, "A step test tells the members apart where Table 1 cannot"): the robot
+The test (docs/identification.md, "The step test as a study"): the robot
 holds a tilt (roll or pitch 45 deg), then the setpoint steps by about 12 deg towards upright (a return, as
 after an overshoot) or away from it. A plant with a net static torque pushing away from upright returns
 much more slowly than it moves away; one whose trim and rope balance takes the same time both ways.

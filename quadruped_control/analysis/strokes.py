@@ -1,8 +1,8 @@
 """The strokes a robot made, from its recorded joint angles: how long each power stroke lasted, how far
 each paw went and how fast.
 
-Why: the identification of the tank model (docs/identification.md, "How much torque the strokes
-deliver") finds that in simulation a power stroke lasts 0.07-0.16 s before its commanded path meets the
+Why: the identification of the tank model (docs/identification.md, "What the model misses, and
+why") finds that in simulation a power stroke lasts 0.07-0.16 s before its commanded path meets the
 workspace boundary, the paws move a few centimetres, and the strokes deliver 2-6 % of the commanded
 torque. Whether the real robot strokes the same way decides what the model lacks, and every bag holds
 the answer: the controller's pair phases (``/controller_state``, paper section "Power and Recovery

@@ -565,8 +565,8 @@ RECORDER_CHUNK_MESSAGES = 30
 
 def failures(summary: Dict[str, dict], safe_limit: float, recovery_limit: float = RECOVERY_LIMIT,
              lost_allowed: Optional[Dict[str, int]] = None) -> List[str]:
-    """What breaks the issue's targets, per kind (empty: every target met). ``lost_allowed``: messages
-    per injection a kind may lose from the bag (default none: the issue's target of 0)."""
+    """What breaks the campaign's targets (docs/faults.md), per kind (empty: every target met). ``lost_allowed``: messages
+    per injection a kind may lose from the bag (default none: a target of 0)."""
     problems = []
     for kind, row in summary.items():
         if kind.startswith("_"):

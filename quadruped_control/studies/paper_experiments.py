@@ -173,7 +173,7 @@ def within_factor(sim: Optional[float], paper: Optional[float], factor: float = 
 
 
 def agreement(rows: Sequence[Dict[str, Any]]) -> Dict[str, int]:
-    """Counts of the issue's targets: same settled/not-settled outcome as the paper (commanded axis or
+    """Counts of the reproduction targets: same settled/not-settled outcome as the paper (commanded axis or
     worst axis), and t_s within a factor 2 of the paper's (:func:`within_factor`, both settled)."""
     same = sum(1 for r in rows if r["settled_paper"] == r["settled_sim"])
     within = sum(1 for r in rows if within_factor(r["sim"]["t_s"], r["paper"]["t_s"]))

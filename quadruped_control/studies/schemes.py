@@ -11,7 +11,7 @@ Per trial: geodesic settling time (3 s centred average, 6 degree band, held 30 s
 settles), the worst smoothed geodesic error over the last 30 s, the torque delivered (eq. torque_leg from
 the simulated joints) against tau_sat, and the fraction of time some pair is in power
 (:func:`quadruped_control.studies.trial.stroke_metrics`). Writes ``schemes.json``, ``schemes.md`` and
-``schemes.png`` into the output folder and prints the summary with the targets of issue 9.
+``schemes.png`` into the output folder and prints the summary with its targets (docs/stroke_schemes.md).
 """
 from __future__ import annotations
 
@@ -129,7 +129,7 @@ def _markdown(result: Dict[str, Any], rows: Sequence[Dict[str, Any]]) -> str:
             lines.append("| %s | %d | %s | %d | %.1f | %.2f | %.2f / %.2f | %.0f %% |" % (
                 name, group["trials"], scheme, g["settled"], g["median_t_s"], g["median_worst_last_30s"],
                 g["median_torque_ratio"], g["median_torque_sideways"], 100.0 * g["median_power_fraction"]))
-    lines += ["", "Targets (issue 9): " + "; ".join("%s: %s" % (k, "met" if v else "NOT met")
+    lines += ["", "Targets: " + "; ".join("%s: %s" % (k, "met" if v else "NOT met")
                                                     for k, v in result["targets"].items()),
               "", "Cases where the coordinated scheme is more than 10 %% worse: %d of %d"
               % (len(result["worse_cases"]), result["groups"]["all"]["trials"])]

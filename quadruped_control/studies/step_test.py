@@ -6,16 +6,15 @@ how long each step takes to settle is set beside what each tank model does on th
     python -m quadruped_control.studies.step_test --simulated TRUTH_YAML [--tank-disturbance SIGMA TAU]
         [--attitude-noise-deg 0.05] (and the options above)
 
-Why (docs/identification.md, "A step test tells the members apart where Table 1 cannot"): the shipped
-ensemble's members fit Table 1 within 3 of each other and take 1.5 to 15 s to return 12 deg towards upright
-from a held 45 deg roll. A plant whose trim leaves a net static torque pushing away from upright returns much
+Why (docs/identification.md, "The step test as a study"): the shipped ensemble's members fit Table 1
+within 3 of each other and take 1.5 to 15 s to return 12 deg towards upright from a held 45 deg roll. A plant whose trim leaves a net static torque pushing away from upright returns much
 more slowly than it moves away; one whose trim and rope balance takes the same time both ways. The robot's
 roll group in Table 1 settled 18-95 s after its rise, which no fitted set reproduces; this test, eighteen
 minutes in the tank with nothing added, says which kind of plant the robot is.
 
-The protocol (:data:`PROTOCOL`; on the robot ``roslaunch underwater_quadruped step_test.launch``, which records and
-publishes the setpoints in turn once the controller is armed, README "The step test"): roll 45 deg held 120 s, then
-33, 45, 57 and 45 deg for 90 s each; level for 120 s; the same in pitch. A RUN is a bag (or a split recording's
+The protocol (:data:`PROTOCOL`; on the robot ``roslaunch underwater_quadruped step_test.launch``, which records
+and publishes the setpoints in turn once the controller is armed, docs/tuning_and_recording.md): roll 45 deg held
+120 s, then 33, 45, 57 and 45 deg for 90 s each; level for 120 s; the same in pitch. A RUN is a bag (or a split recording's
 parts joined by commas) with ``/imu/data`` and ``/controller_state``, read by
 :func:`quadruped_control.analysis.bag_report.read_bags`; the steps are the changes of the controller's setpoint
 while it was acting, armed and not holding its safe pose (:func:`~quadruped_control.analysis.steps.find_steps`), so

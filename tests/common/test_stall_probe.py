@@ -36,7 +36,7 @@ def test_stalls_round_trip_through_the_probe_file():
 
 
 def test_stalled_time_adds_up_the_parts_of_a_stall_inside_the_window():
-    # The run-1 hold of docs/sim_timing.md: one freeze the probe saw as three stalls.
+    # The hold of set A, run 1 in docs/sim_timing.md: one freeze the probe saw as three stalls.
     parts = [Stall(0.638, 0.6516), Stall(0.6526, 0.6635), Stall(0.6645, 0.7027)]
     assert stalled_time(parts, 0.6445, 0.7045) == pytest.approx(0.0071 + 0.0109 + 0.0382)
     assert stalled_time(parts, 0.0, 1.0) == pytest.approx(0.0136 + 0.0109 + 0.0382)

@@ -1,4 +1,4 @@
-"""The fault campaigns of issue 10 at a size that fits CI (benchmarks/fuzz_campaign.py runs the full size)."""
+"""The fault campaigns at a size that fits CI (benchmarks/fuzz_campaign.py runs the full size)."""
 import pytest
 
 from quadruped_drivers.calibration import load_servo_calibration

@@ -218,7 +218,7 @@ def test_whole_stack_through_the_socket_bridge():
         os.rmdir(directory)
 
 
-# --- issue 10: faults the chip and the bus can make --------------------------------------------------------------
+# --- faults the chip and the bus can make --------------------------------------------------------------
 
 from hypothesis import settings  # noqa: E402
 

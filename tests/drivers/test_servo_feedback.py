@@ -193,7 +193,7 @@ def test_register_config_value_on_the_wire(rig):
     assert all(t.written == bytes([0x01, 0x42, 0xE3]) for t in config_writes)
 
 
-# --- issue 10: wrong data is never reported fresh -------------------------------------------------------------
+# --- wrong data is never reported fresh -------------------------------------------------------------
 from hypothesis import given, settings  # noqa: E402
 from hypothesis import strategies as st  # noqa: E402
 

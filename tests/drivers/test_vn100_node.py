@@ -1,5 +1,5 @@
 """vn100_node's reader loop never dies: per-read exceptions and absurd packets are counted, good samples
-keep flowing (issue 10: a colliding packet with a ~1e19 ns stamp used to kill the thread)."""
+keep flowing (a colliding packet with a ~1e19 ns stamp used to kill the thread)."""
 import pytest
 
 rospy = pytest.importorskip("rospy")
