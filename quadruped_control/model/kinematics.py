@@ -11,7 +11,7 @@ Fig. 3c). This module implements:
   :func:`joint_angles_floats`, the same on plain floats (the controller's per-step IK);
 - eq. (J_leg): translational leg Jacobian, :func:`five_bar_jacobian`, :func:`foot_jacobian`;
 - eq. (ee_vel): floating-base Jacobian, :func:`floating_base_jacobian`;
-- the simulator's fast path :func:`leg_kinematics_flat`: r_e,i^B and J_P,i^B q_dot_i of all legs on
+- the simulator's fast path :func:`leg_kinematics_rows`: r_e,i^B and J_P,i^B q_dot_i of all legs on
   floats, without numpy (the plant needs them at every integration step).
 
 Each forward-kinematics equation is written once, in a float core that the readable functions and the
@@ -497,7 +497,7 @@ class IkConstants(NamedTuple):
 
 
 class LegGeometry(NamedTuple):
-    """The geometry of the float paths (:func:`joint_angles_floats`, :func:`leg_kinematics_flat`,
+    """The geometry of the float paths (:func:`joint_angles_floats`, :func:`leg_kinematics_rows`,
     :func:`foot_position`) as floats: ``frames[leg]`` = (o_x, o_y, o_z, m_x, m_y, m_z) of eq. (ee_body),
     ``frame_rows`` the same in the order of LEGS, and the five-bar, hip and servo-range constants
     (``ik``, as :func:`ik_row` takes them)."""
@@ -693,17 +693,16 @@ def leg_kinematics(q: Sequence[Sequence[float]], q_dot: Sequence[Sequence[float]
 
     For each leg i (rows of ``q``, ``q_dot``: legs 1..4 x (theta1, theta2, theta3)) returns the list
     [x, y, z, vx, vy, vz] of r_e,i^B (eq. (ee_body)) and J_P,i^B(q_i) q_dot_i (eq. (J_leg)), body frame.
-    See :func:`leg_kinematics_flat`.
+    See :func:`leg_kinematics_rows`.
     """
     if len(q) != NUM_LEGS or len(q_dot) != NUM_LEGS:
         raise ValueError("q and q_dot must have %d rows (legs), got %d and %d" % (NUM_LEGS, len(q), len(q_dot)))
-    flat = leg_kinematics_flat(q, q_dot, params)
-    return [list(flat[i:i + 6]) for i in range(0, 6 * NUM_LEGS, 6)]
+    return [list(row) for row in leg_kinematics_rows(q, q_dot, params)]
 
 
-def leg_kinematics_flat(q: Sequence[Sequence[float]], q_dot: Sequence[Sequence[float]],
-                        params: RobotParams) -> Tuple[float, ...]:
-    """:func:`leg_kinematics` as one flat tuple (legs 1..4 x [x, y, z, vx, vy, vz]): the simulator's path.
+def leg_kinematics_rows(q: Sequence[Sequence[float]], q_dot: Sequence[Sequence[float]],
+                        params: RobotParams) -> Tuple[Tuple[float, ...], ...]:
+    """:func:`leg_kinematics` as a tuple of the legs' rows (x, y, z, vx, vy, vz), legs 1..4: the simulator's path.
 
     The float fast path of :func:`foot_position` and :func:`foot_jacobian` times q_dot: the same float
     cores (:func:`_five_bar_closure`, :func:`_five_bar_rates`, :func:`_leg_point`, :func:`_leg_rate`,
@@ -716,13 +715,13 @@ def leg_kinematics_flat(q: Sequence[Sequence[float]], q_dot: Sequence[Sequence[f
     geometry = last[1] if last[0] is params else _geometry(params)
     frames = geometry.frame_rows
     a1, a2, a3, a4, c, l_y, l_z = geometry.five_bar_hip
-    out: Tuple[float, ...] = ()
+    rows: Tuple[Tuple[float, ...], ...] = ()
     for (t1, t2, t3), (d1, d2, d3), frame in zip(q, q_dot, frames):
         ok, x, y, z, vx, vy, vz = leg_row(t1, t2, t3, d1, d2, d3, frame, a1, a2, a3, a4, c, l_y, l_z)
         if not ok:  # say why, with the raising forms of the same cores
             _five_bar_rates(t1, t2, _five_bar_closure(t1, t2, a1, a2, a3, a4, c)[2], a1, a2)
-        out += (x, y, z, vx, vy, vz)
-    return out
+        rows += ((x, y, z, vx, vy, vz),)
+    return rows
 
 
 class LegRow(NamedTuple):
@@ -741,7 +740,7 @@ class LegRow(NamedTuple):
 @jitable
 def leg_row(t1: float, t2: float, t3: float, d1: float, d2: float, d3: float, frame: Sequence[float], a1: float,
             a2: float, a3: float, a4: float, c: float, l_y: float, l_z: float) -> LegRow:
-    """One leg of :func:`leg_kinematics_flat`, without raising (compiled code calls it too): the
+    """One leg of :func:`leg_kinematics_rows`, without raising (compiled code calls it too): the
     :class:`LegRow` (ok, r_e,i^B, J_P,i^B q_dot_i) for joint angles (t1, t2, t3), rates (d1, d2, d3) and
     the leg ``frame`` (o_x, o_y, o_z, m_x, m_y, m_z) of :func:`_geometry`; ``ok`` False where the
     five-bar cannot close or is singular (the values are then meaningless). eq. (fk_EFG), (fk_phi),

@@ -50,7 +50,7 @@ from quadruped_common.jit import jitable
 from quadruped_common.so3 import hat
 from quadruped_control.model import hydrodynamics
 from quadruped_control.model.hydrodynamics import body_drag_f, paw_drag_wrench_f
-from quadruped_control.model.kinematics import leg_kinematics, leg_kinematics_flat
+from quadruped_control.model.kinematics import leg_kinematics, leg_kinematics_rows
 from quadruped_control.model.params import RobotParams
 from quadruped_control.sim.plants.rigid_body import (NUM_LEGS, DynamicsError, Mat3, RigidBodyState, StateDerivative,
                                                      StepContext, as_mat3, chart_point, chart_step_end, check_dt,
@@ -326,9 +326,9 @@ class FloatingBaseModel:
     def _context_from_joints(self, q: Sequence[Sequence[float]], q_dot: Sequence[Sequence[float]]) -> StepContext:
         """Step context straight from finite joint angles and rates (4 x 3 arrays or nested float
         sequences), floats all the way."""
-        flat = leg_kinematics_flat(q.tolist() if isinstance(q, np.ndarray) else q,
+        rows = leg_kinematics_rows(q.tolist() if isinstance(q, np.ndarray) else q,
                                    q_dot.tolist() if isinstance(q_dot, np.ndarray) else q_dot, self.params)
-        return StepContext(flat, self.net_paw_buoyancy, self._restoring)
+        return StepContext(rows, self.net_paw_buoyancy, self._restoring)
 
     # ---- forces ------------------------------------------------------------------------------
 

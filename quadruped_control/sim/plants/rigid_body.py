@@ -286,10 +286,10 @@ class StepContext:
 
     __slots__ = ("feet", "lift", "up_torque")
 
-    def __init__(self, flat: Tuple[float, ...], net_paw_buoyancy: float, restoring: Mat3) -> None:
-        """``flat``: the legs' rows one after the other, as
-        :func:`~quadruped_control.model.kinematics.leg_kinematics_flat` returns them."""
-        feet = self.feet = [flat[i:i + 6] for i in range(0, len(flat), 6)]
+    def __init__(self, rows: Sequence[Tuple[float, ...]], net_paw_buoyancy: float, restoring: Mat3) -> None:
+        """``rows``: the legs' rows, as :func:`~quadruped_control.model.kinematics.leg_kinematics_rows`
+        returns them."""
+        feet = self.feet = list(rows)
         self.lift, (u0, u1, u2, u3, u4, u5, u6, u7, u8) = paw_buoyancy_f(feet, net_paw_buoyancy)
         r0, r1, r2, r3, r4, r5, r6, r7, r8 = restoring
         self.up_torque = (r0 + u0, r1 + u1, r2 + u2, r3 + u3, r4 + u4, r5 + u5, r6 + u6, r7 + u7, r8 + u8)
@@ -297,4 +297,4 @@ class StepContext:
     @classmethod
     def from_rows(cls, rows: Sequence[Sequence[float]], net_paw_buoyancy: float, restoring: Mat3) -> "StepContext":
         """The context of per-leg rows (r_e,i^B, J_P,i^B q_dot_i) (same values as the flat constructor)."""
-        return cls(tuple(value for row in rows for value in row), net_paw_buoyancy, restoring)
+        return cls([tuple(row) for row in rows], net_paw_buoyancy, restoring)

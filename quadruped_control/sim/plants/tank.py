@@ -18,7 +18,7 @@ import numpy as np
 
 from quadruped_common.config import ParameterError
 from quadruped_control.model import hydrodynamics
-from quadruped_control.model.kinematics import _geometry, leg_kinematics_flat
+from quadruped_control.model.kinematics import _geometry, leg_kinematics_rows
 from quadruped_control.model.params import RobotParams
 from quadruped_control.sim.plants.added_mass import ellipsoid_added_mass, point_mass_matrix, sphere_added_mass
 from quadruped_control.sim.plants.paper import FloatingBaseModel
@@ -387,9 +387,9 @@ class TankModel(FloatingBaseModel):
         return tuple(map(tuple, self._drag_feet.tolist()))
 
     def _step_context(self, q: Any, q_dot: Any) -> "_TankContext":
-        flat = leg_kinematics_flat(q.tolist() if isinstance(q, np.ndarray) else q,
+        rows = leg_kinematics_rows(q.tolist() if isinstance(q, np.ndarray) else q,
                                     q_dot.tolist() if isinstance(q_dot, np.ndarray) else q_dot, self.params)
-        context = _TankContext(flat, self.net_paw_buoyancy, self._restoring)
+        context = _TankContext(rows, self.net_paw_buoyancy, self._restoring)
         context.leg_sums = leg_sums(context.feet)
         context.mass_solver = self._mass_solver(context.leg_sums[0], context.leg_sums[2])
         return context

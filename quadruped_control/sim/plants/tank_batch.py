@@ -48,8 +48,8 @@ def _carry_twist(rotation, reference, torsion) -> None:
 
 @trial_step
 def tank_trial_step(i, frames, five_bar, net_paw_buoyancy, drag_constant, drag, extra_lift, suspension, hook, anchor,
-                    rope, torsion, untwisted, linear, quadratic, body_m, paw_added_mass, wake_fraction,
-                    wake_time_constant, wake_body_share, body_wake_fraction, body_wake_time_constant, tether,
+                    rope, torsion, untwisted, linear, quadratic, body_m, paw_added_mass, paw_wake_fraction,
+                    paw_wake_time_constant, paw_wake_body_share, body_wake_fraction, body_wake_time_constant, tether,
                     restoring, wake, water, p, v, R, w, q, q_dot, dt, feet, drag_feet, stall_torque, loads, block,
                     block_rest, friction, hook_friction, counts_twist, disturbed, disturbance) -> bool:
     """One held-input RK4 step of eq. (tank) for trial ``i`` in place (its paws' ``wake[i]``, the water
@@ -67,16 +67,16 @@ def tank_trial_step(i, frames, five_bar, net_paw_buoyancy, drag_constant, drag, 
     sums = leg_sums(feet)
     solver = mass_solver(body_m[i], paw_added_mass[i], sums[0], sums[2])
     constants = (drag_constant[i], drag[i], extra_lift[i], suspension[i], hook[i], anchor[i], rope[i],
-                 torsion[i], untwisted[i], linear[i], quadratic[i], body_m[i], paw_added_mass[i], wake_fraction[i],
-                 wake_time_constant[i], wake_body_share[i], body_wake_fraction[i], body_wake_time_constant[i],
+                 torsion[i], untwisted[i], linear[i], quadratic[i], body_m[i], paw_added_mass[i], paw_wake_fraction[i],
+                 paw_wake_time_constant[i], paw_wake_body_share[i], body_wake_fraction[i], body_wake_time_constant[i],
                  tether[i])
     rows = feet
-    if wake_fraction[i] > 0.0 or stall_torque[i] > 0.0:
+    if paw_wake_fraction[i] > 0.0 or stall_torque[i] > 0.0:
         vx, vy, vz = v[i, 0], v[i, 1], v[i, 2]  # b = R^T v at the step's start, as TankModel._body_motion
         bx, by, bz = R0[0] * vx + R0[3] * vy + R0[6] * vz, R0[1] * vx + R0[4] * vy + R0[7] * vz, \
             R0[2] * vx + R0[5] * vy + R0[8] * vz
-        if wake_fraction[i] > 0.0:
-            paw_wake_update(feet, wake[i], wake_fraction[i], wake_time_constant[i], wake_body_share[i], bx, by, bz,
+        if paw_wake_fraction[i] > 0.0:
+            paw_wake_update(feet, wake[i], paw_wake_fraction[i], paw_wake_time_constant[i], paw_wake_body_share[i], bx, by, bz,
                             w[i, 0], w[i, 1], w[i, 2], dt, drag_feet)
             rows = drag_feet
         if stall_torque[i] > 0.0:
@@ -118,8 +118,8 @@ def tank_trial_step(i, frames, five_bar, net_paw_buoyancy, drag_constant, drag, 
 
 @kernel
 def tank_batch_step(frames, five_bar, net_paw_buoyancy, drag_constant, drag, extra_lift, suspension, hook, anchor,
-                    rope, torsion, untwisted, linear, quadratic, body_m, paw_added_mass, wake_fraction,
-                    wake_time_constant, wake_body_share, body_wake_fraction, body_wake_time_constant, tether,
+                    rope, torsion, untwisted, linear, quadratic, body_m, paw_added_mass, paw_wake_fraction,
+                    paw_wake_time_constant, paw_wake_body_share, body_wake_fraction, body_wake_time_constant, tether,
                     restoring, wake, water, p, v, R, w, q, q_dot, dt, failed, stall_torque, loads, block, block_rest,
                     friction, hook_friction, counts_twist, disturbed, disturbance):
     """One held-input RK4 step of eq. (tank) for every trial not yet ``failed``, in place on p, v, w
@@ -140,8 +140,8 @@ def tank_batch_step(frames, five_bar, net_paw_buoyancy, drag_constant, drag, ext
     for i in range(p.shape[0]):
         if not failed[i] and not tank_trial_step(i, frames, five_bar, net_paw_buoyancy, drag_constant, drag,
                                                  extra_lift, suspension, hook, anchor, rope, torsion, untwisted,
-                                                 linear, quadratic, body_m, paw_added_mass, wake_fraction,
-                                                 wake_time_constant, wake_body_share, body_wake_fraction,
+                                                 linear, quadratic, body_m, paw_added_mass, paw_wake_fraction,
+                                                 paw_wake_time_constant, paw_wake_body_share, body_wake_fraction,
                                                  body_wake_time_constant, tether, restoring, wake, water, p, v, R,
                                                  w, q, q_dot, dt, feet, drag_feet, stall_torque, loads, block,
                                                  block_rest, friction, hook_friction, counts_twist, disturbed,
@@ -267,7 +267,7 @@ class TankPlantBatch:
         tank_batch_step(self.frames, self.five_bar, self.net_paw_buoyancy, c["drag_constant"], c["drag"],
                         c["extra_lift"], c["suspension"], c["hook"], c["anchor"], c["rope"], c["torsion"],
                         c["untwisted"], c["linear"], c["quadratic"], c["body_m"], c["paw_added_mass"],
-                        c["wake_fraction"], c["wake_time_constant"], c["wake_body_share"], c["body_wake_fraction"],
+                        c["paw_wake_fraction"], c["paw_wake_time_constant"], c["paw_wake_body_share"], c["body_wake_fraction"],
                         c["body_wake_time_constant"], c["tether"], self.restoring, self.wake, self.water, p, v, R, w,
                         np.ascontiguousarray(q), np.ascontiguousarray(q_dot), float(dt), self.failed, self.stall_torque,
                         self.loads, self.block, self.block_rest, self.friction, self.hook_friction,

@@ -62,8 +62,8 @@ TankConstants = Tuple[Any, ...]
 #: the fields it carries from step to step by position, :data:`TANK_CONSTANT_AT`) and the batch (which keeps one
 #: array per field) read. The tuple itself stays positional because the compiled kernels type it field by field.
 TANK_CONSTANT_FIELDS = ("drag_constant", "drag", "extra_lift", "suspension", "hook", "anchor", "rope", "torsion",
-                        "untwisted", "linear", "quadratic", "body_m", "paw_added_mass", "wake_fraction",
-                        "wake_time_constant", "wake_body_share", "body_wake_fraction", "body_wake_time_constant",
+                        "untwisted", "linear", "quadratic", "body_m", "paw_added_mass", "paw_wake_fraction",
+                        "paw_wake_time_constant", "paw_wake_body_share", "body_wake_fraction", "body_wake_time_constant",
                         "tether")
 #: Each field's position in :data:`TankConstants` by name.
 TANK_CONSTANT_AT = {name: position for position, name in enumerate(TANK_CONSTANT_FIELDS)}

@@ -8,7 +8,8 @@ range, meaning, and the coordinates the identification fits (:class:`Fit`). From
   ranges; ParameterError naming ``section.name``);
 * :meth:`TankParams.__post_init__` checks the same ranges on a set built in code (``with_values``, overrides);
 * :func:`fit_coordinates` gives the identification's parameter table
-  (:mod:`quadruped_control.studies.identify_parameters`).
+  (:mod:`quadruped_control.studies.identify_parameters`);
+* :func:`parameter_table` gives the table of docs/tank_model.md.
 
 The physics of each effect: docs/tank_model.md. Every candidate effect's default is "off": the defaults are
 the plant without it, bit for bit.
@@ -25,7 +26,7 @@ import numpy as np
 from quadruped_common.config import ParameterError, boolean, check_keys, integer, load_config, number, vector
 
 __all__ = ["SCHEMA", "SECTIONS", "Fit", "TankParameter", "TankParams", "fit_coordinates", "load_tank_params",
-           "parameter", "tank_params_from_dict", "yaml_path"]
+           "parameter", "parameter_table", "tank_params_from_dict", "yaml_path"]
 
 Vec3 = Tuple[float, float, float]
 
@@ -295,3 +296,23 @@ def load_tank_params(path: Optional[str] = None, tree: Optional[Mapping[str, Any
         except ParameterError as exc:
             raise ParameterError("%s: %s" % (path or "tank parameters", exc)) from None
     return load_config(path, "tank.yaml", tank_params_from_dict)
+
+
+def _range_text(spec: TankParameter) -> str:
+    if spec.low == -math.inf and spec.high == math.inf:
+        return "any"
+    return "%s%g, %g%s" % ("(" if spec.low_open else "[", spec.low, spec.high, ")" if spec.high_open else "]")
+
+
+def parameter_table() -> str:
+    """Every tank parameter as a Markdown table, from :data:`SCHEMA` (docs/tank_model.md holds this table,
+    and a test keeps the two equal): tank.yaml key, unit, range, default, what it means, identification bounds."""
+    lines = ["| tank.yaml key | unit | range | default | meaning | identified as [bounds] |",
+             "|---|---|---|---|---|---|"]
+    for spec in SCHEMA:
+        fits = ", ".join("`%s` [%g, %g]" % (name, fit.low, fit.high)
+                         for name, owner, fit in fit_coordinates() if owner is spec)
+        default = list(spec.default) if isinstance(spec.default, tuple) else spec.default
+        lines.append("| `%s` | %s | %s | %s | %s | %s |" % (spec.path, spec.unit or "-", _range_text(spec),
+                                                          default, spec.meaning.replace("|", "/"), fits or "-"))
+    return "\n".join(lines) + "\n"

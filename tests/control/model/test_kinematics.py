@@ -13,7 +13,7 @@ from quadruped_control.model.kinematics import (UnreachableError, _five_bar_clos
                                                 five_bar_ik, five_bar_jacobian, floating_base_jacobian,
                                                 foot_jacobian, foot_position, joint_angles, joint_angles_floats,
                                                 joint_angles_full, leg_fk, leg_ik_full, leg_kinematics,
-                                                leg_kinematics_flat, leg_row, within_limits, wrap_into_range)
+                                                leg_kinematics_rows, leg_row, within_limits, wrap_into_range)
 from quadruped_control.model.params import load_robot_params
 from quadruped_control.sim.simulation import nominal_joint_angles
 
@@ -445,7 +445,7 @@ def test_leg_kinematics_matches_foot_position_and_jacobian(seed) -> None:
         np.testing.assert_allclose(rows[row, :3], foot_position(q[row], leg, PARAMS), rtol=0, atol=1e-14)
         np.testing.assert_allclose(rows[row, 3:], foot_jacobian(q[row], leg, PARAMS) @ q_dot[row],
                                    rtol=1e-12, atol=1e-13)
-    assert leg_kinematics_flat(q.tolist(), q_dot.tolist(), PARAMS) == tuple(rows.ravel().tolist())
+    assert leg_kinematics_rows(q.tolist(), q_dot.tolist(), PARAMS) == tuple(map(tuple, rows.tolist()))
 
 
 def test_leg_kinematics_raises_the_kinematics_error_for_irregular_input() -> None:
@@ -458,7 +458,7 @@ def test_leg_kinematics_raises_the_kinematics_error_for_irregular_input() -> Non
     q = Q0.copy()
     q[1, :2] = (elbow, math.pi - elbow)
     with pytest.raises(UnreachableError, match="elbows coincide") as info:
-        leg_kinematics_flat(q.tolist(), np.zeros((4, 3)).tolist(), PARAMS)
+        leg_kinematics_rows(q.tolist(), np.zeros((4, 3)).tolist(), PARAMS)
     with pytest.raises(UnreachableError) as reference:
         five_bar_fk(elbow, math.pi - elbow, GEOM)
     assert str(info.value) == str(reference.value)
@@ -536,7 +536,7 @@ def test_ik_row_is_joint_angles_floats_and_compiles_to_the_same_angles():
 
 def test_leg_row_flags_five_bars_that_cannot_close_where_the_float_cores_raise():
     """leg_row (the compiled plants' per-leg kinematics) says ok exactly where the raising cores of
-    leg_kinematics_flat succeed; with short passive links many motor angles cannot close the five-bar."""
+    leg_kinematics_rows succeed; with short passive links many motor angles cannot close the five-bar."""
     fb = PARAMS.five_bar
     a1, a2, a3, a4, c = fb.a1, fb.a2, 0.6 * fb.a3, 0.6 * fb.a4, fb.c
     frame = (0.1, 0.2, 0.0, 1.0, 1.0, 1.0)
@@ -555,10 +555,10 @@ def test_leg_row_flags_five_bars_that_cannot_close_where_the_float_cores_raise()
     assert outcomes == {True, False}
 
 
-def test_leg_kinematics_flat_says_why_a_leg_cannot_close():
+def test_leg_kinematics_rows_says_why_a_leg_cannot_close():
     """Where leg_row says no, the float path raises the raising cores' error (here: a NaN angle; the
     robot's own five-bar closes at every motor angle)."""
     q = nominal_joint_angles(PARAMS).tolist()
     q[2] = [math.nan, q[2][1], q[2][2]]
     with pytest.raises(UnreachableError, match="finite"):
-        leg_kinematics_flat(q, np.zeros((4, 3)).tolist(), PARAMS)
+        leg_kinematics_rows(q, np.zeros((4, 3)).tolist(), PARAMS)

@@ -11,7 +11,7 @@ from hypothesis import strategies as st
 from quadruped_common.robot import LEGS
 from quadruped_common.so3 import exp_so3, hat
 from quadruped_control.model import hydrodynamics as hd
-from quadruped_control.model.kinematics import joint_angles, leg_kinematics, leg_kinematics_flat
+from quadruped_control.model.kinematics import joint_angles, leg_kinematics, leg_kinematics_rows
 from quadruped_control.model.params import load_robot_params
 from quadruped_control.sim.plants.rigid_body import (SERIES_ANGLE, DynamicsError, RigidBodyState, StepContext, as_mat3,
                                                      chart_coefficients, chart_point, chart_rate, chart_step_end,
@@ -115,13 +115,13 @@ def test_step_context_from_rows_equals_flat_constructor():
     q, q_dot = (Q0 + rng.uniform(-0.2, 0.2, (4, 3))).tolist(), rng.uniform(-3.0, 3.0, (4, 3)).tolist()
     restoring = tuple(rng.normal(size=9).tolist())
     a = StepContext.from_rows(leg_kinematics(q, q_dot, PARAMS), 0.37, restoring)
-    b = StepContext(leg_kinematics_flat(q, q_dot, PARAMS), 0.37, restoring)
+    b = StepContext(leg_kinematics_rows(q, q_dot, PARAMS), 0.37, restoring)
     assert a.feet == b.feet and a.up_torque == b.up_torque and a.lift == b.lift
     # U = restoring + B_net hat(sum_i r_i): the paw buoyancy torque of hydrodynamics plus the restoring one.
     feet = np.array(b.feet)[:, :3]
     R = exp_so3([0.4, -0.3, 1.1])
     force, torque = hd.paw_buoyancy(feet, R, PARAMS)
-    context = StepContext(leg_kinematics_flat(q, q_dot, PARAMS), PARAMS.paw_net_buoyancy, restoring)
+    context = StepContext(leg_kinematics_rows(q, q_dot, PARAMS), PARAMS.paw_net_buoyancy, restoring)
     np.testing.assert_allclose(np.reshape(context.up_torque, (3, 3)) @ R[2, :],
                                torque + np.reshape(restoring, (3, 3)) @ R[2, :], rtol=1e-12, atol=1e-15)
     assert context.lift == force[2]

@@ -738,11 +738,11 @@ def test_a_paws_wake_is_water_so_it_turns_back_in_body_axes_as_the_body_turns() 
 def test_paw_joint_loads_are_the_jacobian_transpose_of_the_paw_drag_and_drag_takes_power_from_the_stroke() -> None:
     """tau_j = J_P,i^B[:, j] . F_i with J of foot_jacobian and F_i = -k |u_i| u_i; with the body at rest
     a stroke's paw drag does negative work on its joints: tau . q_dot = F . J q_dot = -k |c|^3 < 0."""
-    from quadruped_control.model.kinematics import _geometry, foot_jacobian, leg_kinematics_flat
+    from quadruped_control.model.kinematics import _geometry, foot_jacobian, leg_kinematics_rows
     from quadruped_control.sim.plants.tank_dynamics import paw_joint_loads
     q = np.array(nominal_joint_angles(ROBOT)) + 0.05
     q_dot = np.array([[1.5, -2.0, 0.7]] * 4)
-    rows = np.array(leg_kinematics_flat(q.tolist(), q_dot.tolist(), ROBOT)).reshape(4, 6)
+    rows = np.array(leg_kinematics_rows(q.tolist(), q_dot.tolist(), ROBOT)).reshape(4, 6)
     geometry = _geometry(ROBOT)
     k, body = 1.4, (0.02, -0.01, 0.03, 0.2, -0.1, 0.3)
     loads = np.zeros((4, 3))

@@ -2,6 +2,7 @@
 and the yaml keys, the dataclass fields, the range checks and the identification's table read from it."""
 import dataclasses
 import math
+import os
 
 import pytest
 import yaml
@@ -91,3 +92,14 @@ def test_the_identification_table_is_read_from_the_schema() -> None:
         if fit.reciprocal:  # a coordinate near 0 is a huge value, which the schema takes
             spec.read(idp.field_value(name, low + 1e-9 * (high - low)), name)
     assert "servo_stall_torque_inverse" in names and "center_of_buoyancy_z" in names and "hook_z" in names
+
+
+def test_the_docs_table_of_parameters_is_the_schema() -> None:
+    """docs/tank_model.md reads its parameter table from the one declaration (regenerate it with
+    tank_params.parameter_table() when a parameter changes)."""
+    from tests.repo import REPO_ROOT
+    from quadruped_control.sim.plants.tank_params import parameter_table
+    with open(os.path.join(REPO_ROOT, "docs", "tank_model.md"), encoding="utf-8") as stream:
+        text = stream.read()
+    begin, end = "<!-- parameter table: begin -->\n", "<!-- parameter table: end -->"
+    assert text[text.index(begin) + len(begin):text.index(end)] == parameter_table()
