@@ -28,7 +28,9 @@ esac
 
 #: the fast tier: the robot's pure code, the analysis, and the README's and the layers' checks
 FAST_PATHS=(tests/common tests/drivers tests/control/model tests/control/control tests/control/analysis
-            tests/test_readme.py tests/test_layers.py tests/test_package_manifest.py)
+            tests/test_readme.py tests/test_code_shape.py tests/test_layers.py tests/test_package_manifest.py)
+
+section() { echo "== $* [at $((SECONDS / 60))m$((SECONDS % 60))s] =="; }
 
 export UQ_WITH_TESTS=1  # on the robot, setup.sh installs the tests' packages too
 source "$ROOT/scripts/prepare.sh"
@@ -56,43 +58,62 @@ run_step() {  # run_step NAME COMMAND...: output to the console and to $RESULTS/
 }
 
 if [ "$TIER" = full ]; then
-echo "== Python 3.8 compatibility (vermin) =="
+# The batched simulator's kernels compile once, here, beside the lint steps; the pytest workers then load
+# them from numba's on-disk cache instead of each compiling them (quadruped_common/jit.py).
+if python -c "import numba" 2>/dev/null; then
+  section "compiled kernels: one short batch on each plant, started beside the lint steps"
+  ( python -m quadruped_control.simulate --study paper-experiments --engine batch --duration 0.5 --jobs 1 \
+      --no-resume --quiet --out "$RESULTS/kernels-tank" \
+    && python -m quadruped_control.simulate --study paper-experiments --plant paper --engine batch --duration 0.5 \
+      --jobs 1 --no-resume --quiet --out "$RESULTS/kernels-paper" ) >"$RESULTS/kernels.log" 2>&1 &
+  kernels_pid=$!
+fi
+
+section "Python 3.8 compatibility (vermin)"
 PY_SOURCES=(quadruped_common quadruped_control quadruped_drivers nodes cfg/AttitudeController.cfg setup.py)
 if ! vermin -q -t=3.8- --no-tips --violations --eval-annotations \
      --exclude-regex '\.venv|build/' "${PY_SOURCES[@]}"; then
   echo "vermin: sources need a Python newer than 3.8"; failures=$((failures + 1))
 fi
 
-echo "== catkin_lint -W2 (the package, as the workspace sees it) =="
+section "catkin_lint -W2 (the package, as the workspace sees it)"
 if command -v catkin_lint >/dev/null; then
   run_step catkin_lint catkin_lint -W2 --strict "$UQ_WS/src/underwater_quadruped"
 else
   echo "catkin_lint: SKIPPED: not installed (scripts/setup.sh installs Debian's catkin-lint; pip install catkin-lint)"
 fi
 
-echo "== import-linter: the floors of the code base (.importlinter) =="
+section "import-linter: the floors of the code base (.importlinter)"
 if command -v lint-imports >/dev/null; then
   run_step lint_imports lint-imports --no-cache --no-logo
 else
   echo "lint-imports: SKIPPED: not installed (requirements.txt pins import-linter)"
 fi
 
-# The Python 3.8 step runs on the second core while pytest runs on the first (both pure Python).
-echo "== the robot's code under Python 3.8 with requirements-jetson-test.txt: started beside pytest =="
+# The Python 3.8 step runs beside pytest (both pure Python).
+section "the robot's code under Python 3.8 with requirements-jetson-test.txt: started beside pytest"
 bash tests/python38.sh >"$RESULTS/python38-background.log" 2>&1 &
 python38_pid=$!
 
-echo "== pytest (pure modules) =="
-python -m pytest -q -p no:cacheprovider --junitxml="$RESULTS/pytest.xml" tests "$@"
+if [ -n "${kernels_pid:-}" ] && ! wait "$kernels_pid"; then
+  echo "   the kernels' warm-up failed (the tests compile them themselves); last lines of $RESULTS/kernels.log:"
+  tail -5 "$RESULTS/kernels.log"
+fi
+# Both cores when pytest-xdist is installed (requirements.txt; not on the robot).
+workers=()
+if python -c "import xdist" 2>/dev/null; then workers=(-n 2); fi
+
+section "pytest (pure modules)"
+python -m pytest -q -p no:cacheprovider "${workers[@]}" --junitxml="$RESULTS/pytest.xml" tests "$@"
 pytest_rc=$?
 if [ "$pytest_rc" -ne 0 ]; then failures=$((failures + 1)); fi
 
-echo "== the robot's code under Python 3.8 (tests/python38.sh) =="
+section "the robot's code under Python 3.8 (tests/python38.sh)"
 python38_rc=0; wait "$python38_pid" || python38_rc=$?
 run_step python38 bash -c 'cat "$1"; exit "$2"' _ "$RESULTS/python38-background.log" "$python38_rc"
 fi
 
-echo "== rostest (node graph) =="
+section "rostest (node graph)"
 export ROS_HOME="$RESULTS/ros_home"; mkdir -p "$ROS_HOME"
 export ROS_LOG_DIR="$ROS_HOME/log"
 rostest_passed=0; rostest_failed=0
@@ -155,7 +176,7 @@ else
 fi
 unset UQ_TRAJECTORY_FILE
 
-echo "== install space: catkin_make install into a temporary prefix, sim.launch from there =="
+section "install space: catkin_make install into a temporary prefix, sim.launch from there"
 run_step install_space bash tests/install_space.sh
 
 fi
@@ -175,6 +196,7 @@ skipped = sum(int(s.get("skipped", 0)) for s in suites)
 print(tests - bad - skipped, bad)
 PYEOF
 )
+echo "time: $((SECONDS / 60))m$((SECONDS % 60))s (set-up included)"
 echo "rostest: $rostest_passed passed, $rostest_failed failed"
 echo "steps (catkin_lint, lint_imports, python38, install_space): $steps_passed passed, $steps_failed failed"
 echo "$((py_passed + rostest_passed + steps_passed)) passed, $((py_failed + rostest_failed + steps_failed)) failed"

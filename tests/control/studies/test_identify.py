@@ -20,6 +20,7 @@ from quadruped_control.studies import identify_report as idr
 from quadruped_control.studies import identify_search as ids
 from quadruped_control.studies import paper_experiments as pe
 from quadruped_control.studies.runner import code_fingerprint, code_source, describe_source
+from tests.control.studies.fake_trials import fake_summary
 
 
 def _row(paper_ts=50.0, sim_ts=50.0, yaw=True):
@@ -351,7 +352,8 @@ def test_nominal_values_lie_within_the_bounds() -> None:
 
 
 def _tiny_identify(out: str, evaluations: int, ensemble: int, *choice: str) -> dict:
-    """A tiny identification (0.2 s trials, two screening trajectories) through the CLI; its report."""
+    """A tiny identification (0.2 s trials, two screening trajectories: the fewest the CLI takes) through the
+    CLI; its report."""
     pytest.importorskip("cma")
     pytest.importorskip("SALib")
     assert simulate.main(["--study", "identify", "--screen", "2", "--evaluations", str(evaluations),
@@ -361,7 +363,48 @@ def _tiny_identify(out: str, evaluations: int, ensemble: int, *choice: str) -> d
         return json.load(stream)
 
 
-def test_identify_cli_tiny_run(tmp_path) -> None:
+def _fake_trials(monkeypatch) -> None:
+    """The study's logic on small inputs: the real CLI, Evaluator (labels, costs, counts, checks) and trial
+    runner (its per-trial files and their reuse) with each trial's simulation replaced by :func:`~tests.control.studies.fake_trials.fake_summary`.
+    The one CLI smoke test (test_identify_cli_tiny_run) runs the real trials."""
+    from quadruped_control.studies import trial
+
+    monkeypatch.setattr(trial, "run_batch", lambda specs: [fake_summary(s) for s in specs])
+    monkeypatch.setattr(trial, "run_trial", fake_summary)
+    monkeypatch.setattr(ido, "run_batch", lambda specs: [])  # the Evaluator's compile of the batch's loops
+    monkeypatch.setattr(pe, "initial_attitude", _initial_attitude)
+
+
+_ATTITUDES: dict = {}
+
+
+def _initial_attitude(*args):
+    """paper_experiments.initial_attitude (a root search per Table-1 row, for every Evaluator), remembered:
+    a pure function of its arguments."""
+    if args not in _ATTITUDES:
+        _ATTITUDES[args] = _REAL_INITIAL_ATTITUDE(*args)
+    return _ATTITUDES[args]
+
+
+_REAL_INITIAL_ATTITUDE = pe.initial_attitude
+
+
+def test_identify_cli_tiny_run(tmp_path, monkeypatch) -> None:
+    """The study's one smoke test on real trials, end to end through the CLI."""
+    import copy
+
+    from quadruped_common import config
+
+    # Every trial's setup reads the same YAML files again (most of this run's time): each text is parsed once
+    # and each read gets its own copy of the tree, as a parse would give it.
+    trees, real_parse = {}, config.parse_yaml
+
+    def parse_yaml(text):
+        if text not in trees:
+            trees[text] = real_parse(text)
+        return copy.deepcopy(trees[text])
+
+    monkeypatch.setattr(config, "parse_yaml", parse_yaml)
     out = str(tmp_path / "id")
     report = _tiny_identify(out, 4, 2, "--include", "paw_wake_fraction")
     names = [p[0] for p in idp.PARAMETERS]
@@ -426,6 +469,33 @@ def test_identify_cli_tiny_run(tmp_path) -> None:
 
 
 def test_the_slow_recovery_check_adds_the_papers_t_rec_cases_to_their_groups(tmp_path, monkeypatch) -> None:
+    """Evaluator's case selection and its checks' trials (real, 0.2 s) directly; then the study's use of them
+    (objective, counts, folds, report, band) on fake trials."""
+    args = simulate.build_parser().parse_args(["--study", "identify", "--out", str(tmp_path / "cases"), "--quiet",
+                                               "--jobs", "1"])
+    evaluate = ido.Evaluator(args, 0.2, "rate-limited", True)
+    # the three checks on the real batch: 0.2 s trials settle nowhere, so every check is met
+    (checked,) = evaluate([idp.nominal_values(load_tank_params())], [15, 16, 17], "chk")
+    assert [c["case"] for c in checked["slow_recovery"]] == ["t_rec 1.5 pitch 75", "t_rec 1.5 pitch 90",
+                                                             "t_rec 1.5 roll+pitch 60"]
+    assert checked["rows"] == [] and checked["failed"] == [] and checked["costs"] == [0.0, 0.0, 0.0]
+    assert checked["targets"]["slow_recovery_checks"] == 3 == checked["targets"]["slow_recovery_unsettled"]
+    _fake_trials(monkeypatch)
+    without = ido.Evaluator(args, 0.2, "rate-limited")
+    labels = {k: pe.case_label(pe.PAPER_TABLE[row]) for k, row in evaluate.check_row.items()}
+    assert labels == {15: "pitch 75", 16: "pitch 90", 17: "roll+pitch 60"}
+    # the checks come after Table 1's rows, which keep their numbers
+    assert [evaluate.base[k].label for k in range(15)] == [spec.label for spec in without.base]
+    for k, row in evaluate.check_row.items():  # the Table-1 trial run with the experiment gains' own t_rec 1.5 s
+        check, table = evaluate.base[k], evaluate.base[row]
+        assert check.label == "t_rec 1.5 " + table.label and check.duration == table.duration == 0.2
+        assert ("t_rec", 1.0) in table.config_overrides and all(o[0] != "t_rec" for o in check.config_overrides)
+    assert evaluate.cases(ido.GROUPS) == list(range(18))
+    for group, checks in zip(ido.GROUPS, ([], [15, 16], [17])):  # each check in its Table-1 row's group
+        assert evaluate.cases([group]) == [k for k, row in enumerate(pe.PAPER_TABLE) if row["set"] == group] + checks
+    assert evaluate.cases(["roll", "roll+pitch"]) == [k for k, row in enumerate(pe.PAPER_TABLE)
+                                                       if row["set"] != "pitch"] + [17]
+    assert without.cases(ido.GROUPS) == list(range(15)) and without.check_row == {}  # no check by default
     report = _tiny_identify(str(tmp_path / "slow"), 2, 1, "--parameters", "center_of_buoyancy_z", "net_weight",
                             "--slow-recovery-check")
     assert report["slow_recovery_check"] is True
@@ -496,10 +566,11 @@ def test_a_start_that_is_neither_the_screening_nor_the_nominal_values_is_refused
         idf.main_study(args)
 
 
-def test_a_polish_added_to_an_earlier_run_reuses_its_searches_trials(tmp_path) -> None:
+def test_a_polish_added_to_an_earlier_run_reuses_its_searches_trials(tmp_path, monkeypatch) -> None:
     """Trial labels number the sets per search (Evaluator.count_of): the same command with
     --polish-evaluations runs only the polishes' trials; the screening's, the CMA-ES fits', the
-    baselines' and the predictions' come from the trial cache."""
+    baselines' and the predictions' come from the trial cache (the runner's real one; the trials are fakes)."""
+    _fake_trials(monkeypatch)
     out = str(tmp_path / "id")
     first = _tiny_identify(out, 2, 1, "--parameters", "center_of_buoyancy_z", "net_weight")
     trials = os.path.join(out, "trials")
@@ -517,7 +588,8 @@ def test_a_polish_added_to_an_earlier_run_reuses_its_searches_trials(tmp_path) -
     assert polished["fit"]["search"]["sets"] == first["fit"]["search"]["sets"] + 4
 
 
-def test_identify_fits_exactly_the_parameters_given(tmp_path) -> None:
+def test_identify_fits_exactly_the_parameters_given(tmp_path, monkeypatch) -> None:
+    _fake_trials(monkeypatch)
     report = _tiny_identify(str(tmp_path / "exact"), 2, 1, "--parameters", "servo_lag_scale", "center_of_buoyancy_z")
     assert report["identified"] == ["center_of_buoyancy_z", "servo_lag_scale"]  # in the order of PARAMETERS
     fixed = idp.nominal_values(load_tank_params())
@@ -531,6 +603,7 @@ def test_every_fit_starts_from_the_nominal_values_with_start_nominal(tmp_path, m
     """--start nominal: the full fit and every fold start at --tank-yaml's values, whatever the screening
     found; the default starts the full fit at the screening's best set and each fold at its best on the
     fold's training groups (so adding a candidate to the screening moves every start)."""
+    _fake_trials(monkeypatch)
     starts, screenings = [], []
     real_fit, real_screen = ids.fit, ids.screen
     monkeypatch.setattr(idf, "fit", lambda evaluate, names, fixed, start, *rest, **kw: starts.append(
@@ -609,7 +682,8 @@ def test_the_polish_keeps_to_its_budget_and_never_returns_a_worse_best() -> None
         ids.polish(evaluate, names, fixed, start, 13, [0], "t", step=0.01, smallest=0.1)
 
 
-def test_identify_polishes_the_full_fit_and_every_fold(tmp_path) -> None:
+def test_identify_polishes_the_full_fit_and_every_fold(tmp_path, monkeypatch) -> None:
+    _fake_trials(monkeypatch)
     report = _tiny_identify(str(tmp_path / "pol"), 2, 1, "--parameters", "servo_lag_scale", "center_of_buoyancy_z",
                             "--polish-evaluations", "8")
     polished = [report["fit"]["polish"]] + [fold["polish"] for fold in report["cross_validation"]]
@@ -653,10 +727,12 @@ def test_a_set_whose_trial_diverges_scores_badly_and_the_study_goes_on(tmp_path,
     from quadruped_control.studies import trial
 
     real_batch = trial.run_batch
+    _fake_trials(monkeypatch)
 
     def breaking(specs):  # paws with ten thousand times their drag: the tank plant's step diverges at once
-        return real_batch([dataclasses.replace(s, tank_overrides=s.tank_overrides + (("paw_drag_scale", 1e4),))
-                           if s.label.startswith(("scr00003 roll 15", "fit00001 roll 15")) else s for s in specs])
+        # (those two on the real batch; the others are fakes)
+        return [real_batch([dataclasses.replace(s, tank_overrides=s.tank_overrides + (("paw_drag_scale", 1e4),))])[0]
+                if s.label.startswith(("scr00003 roll 15", "fit00001 roll 15")) else fake_summary(s) for s in specs]
 
     monkeypatch.setattr(trial, "run_batch", breaking)
     # the schema refuses a paw drag scale past 10 (tank_params): let this one set through to the plant

@@ -13,13 +13,37 @@ import pytest
 from quadruped_control import simulate
 from quadruped_control.studies import StudyError
 from quadruped_control.studies import identify_objective as ido, identify_parameters as idp
+from quadruped_control.studies import paper_experiments as pe
 from quadruped_control.studies import profile as pro
 from quadruped_control.studies.runner import code_source
+from tests.control.studies.fake_trials import fake_summary
 
 
 @pytest.fixture(scope="module")
-def tiny_report(tmp_path_factory) -> str:
-    """An identification of three parameters on 0.2 s trials (only the plumbing is under test)."""
+def fake_trials():
+    """Only the plumbing is under test: the identification's and the profile's CLI, Evaluator and trial runner
+    run for real, each trial's simulation is :func:`~tests.control.studies.fake_trials.fake_summary`
+    (test_identify_cli_tiny_run runs the same Evaluator on real trials)."""
+    from quadruped_control.studies import trial
+
+    with pytest.MonkeyPatch.context() as patch:
+        patch.setattr(trial, "run_batch", lambda specs: [fake_summary(s) for s in specs])
+        patch.setattr(trial, "run_trial", fake_summary)
+        patch.setattr(ido, "run_batch", lambda specs: [])  # the Evaluator's compile of the batch's loops
+        attitudes, real = {}, pe.initial_attitude  # a root search per Table-1 row for every Evaluator: once
+
+        def initial_attitude(*args):
+            if args not in attitudes:
+                attitudes[args] = real(*args)
+            return attitudes[args]
+
+        patch.setattr(pe, "initial_attitude", initial_attitude)
+        yield
+
+
+@pytest.fixture(scope="module")
+def tiny_report(tmp_path_factory, fake_trials) -> str:
+    """An identification of three parameters on fake trials (only the plumbing is under test: fake_trials)."""
     pytest.importorskip("SALib")
     out = str(tmp_path_factory.mktemp("identify"))
     assert simulate.main(["--study", "identify", "--screen", "2", "--evaluations", "2", "--cv-evaluations", "2",
