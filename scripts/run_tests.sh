@@ -37,7 +37,7 @@ source "$ROOT/scripts/prepare.sh"
 
 if [ "$TIER" = fast ]; then
   paths=()
-  for arg in "$@"; do case "$arg" in -*) ;; *) paths+=("$arg") ;; esac; done
+  for arg in "$@"; do if [ -e "${arg%%::*}" ]; then paths+=("$arg"); fi; done  # a file or test id, not -k EXPR
   if [ "${#paths[@]}" -eq 0 ]; then set -- "${FAST_PATHS[@]}" "$@"; fi
   UQ_NO_JIT=1 exec python -m pytest -q -p no:cacheprovider -m "not slow" "$@"
 fi
