@@ -33,7 +33,7 @@ from quadruped_common.vec3 import ZERO, Mat3, Vec3, add, mat3, scale, sub
 from quadruped_control.control.allocation import foot_velocity_command_f
 from quadruped_control.control.controller import AttitudeController, Feedforward, LawGains, control_law_f
 from quadruped_control.control.controller_config import ControllerConfig
-from quadruped_control.control.strokes.cycle import (LegSolution, LegTarget, PairSolutions, PairTargets,
+from quadruped_control.control.strokes.cycle import (LegSolution, LegTarget, PairSolutions,
                                                      new_cycle_state, power_step, power_targets, recovery_step,
                                                      recovery_targets, start_power, wait_at_start)
 from quadruped_control.model.kinematics import IkConstants, _geometry, ik_row, joint_angles_floats
@@ -83,8 +83,9 @@ def _solve_leg(target: LegTarget, frame, ik: IkConstants) -> LegSolution:
 
 
 @jitable
-def _solve(targets: PairTargets, pair, legs, frames, ik: IkConstants) -> PairSolutions:
-    """The IK of the pair's :class:`~quadruped_control.control.strokes.cycle.PairTargets` (an unreachable
+def _solve(targets, pair, legs, frames, ik: IkConstants) -> PairSolutions:
+    """The IK of the pair's targets (a power step's :class:`~quadruped_control.control.strokes.cycle.PairTargets`
+    or a recovery step's :class:`~quadruped_control.control.strokes.cycle.RecoveryTargets`; an unreachable
     target is reported, not raised: the shared cycle ends the power phase or takes the nearest recorded
     point)."""
     return PairSolutions(_solve_leg(targets.first, frames[legs[pair, 0]], ik),
@@ -140,7 +141,7 @@ def controller_batch_step(h, R, omega_measured, R_d, gains, limits, t_rec, t_pow
                     power_step(st, i, pair, legs, h, t_rec[i], targets, _solve(targets, pair, legs, frames, ik))
             else:
                 targets = recovery_targets(st, i, pair, legs, h)
-                if recovery_step(st, i, pair, legs, h, targets, _solve(targets, pair, legs, frames, ik)):
+                if recovery_step(st, i, pair, legs, targets, _solve(targets, pair, legs, frames, ik)):
                     tau = scale(0.25, law.tau_sat)
                     start_power(st, i, pair, legs, t_pow_max[i],
                                 _velocity_command(st, i, legs[pair, 0], tau, w, k_drag, normalize[i]),

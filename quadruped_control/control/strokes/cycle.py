@@ -43,7 +43,7 @@ from quadruped_common.jit import hypot3, jitable
 from quadruped_common.vec3 import ZERO, Vec3, add, scale
 from quadruped_control.control.strokes.base import TIME_EPS, arc_length_point, arc_length_segment, cubic_time_profile
 
-__all__ = ["CycleState", "LegSolution", "LegTarget", "PairSolutions", "PairTargets", "RecoveryClock",
+__all__ = ["CycleState", "LegSolution", "LegTarget", "PairSolutions", "PairTargets", "RecoveryClock", "RecoveryTargets",
            "new_cycle_state", "path_nearly_full", "power_step", "power_targets", "record_point",
            "recovery_clock", "recovery_step", "recovery_targets", "start_power", "start_recovery", "wait_at_start"]
 
@@ -124,6 +124,15 @@ class RecoveryClock(NamedTuple):
     time: float
     s: float
     done: bool
+
+
+class RecoveryTargets(NamedTuple):
+    """A recovery step of a pair: its :class:`RecoveryClock` and the :class:`LegTarget` of its first and
+    second leg (the clock goes on to :func:`recovery_step`, which need not compute it again)."""
+
+    clock: RecoveryClock
+    first: LegTarget
+    second: LegTarget
 
 
 @jitable
@@ -292,10 +301,11 @@ def _recovery_target(st, i, leg, clock: RecoveryClock) -> LegTarget:
 
 
 @jitable
-def recovery_targets(st, i, pair, legs, h) -> PairTargets:
+def recovery_targets(st, i, pair, legs, h) -> RecoveryTargets:
     """The pair's feet after ``h`` more s of recovery (:func:`recovery_clock`) on their recorded strokes."""
     clock = recovery_clock(st, i, pair, h)
-    return PairTargets(_recovery_target(st, i, legs[pair, 0], clock), _recovery_target(st, i, legs[pair, 1], clock))
+    return RecoveryTargets(clock, _recovery_target(st, i, legs[pair, 0], clock),
+                           _recovery_target(st, i, legs[pair, 1], clock))
 
 
 @jitable
@@ -317,10 +327,10 @@ def _recovery_leg(st, i, leg, clock: RecoveryClock, target: LegTarget, solution:
 
 
 @jitable
-def recovery_step(st, i, pair, legs, h, targets: PairTargets, solutions: PairSolutions) -> bool:
-    """``h`` s of the pair's recovery to its :func:`recovery_targets` (the nearest recorded point where the
-    IK did not reach); True when the phase is over (the caller then calls :func:`start_power`)."""
-    clock = recovery_clock(st, i, pair, h)
+def recovery_step(st, i, pair, legs, targets: RecoveryTargets, solutions: PairSolutions) -> bool:
+    """The pair's recovery step to its :func:`recovery_targets` (the nearest recorded point where the IK
+    did not reach); True when the phase is over (the caller then calls :func:`start_power`)."""
+    clock = targets.clock
     st.phase_time[i, pair] = clock.time
     _recovery_leg(st, i, legs[pair, 0], clock, targets.first, solutions.first)
     _recovery_leg(st, i, legs[pair, 1], clock, targets.second, solutions.second)

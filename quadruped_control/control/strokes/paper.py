@@ -41,16 +41,16 @@ clips it); a zero step changes nothing.
 from __future__ import annotations
 
 import math
-from typing import List, Optional, Sequence, Tuple
+from typing import List, Optional, Sequence, Tuple, Union
 
 import numpy as np
 
 from quadruped_control.control.strokes.base import (PHASE_HOLD, PHASE_POWER, PHASE_RECOVERY, TIME_EPS, IkFunction,
                                                     StrokeScheme, Vec3, VelocityCommand)
 from quadruped_control.control.strokes.cycle import (LegSolution, LegTarget, PairSolutions, PairTargets,
-                                                     new_cycle_state, path_nearly_full, power_step, power_targets,
-                                                     recovery_step, recovery_targets, start_power, start_recovery,
-                                                     wait_at_start)
+                                                     RecoveryTargets, new_cycle_state, path_nearly_full, power_step,
+                                                     power_targets, recovery_step, recovery_targets, start_power,
+                                                     start_recovery, wait_at_start)
 from quadruped_control.model.kinematics import UnreachableError, joint_angles_floats
 from quadruped_control.model.params import RobotParams
 
@@ -65,9 +65,8 @@ __all__ = [
 
 #: Points a recorded stroke holds at first (t_pow^max = 0.5 s at dt = 0.01 s takes 51); doubled when full.
 _INITIAL_CAPACITY = 64
-#: A target the cycle does not need solved, and one the IK cannot reach.
-_NOT_SOLVED = LegSolution(False, 0.0, 0.0, 0.0)
-_UNREACHED = LegSolution(False, 0.0, 0.0, 0.0)
+#: No solution: for a target the cycle does not need solved (it does not move), or one the IK cannot reach.
+_NO_SOLUTION = LegSolution(False, 0.0, 0.0, 0.0)
 #: The one trial of the cycle state this class keeps.
 _I = 0
 
@@ -220,18 +219,18 @@ class StrokeCycle(StrokeScheme):
             self._recovery_step(pair, dt, None)
         self._sync()
 
-    def _solve(self, pair: int, targets: PairTargets) -> PairSolutions:
+    def _solve(self, pair: int, targets: Union[PairTargets, RecoveryTargets]) -> PairSolutions:
         """This robot's IK (:meth:`ik`) of the targets the cycle asks for; unreachable is reported."""
         first, second = self.pairs[pair]
         return PairSolutions(self._solve_leg(targets.first, first), self._solve_leg(targets.second, second))
 
     def _solve_leg(self, target: LegTarget, leg: int) -> LegSolution:
         if not target.moves:
-            return _NOT_SOLVED
+            return _NO_SOLUTION
         try:
             t1, t2, t3 = self.ik((float(target.x), float(target.y), float(target.z)), leg)
         except UnreachableError:
-            return _UNREACHED
+            return _NO_SOLUTION
         return LegSolution(True, t1, t2, t3)
 
     def _power_step(self, pair: int, dt: float) -> None:
@@ -245,7 +244,7 @@ class StrokeCycle(StrokeScheme):
         the hold's t_total is infinite)."""
         cycle = self._cycle
         targets = recovery_targets(cycle, _I, pair, self._legs, dt)
-        done = recovery_step(cycle, _I, pair, self._legs, dt, targets, self._solve(pair, targets))
+        done = recovery_step(cycle, _I, pair, self._legs, targets, self._solve(pair, targets))
         if done and velocity_command is not None:
             commands = []
             for leg in self.pairs[pair]:

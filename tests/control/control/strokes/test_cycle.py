@@ -14,7 +14,7 @@ LEGS = np.array([[0, 2], [1, 3]], dtype=np.int64)
 
 def _solved(targets):
     """An IK that reaches every target, with joints (x, y, z) (a stand-in: the cycle only stores them)."""
-    return PairSolutions(*(LegSolution(True, t.x, t.y, t.z) for t in targets))
+    return PairSolutions(*(LegSolution(True, t.x, t.y, t.z) for t in (targets.first, targets.second)))
 
 
 def test_start_up_first_pair_waits_half_a_recovery_second_starts_power_at_once():
@@ -24,9 +24,9 @@ def test_start_up_first_pair_waits_half_a_recovery_second_starts_power_at_once()
         wait_at_start(state, i, 1, LEGS, 0.0)
     targets = recovery_targets(state, 0, 1, LEGS, 0.01)
     assert not targets.first.moves and not targets.second.moves
-    assert recovery_step(state, 0, 1, LEGS, 0.01, targets, _solved(targets))  # over: start the power phase
+    assert recovery_step(state, 0, 1, LEGS, targets, _solved(targets))  # over: start the power phase
     targets = recovery_targets(state, 0, 0, LEGS, 0.01)
-    assert not recovery_step(state, 0, 0, LEGS, 0.01, targets, _solved(targets))
+    assert not recovery_step(state, 0, 0, LEGS, targets, _solved(targets))
     np.testing.assert_array_equal(state.positions[0], NOMINAL)
 
 
@@ -63,8 +63,8 @@ def test_recovery_falls_back_to_the_nearest_recorded_point_and_counts_it():
     start_recovery(state, 0, 0, LEGS, 1.0)
     targets = recovery_targets(state, 0, 0, LEGS, 0.3)
     assert targets.first.moves
-    recovery_step(state, 0, 0, LEGS, 0.3, targets, PairSolutions(LegSolution(False, 0.0, 0.0, 0.0),
-                                                                  _solved(targets).second))
+    recovery_step(state, 0, 0, LEGS, targets, PairSolutions(LegSolution(False, 0.0, 0.0, 0.0),
+                                                            _solved(targets).second))
     assert state.ik_fallbacks[0] == 1
     assert tuple(state.positions[0, 0]) in {tuple(p) for p in state.path_points[0, 0, :4]}
     np.testing.assert_array_equal(state.positions[0, 2], (targets.second.x, targets.second.y, targets.second.z))
