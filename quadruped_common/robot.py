@@ -15,7 +15,8 @@ from typing import Any, Dict, Mapping, Optional, Tuple
 
 import numpy as np
 
-from quadruped_common.config import ParameterError, load_config, lookup, number, vector
+from quadruped_common.config import ParameterError, load_config, lookup
+from quadruped_common.schema import Param, Schema
 
 LEGS: Tuple[int, ...] = (1, 2, 3, 4)
 """Leg numbers as in the paper."""
@@ -55,17 +56,74 @@ class JointLimits:
         return np.array([self.theta1, self.theta2, self.theta3])
 
 
+def _limits_span(value: Any) -> Optional[str]:
+    low, high = value
+    if not low < high:
+        return "needs low < high"
+    return None if high - low <= 360.0 else "spans more than 360 degrees"
+
+
+def _principal_moments(value: Any) -> Optional[str]:
+    # The inertia-box model (eq. inertia_box) takes square roots of I_yy + I_zz - I_xx etc.
+    ixx, iyy, izz = value
+    if ixx > iyy + izz or iyy > izz + ixx or izz > ixx + iyy:
+        return "violates the triangle inequality of principal moments (no physical body has it)"
+    return None
+
+
+_LINK = dict(low=0.0, high=1.0, low_open=True, source="paper")
+#: ``config/robot.yaml``: the paper's model (section "Mathematical Modeling"), one row per value.
+ROBOT_SCHEMA = Schema("robot.yaml", (
+    Param("body.mass", "kg", "body mass m", 0.0, 1000.0, low_open=True, source="paper"),
+    Param("body.dimensions", "m", "body extent along x (forward), y (left), z (up)", 0.0, 5.0, kind="vector",
+          length=3, low_open=True, source="paper"),
+    Param("body.inertia_diag", "kg m^2", "principal moments of inertia I (eq. inertia_box); a physical body's obey "
+          "the triangle inequality", 0.0, 100.0, kind="vector", length=3, low_open=True, source="estimate",
+          check=_principal_moments),
+    Param("fluid.density", "kg/m^3", "water density rho", 0.0, 2000.0, low_open=True, source="paper"),
+    Param("fluid.viscosity", "Pa s", "dynamic viscosity beta", 0.0, 1.0, source="estimate"),
+    Param("fluid.gravity", "m/s^2", "gravitational acceleration g", 0.0, 20.0),
+    Param("paw.diameter", "m", "spherical paw diameter (area A of eq. drag)", **_LINK),
+    Param("paw.drag_coefficient", "", "paw drag coefficient C_D (eq. drag)", 0.0, 10.0, low_open=True,
+          source="paper"),
+    Param("paw.mass", "kg", "flooded paw's shell mass m_s (eq. buoy_force)", 0.0, 10.0, source="estimate"),
+    Param("paw.volume", "m^3", "flooded paw's shell volume V_s (eq. buoy_force)", 0.0, 0.01, source="estimate"),
+    Param("five_bar.a1", "m", "actuated link of motor 1 (eq. fk_EFG)", **_LINK),
+    Param("five_bar.a2", "m", "actuated link of motor 2 (= a1)", **_LINK),
+    Param("five_bar.a3", "m", "passive link on motor 1's side", **_LINK),
+    Param("five_bar.a4", "m", "passive link on motor 2's side (= a3)", **_LINK),
+    Param("five_bar.c", "m", "distance between the two lateral motor axes", 0.0, 1.0, source="paper"),
+    Param("hip.l_y", "m", "five-bar plane origin along the leg's in-plane direction (eq. fk_T)", -1.0, 1.0,
+          source="estimate"),
+    Param("hip.l_z", "m", "five-bar plane's lateral distance from the hip axis (eq. fk_T)", 0.0, 1.0,
+          low_open=True, source="estimate"),
+    Param("leg_origins.<leg>", "m", "origin o_i of leg frame F_L,i in the body frame (eq. ee_body)", -2.0, 2.0,
+          kind="vector", length=3, source="estimate"),
+    Param("joint_limits_deg.theta1", "deg", "servo range [low, high] of theta1 (five-bar motor 1)", -360.0, 360.0,
+          kind="vector", length=2, source="estimate", check=_limits_span),
+    Param("joint_limits_deg.theta2", "deg", "servo range of theta2 (five-bar motor 2)", -360.0, 360.0,
+          kind="vector", length=2, source="estimate", check=_limits_span),
+    Param("joint_limits_deg.theta3", "deg", "servo range of theta3 (hip)", -360.0, 360.0, kind="vector", length=2,
+          source="estimate", check=_limits_span),
+    Param("nominal_foot_leg", "m", "nominal foot point in the leg frame; every power stroke starts here "
+          "(eq. foot_integration)", -1.0, 1.0, kind="vector", length=3, source="estimate"),
+    Param("servo.stall_torque", "N m", "IB53BHU stall torque", 0.0, 100.0, low_open=True, source="paper"),
+    Param("servo.no_load_speed_rpm", "rpm", "IB53BHU no-load speed", 0.0, 10000.0, low_open=True, source="paper"),
+    Param("imu.mount_xyz", "m", "imu_link's origin in base_link (inside the body; rviz and TF only)",
+          kind="vector", length=3, source="estimate"),
+), names={"leg": tuple(str(leg) for leg in LEGS)})
+
+
+def _robot_value(tree: Mapping[str, Any], key: str) -> Any:
+    return ROBOT_SCHEMA[key].read(lookup(tree, key), key)
+
+
 def joint_limits_from_dict(tree: Mapping[str, Any]) -> JointLimits:
-    """``joint_limits_deg`` of a parsed ``robot.yaml``: each [low, high] in degrees, low < high, at most
-    one turn; :class:`ParameterError` naming the key otherwise."""
+    """``joint_limits_deg`` of a parsed ``robot.yaml`` (:data:`ROBOT_SCHEMA`) in radians; :class:`ParameterError`
+    naming the key otherwise."""
     limits = {}
     for name in ("theta1", "theta2", "theta3"):
-        key = "joint_limits_deg." + name
-        low, high = vector(lookup(tree, key), key, 2, -360.0, 360.0)
-        if not low < high:
-            raise ParameterError("parameter '%s' needs low < high, got [%g, %g]" % (key, low, high))
-        if high - low > 360.0:
-            raise ParameterError("parameter '%s' spans more than 360 degrees" % key)
+        low, high = _robot_value(tree, "joint_limits_deg." + name)
         limits[name] = (math.radians(low), math.radians(high))
     return JointLimits(**limits)
 
@@ -78,7 +136,7 @@ def load_joint_limits(path: Optional[str] = None) -> JointLimits:
 def servo_no_load_speed_from_dict(tree: Mapping[str, Any]) -> float:
     """``servo.no_load_speed_rpm`` of a parsed ``robot.yaml`` in rad/s: the fastest a servo can turn (the
     simulated servos' rate limit, and the drivers' bound on how far a joint can move between readings)."""
-    rpm = number(lookup(tree, "servo.no_load_speed_rpm"), "servo.no_load_speed_rpm", 0.0, 10000.0, low_open=True)
+    rpm = _robot_value(tree, "servo.no_load_speed_rpm")
     return rpm * 2.0 * math.pi / 60.0
 
 

@@ -12,6 +12,7 @@ puts the middle of the range (-140, -40, 90 deg) at the 1500 us neutral pulse:
 ``us_per_rad`` = 2000 us / pi for a 180 deg, 500..2500 us servo. The feedback map is fitted by
 ``python -m quadruped_drivers.calibrate``; until then it is an estimate. Pulse limits are not applied
 here: they are per-channel hardware limits enforced by :class:`~quadruped_drivers.pwm_output.ServoPwmOutput`.
+The file lists every joint; each parameter of a joint's entry is declared once, in :data:`CALIBRATION_SCHEMA`.
 """
 from __future__ import annotations
 
@@ -23,8 +24,9 @@ from typing import Any, Mapping, Optional, Sequence, Tuple
 
 import numpy as np
 
-from quadruped_common.config import ParameterError, boolean, check_keys, integer, load_config, number
+from quadruped_common.config import load_config
 from quadruped_common.robot import JOINT_NAMES
+from quadruped_common.schema import Param, Schema
 
 
 @dataclass(frozen=True)
@@ -96,46 +98,53 @@ class ServoCalibration:
         return ServoCalibration(joints)
 
 
-#: Keys of one joint's entry: (low, high) bounds of the numbers; the others are checked below.
-_JOINT_NUMBERS = {
-    "neutral_angle_deg": (-360.0, 360.0),   # a joint angle
-    "neutral_us": (500.0, 2500.0),          # inside the servos' pulse range
-    "us_per_deg": (1.0, 50.0),              # 180 deg over 2000 us is 11.1
-    "feedback_deg_per_v": (-1e4, 1e4),      # |slope| of a 3.3 V potentiometer over ~180 deg is ~75
-    "feedback_offset_deg": (-1e5, 1e5),
-    "feedback_rms_deg": (0.0, 90.0),        # an RMS is non-negative
-}
-_JOINT_KEYS = tuple(_JOINT_NUMBERS) + ("direction", "feedback_fitted")
-_JOINT_REQUIRED = ("neutral_angle_deg", "neutral_us", "direction", "us_per_deg", "feedback_deg_per_v",
-                   "feedback_offset_deg")
+def _nonzero(value: float) -> Optional[str]:
+    return "must not be 0" if value == 0 else None
+
+
+def _direction(value: int) -> Optional[str]:
+    return "must be 1 or -1" if value == 0 else None
+
+
+#: ``config/servo_calibration.yaml`` (written by ``python -m quadruped_drivers.calibrate``): every joint's
+#: command and feedback maps, in degrees and microseconds.
+CALIBRATION_SCHEMA = Schema("servo_calibration.yaml", (
+    Param("joints.<joint>.neutral_angle_deg", "deg", "joint angle commanded by neutral_us (middle of its "
+          "robot.yaml joint_limits_deg range)", -360.0, 360.0),
+    Param("joints.<joint>.neutral_us", "us", "pulse that puts the servo at neutral_angle_deg (trim it so the leg "
+          "sits at its mid angle)", 500.0, 2500.0, source="estimate"),
+    Param("joints.<joint>.direction", "", "1 or -1: sign of the pulse change per degree (flip it if the joint "
+          "turns the wrong way)", -1, 1, kind="integer", source="estimate", check=_direction),
+    Param("joints.<joint>.us_per_deg", "us/deg", "pulse change per degree (2000 us over the servo's 180 deg = "
+          "11.1)", 1.0, 50.0),
+    Param("joints.<joint>.feedback_deg_per_v", "deg/V", "feedback map's slope: angle_deg = feedback_deg_per_v x "
+          "volts + feedback_offset_deg (not 0)", -1e4, 1e4, source="estimate", check=_nonzero),
+    Param("joints.<joint>.feedback_offset_deg", "deg", "feedback map's offset (angle at 0 V)", -1e5, 1e5,
+          source="estimate"),
+    Param("joints.<joint>.feedback_fitted", "", "true once the feedback map was fitted to a sweep; false: an "
+          "estimate", kind="boolean", default=False),
+    Param("joints.<joint>.feedback_rms_deg", "deg", "RMS residual of the fitted feedback map (written by the "
+          "fit)", 0.0, 90.0, optional=True),
+), names={"joint": JOINT_NAMES}, what="calibration parameter")
 
 
 def servo_calibration_from_dict(tree: Mapping[str, Any]) -> ServoCalibration:
-    """Validate a parsed ``servo_calibration.yaml`` tree (degrees on disk, radians inside)."""
-    check_keys(tree, "", ("joints",), ("joints",), what="calibration parameter")
-    joints_tree = check_keys(tree["joints"], "joints", JOINT_NAMES, JOINT_NAMES, what="calibration parameter")
+    """Validate a parsed ``servo_calibration.yaml`` tree against :data:`CALIBRATION_SCHEMA` (degrees on disk,
+    radians inside)."""
+    v = CALIBRATION_SCHEMA.read(tree)
     joints = []
     for name in JOINT_NAMES:
-        dotted = "joints.%s" % name
-        entry = check_keys(joints_tree[name], dotted, _JOINT_KEYS, _JOINT_REQUIRED, what="calibration parameter")
-        values = {key: number(entry[key], "%s.%s" % (dotted, key), low, high, what="calibration parameter")
-                  for key, (low, high) in _JOINT_NUMBERS.items() if key in entry}
-        direction = integer(entry["direction"], dotted + ".direction", -1, 1, what="calibration parameter")
-        if direction == 0:
-            raise ParameterError("calibration parameter '%s.direction' must be 1 or -1, got 0" % dotted)
-        if values["feedback_deg_per_v"] == 0.0:
-            raise ParameterError("calibration parameter '%s.feedback_deg_per_v' must not be 0" % dotted)
-        fitted = boolean(entry.get("feedback_fitted", False), dotted + ".feedback_fitted", what="calibration parameter")
-        rms = values.get("feedback_rms_deg")
+        key = "joints.%s." % name
+        rms = v[key + "feedback_rms_deg"]
         joints.append(JointCalibration(
             name=name,
-            neutral_angle_rad=math.radians(values["neutral_angle_deg"]),
-            neutral_us=values["neutral_us"],
-            direction=direction,
-            us_per_rad=values["us_per_deg"] * 180.0 / math.pi,
-            feedback_slope=math.radians(values["feedback_deg_per_v"]),
-            feedback_offset=math.radians(values["feedback_offset_deg"]),
-            feedback_fitted=fitted,
+            neutral_angle_rad=math.radians(v[key + "neutral_angle_deg"]),
+            neutral_us=v[key + "neutral_us"],
+            direction=v[key + "direction"],
+            us_per_rad=v[key + "us_per_deg"] * 180.0 / math.pi,
+            feedback_slope=math.radians(v[key + "feedback_deg_per_v"]),
+            feedback_offset=math.radians(v[key + "feedback_offset_deg"]),
+            feedback_fitted=v[key + "feedback_fitted"],
             feedback_rms_rad=None if rms is None else math.radians(rms),
         ))
     return ServoCalibration(joints)
@@ -198,5 +207,5 @@ def save_servo_calibration(calibration: ServoCalibration, path: str, note: str =
         raise
 
 
-__all__ = ["JointCalibration", "ServoCalibration", "servo_calibration_from_dict", "load_servo_calibration",
-           "calibration_to_yaml", "save_servo_calibration"]
+__all__ = ["CALIBRATION_SCHEMA", "JointCalibration", "ServoCalibration", "servo_calibration_from_dict",
+           "load_servo_calibration", "calibration_to_yaml", "save_servo_calibration"]

@@ -5,7 +5,8 @@ twelve servos through PWM at 100 Hz control rate; this file fixes how those part
 I2C bus. Joints are listed in :data:`quadruped_common.robot.JOINT_NAMES` order
 (``leg{1..4}_{motor1,motor2,hip}`` = theta1, theta2, theta3 of eq. ik_theta3 / ik_theta1245).
 
-Loading never returns a half-valid object: a missing key, a duplicate channel or address, an address
+Every parameter is declared once, in :data:`HARDWARE_SCHEMA` (docs/configuration.md shows it). Loading
+never returns a half-valid object: a missing or unknown key, a duplicate channel or address, an address
 clash or a value out of range raises :class:`~quadruped_common.config.ParameterError` naming the key.
 """
 from __future__ import annotations
@@ -16,8 +17,9 @@ from typing import Any, Dict, Mapping, Optional, Tuple
 
 import numpy as np
 
-from quadruped_common.config import ParameterError, boolean, integer, load_config, lookup, number
+from quadruped_common.config import ParameterError, load_config
 from quadruped_common.robot import JOINT_NAMES
+from quadruped_common.schema import Param, Schema
 
 #: Failsafe actions of a PWM channel when the command watchdog trips.
 FAILSAFE_ACTIONS: Tuple[str, ...] = ("hold", "neutral", "off")
@@ -33,6 +35,71 @@ PCA9685_ALLCALL_ADDRESS = 0x70
 #: Servo pulse widths that no configuration may exceed (us).
 ABSOLUTE_MIN_US = 400.0
 ABSOLUTE_MAX_US = 2600.0
+
+
+def _ads1115_range(value: float) -> Optional[str]:
+    return None if value in ADS1115_FSR_PGA else "not an ADS1115 range %s" % sorted(ADS1115_FSR_PGA)
+
+
+def _ads1115_rate(value: int) -> Optional[str]:
+    return None if value in ADS1115_RATES else "not an ADS1115 rate %s" % sorted(ADS1115_RATES)
+
+
+#: One joint's entry in ``joints``, in the order of :class:`JointHardware`.
+_JOINT_FIELDS = ("pwm_channel", "mux_channel", "adc_address", "adc_input", "min_us", "max_us", "neutral_us",
+                 "failsafe")
+_PULSE = dict(low=ABSOLUTE_MIN_US, high=ABSOLUTE_MAX_US)
+#: ``config/hardware.yaml``: how the servo electronics sit on the Jetson's I2C bus (integers in decimal:
+#: 0x40 = 64, 0x48..0x4B = 72..75, 0x70..0x77 = 112..119).
+HARDWARE_SCHEMA = Schema("hardware.yaml", (
+    Param("i2c.bus", "", "Linux I2C bus /dev/i2c-N of the servo electronics (Jetson Orin NX devkit header pins "
+          "3/5 = 7, pins 27/28 = 1)", 0, 255, kind="integer", source="estimate"),
+    Param("i2c.lock_timeout_s", "s", "longest wait for another user of the bus to release it before a cycle "
+          "gives up", 0.0, 1.0),
+    Param("mux.address", "", "TCA9548A address, 0x71..0x77 (0x70 is refused: the PCA9685 answers it as its "
+          "all-call address at power-up)", 0x70, 0x77, kind="integer"),
+    Param("mux.deselect_after_read", "", "true: deselect the mux channel after each read; false: leave it "
+          "selected between cycles (one transaction less per cycle)", kind="boolean"),
+    Param("pca9685.address", "", "PCA9685 address (not the mux's, an ADS1115's 0x48..0x4B or 0x70)", 0x40, 0x7F,
+          kind="integer"),
+    Param("pca9685.frequency_hz", "Hz", "servo PWM frame rate; PRE_SCALE = round(oscillator / (4096 f)) - 1 must "
+          "lie in 3..255", 24.0, 400.0),
+    Param("pca9685.oscillator_hz", "Hz", "PCA9685 internal oscillator (nominal 25 MHz; measure a pulse to "
+          "correct it)", 20e6, 30e6, source="estimate"),
+    Param("pca9685.stagger_outputs", "", "spread the 16 outputs' rising edges over the period (lower peak "
+          "current; widths unchanged)", kind="boolean"),
+    Param("pca9685.watchdog_timeout_s", "s", "no command for this long: each channel's failsafe is applied once "
+          "(pwm_node watchdog)", 0.001, 10.0),
+    Param("adc.full_scale_v", "V", "ADS1115 PGA full-scale range +-V, one of 0.256, 0.512, 1.024, 2.048, 4.096, "
+          "6.144", 0.256, 6.144, check=_ads1115_range),
+    Param("adc.data_rate_sps", "1/s", "ADS1115 continuous conversion rate, one of 8, 16, 32, 64, 128, 250, 475, "
+          "860", 8, 860, kind="integer", check=_ads1115_rate),
+    Param("adc.stale_after_s", "s", "a previous sample may stand in for a missing one this long", 0.0, 10.0),
+    Param("adc.failed_after_s", "s", "a joint without a good sample this long is failed, not stale (> "
+          "stale_after_s)", 0.0, 60.0),
+    Param("adc.plausible_margin_deg", "deg", "a reading further than this outside the angles of the joint's "
+          "min_us..max_us is stale, never fresh", 0.0, 90.0),
+    Param("adc.jump_margin_deg", "deg", "a reading further from the last good angle than no-load speed x elapsed "
+          "time + this is stale, never fresh", 0.0, 90.0, source="choice"),
+    Param("adc.jump_confirm_readings", "", "... unless this many consecutive readings agree: then the new angle "
+          "is accepted", 1, 100, kind="integer"),
+    Param("joints.<joint>.pwm_channel", "", "PCA9685 output driving the joint's servo (each used once)", 0, 15,
+          kind="integer"),
+    Param("joints.<joint>.mux_channel", "", "TCA9548A channel of the joint's feedback ADS1115", 0, 7,
+          kind="integer"),
+    Param("joints.<joint>.adc_address", "", "address of the joint's ADS1115, 0x48..0x4B (one ADC per joint)",
+          0x48, 0x4B, kind="integer"),
+    Param("joints.<joint>.adc_input", "", "ADS1115 input the feedback potentiometer is wired to", 0, 3,
+          kind="integer"),
+    Param("joints.<joint>.min_us", "us", "hard lower pulse limit (every command is clamped into min_us..max_us)",
+          source="estimate", **_PULSE),
+    Param("joints.<joint>.max_us", "us", "hard upper pulse limit (> min_us, < the PWM period)", source="estimate",
+          **_PULSE),
+    Param("joints.<joint>.neutral_us", "us", "pulse of the 'neutral' failsafe (mid travel; within min_us..max_us)",
+          **_PULSE),
+    Param("joints.<joint>.failsafe", "", "on a command timeout: hold the last pulse, go to neutral_us, or off "
+          "(servo limp)", kind="string", choices=FAILSAFE_ACTIONS),
+), names={"joint": JOINT_NAMES}, what="hardware parameter")
 
 
 @dataclass(frozen=True)
@@ -125,82 +192,47 @@ def pca9685_prescale(frequency_hz: float, oscillator_hz: float = 25e6) -> int:
     return prescale
 
 
-def _get(tree: Mapping[str, Any], dotted: str) -> Any:
-    return lookup(tree, dotted, "hardware parameter")
-
-
-def _int(tree: Mapping[str, Any], dotted: str, low: int, high: int) -> int:
-    return integer(_get(tree, dotted), dotted, low, high, what="hardware parameter")
-
-
-def _float(tree: Mapping[str, Any], dotted: str, low: float, high: float) -> float:
-    return number(_get(tree, dotted), dotted, low, high, what="hardware parameter")
-
-
-def _bool(tree: Mapping[str, Any], dotted: str) -> bool:
-    return boolean(_get(tree, dotted), dotted, what="hardware parameter")
-
-
 def hardware_config_from_dict(tree: Mapping[str, Any]) -> HardwareConfig:
-    """Validate a parsed ``hardware.yaml`` tree and build the :class:`HardwareConfig`."""
-    mux_address = _int(tree, "mux.address", 0x70, 0x77)
+    """Validate a parsed ``hardware.yaml`` tree against :data:`HARDWARE_SCHEMA` and build the
+    :class:`HardwareConfig` (the checks that tie several values together are here)."""
+    v = HARDWARE_SCHEMA.read(tree)
+    mux_address = v["mux.address"]
     if mux_address == PCA9685_ALLCALL_ADDRESS:
         raise ParameterError("hardware parameter 'mux.address' = 0x70 collides with the PCA9685 LED all-call "
                              "address it answers at power-up; strap the TCA9548A to 0x71..0x77")
-    pca_address = _int(tree, "pca9685.address", 0x40, 0x7F)
+    pca_address = v["pca9685.address"]
     if pca_address == mux_address or pca_address in ADS1115_ADDRESSES or pca_address == PCA9685_ALLCALL_ADDRESS:
         raise ParameterError("hardware parameter 'pca9685.address' = 0x%02x clashes with another device"
                              % pca_address)
-    frequency = _float(tree, "pca9685.frequency_hz", 24.0, 400.0)
-    oscillator = _float(tree, "pca9685.oscillator_hz", 20e6, 30e6)
+    frequency = v["pca9685.frequency_hz"]
+    oscillator = v["pca9685.oscillator_hz"]
     try:
         pca9685_prescale(frequency, oscillator)
     except ValueError as exc:
         raise ParameterError("hardware parameter 'pca9685.frequency_hz': %s" % exc) from exc
     period_us = 1e6 / frequency
-    fsr = _float(tree, "adc.full_scale_v", 0.0, 10.0)
-    if fsr not in ADS1115_FSR_PGA:
-        raise ParameterError("hardware parameter 'adc.full_scale_v' = %g is not an ADS1115 range %s"
-                             % (fsr, sorted(ADS1115_FSR_PGA)))
-    rate = _int(tree, "adc.data_rate_sps", 8, 860)
-    if rate not in ADS1115_RATES:
-        raise ParameterError("hardware parameter 'adc.data_rate_sps' = %d is not an ADS1115 rate %s"
-                             % (rate, sorted(ADS1115_RATES)))
-    stale_after = _float(tree, "adc.stale_after_s", 0.0, 10.0)
-    failed_after = _float(tree, "adc.failed_after_s", 0.0, 60.0)
+    stale_after = v["adc.stale_after_s"]
+    failed_after = v["adc.failed_after_s"]
     if failed_after <= stale_after:
         raise ParameterError("hardware parameter 'adc.failed_after_s' (%g) must exceed 'adc.stale_after_s' (%g)"
                              % (failed_after, stale_after))
 
-    joints_tree = _get(tree, "joints")
-    if not isinstance(joints_tree, Mapping):
-        raise ParameterError("hardware parameter 'joints' must map joint names to their wiring")
-    unknown = sorted(set(joints_tree) - set(JOINT_NAMES))
-    if unknown:
-        raise ParameterError("hardware parameter 'joints' has unknown joints %s; expected %s"
-                             % (unknown, list(JOINT_NAMES)))
     joints = []
     pwm_used: Dict[int, str] = {}
     adc_used: Dict[Tuple[int, int], str] = {}
     for index, name in enumerate(JOINT_NAMES):
         key = "joints.%s" % name
-        pwm_channel = _int(tree, key + ".pwm_channel", 0, 15)
-        mux_channel = _int(tree, key + ".mux_channel", 0, 7)
-        adc_address = _int(tree, key + ".adc_address", 0x48, 0x4B)
-        adc_input = _int(tree, key + ".adc_input", 0, 3)
-        min_us = _float(tree, key + ".min_us", ABSOLUTE_MIN_US, ABSOLUTE_MAX_US)
-        max_us = _float(tree, key + ".max_us", ABSOLUTE_MIN_US, ABSOLUTE_MAX_US)
+        pwm_channel, mux_channel, adc_address, adc_input, min_us, max_us, neutral_us, failsafe = (
+            v["%s.%s" % (key, field)] for field in _JOINT_FIELDS)
         if min_us >= max_us:
             raise ParameterError("hardware parameter '%s.min_us' (%g) must be below max_us (%g)"
                                  % (key, min_us, max_us))
         if max_us >= period_us:
             raise ParameterError("hardware parameter '%s.max_us' (%g) must be shorter than the PWM period %g us"
                                  % (key, max_us, period_us))
-        neutral_us = _float(tree, key + ".neutral_us", min_us, max_us)
-        failsafe = _get(tree, key + ".failsafe")
-        if failsafe not in FAILSAFE_ACTIONS:
-            raise ParameterError("hardware parameter '%s.failsafe' must be one of %s, got %r"
-                                 % (key, FAILSAFE_ACTIONS, failsafe))
+        if not min_us <= neutral_us <= max_us:
+            raise ParameterError("hardware parameter '%s.neutral_us' = %g is outside [%g, %g]"
+                                 % (key, neutral_us, min_us, max_us))
         if pwm_channel in pwm_used:
             raise ParameterError("hardware parameter '%s.pwm_channel' = %d is already used by %s"
                                  % (key, pwm_channel, pwm_used[pwm_channel]))
@@ -216,23 +248,23 @@ def hardware_config_from_dict(tree: Mapping[str, Any]) -> HardwareConfig:
                                     adc_address=adc_address, adc_input=adc_input, min_us=min_us, max_us=max_us,
                                     neutral_us=neutral_us, failsafe=failsafe))
     return HardwareConfig(
-        i2c_bus=_int(tree, "i2c.bus", 0, 255),
-        bus_lock_timeout=_float(tree, "i2c.lock_timeout_s", 0.0, 1.0),
+        i2c_bus=v["i2c.bus"],
+        bus_lock_timeout=v["i2c.lock_timeout_s"],
         mux_address=mux_address,
-        mux_deselect_after_read=_bool(tree, "mux.deselect_after_read"),
+        mux_deselect_after_read=v["mux.deselect_after_read"],
         pca_address=pca_address,
         pwm_frequency_hz=frequency,
         pca_oscillator_hz=oscillator,
-        pwm_stagger=_bool(tree, "pca9685.stagger_outputs"),
-        watchdog_timeout=_float(tree, "pca9685.watchdog_timeout_s", 0.001, 10.0),
-        adc_full_scale_v=fsr,
-        adc_data_rate=rate,
+        pwm_stagger=v["pca9685.stagger_outputs"],
+        watchdog_timeout=v["pca9685.watchdog_timeout_s"],
+        adc_full_scale_v=v["adc.full_scale_v"],
+        adc_data_rate=v["adc.data_rate_sps"],
         stale_after=stale_after,
         failed_after=failed_after,
         joints=tuple(joints),
-        adc_plausible_margin_deg=_float(tree, "adc.plausible_margin_deg", 0.0, 90.0),
-        adc_jump_margin_deg=_float(tree, "adc.jump_margin_deg", 0.0, 90.0),
-        adc_jump_confirm_readings=_int(tree, "adc.jump_confirm_readings", 1, 100),
+        adc_plausible_margin_deg=v["adc.plausible_margin_deg"],
+        adc_jump_margin_deg=v["adc.jump_margin_deg"],
+        adc_jump_confirm_readings=v["adc.jump_confirm_readings"],
     )
 
 
@@ -241,6 +273,6 @@ def load_hardware_config(path: Optional[str] = None) -> HardwareConfig:
     return load_config(path, "hardware.yaml", hardware_config_from_dict)
 
 
-__all__ = ["FAILSAFE_ACTIONS", "ADS1115_FSR_PGA", "ADS1115_RATES", "ADS1115_ADDRESSES", "PCA9685_ALLCALL_ADDRESS",
-           "JointHardware", "HardwareConfig", "pca9685_prescale", "hardware_config_from_dict",
+__all__ = ["HARDWARE_SCHEMA", "FAILSAFE_ACTIONS", "ADS1115_FSR_PGA", "ADS1115_RATES", "ADS1115_ADDRESSES",
+           "PCA9685_ALLCALL_ADDRESS", "JointHardware", "HardwareConfig", "pca9685_prescale", "hardware_config_from_dict",
            "load_hardware_config"]

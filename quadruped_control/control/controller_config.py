@@ -20,22 +20,29 @@ diagonal. The intent (diagonal pairs) is kept: the default pairs are (1,3) and (
 a configuration value. The FIRST pair plays the role of the paper's "(1,2)": it starts with a
 half-duration recovery.
 
-Every constructor validates its arguments and raises :class:`~quadruped_common.config.ParameterError`
-(a ValueError) naming the offending value, so a half-valid configuration never exists.
+Every key of the file is declared once in :data:`CONTROLLER_SCHEMA` (:mod:`quadruped_common.schema`; its table
+is in docs/configuration.md): the gains and the timing from the live-tuning table
+:data:`quadruped_common.tunables.TUNABLES`, the ``stroke.coordinated`` keys from
+:data:`~quadruped_control.control.strokes.coordinated.COORDINATED_PARAMS`. Every constructor validates its
+arguments through the same declarations and raises :class:`~quadruped_common.config.ParameterError` (a
+ValueError) naming the offending value, so a half-valid configuration never exists.
 """
 from __future__ import annotations
 
 import dataclasses
-import math
+import re
 from dataclasses import dataclass
-from typing import Any, Mapping, Optional
+from typing import Any, Dict, Mapping, Optional
 
 from quadruped_common.config import ParameterError, load_config, number
 from quadruped_common.robot import DEFAULT_LEG_PAIRS, LegPairs, leg_pairs
+from quadruped_common.schema import Param, Schema
+from quadruped_common.tunables import GAIN_NAMES, TUNABLES
 from quadruped_common.tunables import bounds as tunable_bounds
-from quadruped_control.control.strokes import SCHEMES, CoordinatedParams
+from quadruped_control.control.strokes import COORDINATED_PARAMS, SCHEMES, CoordinatedParams
 
 __all__ = [
+    "CONTROLLER_SCHEMA",
     "ControllerConfig",
     "DEFAULT_GAIN_SET",
     "Gains",
@@ -49,8 +56,10 @@ __all__ = [
 #: Gain set used when none is named (the paper's simulation gains).
 DEFAULT_GAIN_SET = "simulation"
 
+#: Timing keys a gain set may override (the top-level values are their defaults).
+_TIMING = ("t_rec", "t_pow_max", "tau_max")
 #: Keys a named gain set in controller.yaml may contain (gains plus timing overrides).
-GAIN_SET_KEYS = ("k_p", "k_i", "k_d", "k_aw", "t_rec", "t_pow_max", "tau_max")
+GAIN_SET_KEYS = GAIN_NAMES + _TIMING
 
 #: Bounds of the live-tunable values (gains, tau_max, t_rec, t_pow_max): one table for config files and
 #: dynamic_reconfigure.
@@ -65,18 +74,66 @@ DEFAULT_MAX_ANGULAR_RATE = 36.652
 _TIMING_SLACK = 1e-9
 
 
-def _finite(name: str, value: Any, low: float = 0.0, low_open: bool = False,
-            high: float = math.inf) -> float:
-    """``value`` as a float, with a ParameterError unless it is a finite number in range."""
-    return number(value, name, low, high, low_open=low_open)
-
-
-def _tunable(name: str, value: Any, tunable: Optional[str] = None) -> float:
+def _tunable(name: str, value: Any) -> float:
     """A live-tunable value within the bounds of :data:`quadruped_common.tunables.TUNABLES` (the same
-    bounds as the dynamic_reconfigure definition cfg/AttitudeController.cfg); ``name`` is used in errors,
-    ``tunable`` (default ``name``) picks the bounds."""
-    low, high = TUNABLE_BOUNDS[tunable or name]
+    bounds as the dynamic_reconfigure definition cfg/AttitudeController.cfg)."""
+    low, high = TUNABLE_BOUNDS[name]
     return number(value, name, low, high)
+
+
+_TUNABLES = {tunable.name: tunable for tunable in TUNABLES}
+_UNIT = re.compile(r"\s*\[([^\]]*)\]")  # "[N m]" in a tunable's description
+
+
+def _tunable_param(key: str, name: str, default: Any = None, note: str = "") -> Param:
+    """``key`` declared from the live-tunable ``name`` of TUNABLES: its bounds, and its description's unit
+    (in brackets) and meaning (the rest, plus ``note``)."""
+    tunable = _TUNABLES[name]
+    unit = _UNIT.search(tunable.description)
+    return Param(key, unit.group(1) if unit else "", _UNIT.sub("", tunable.description, count=1) + note,
+                 tunable.low, tunable.high, default=default, source="paper")
+
+
+#: ``config/controller.yaml``. A gain set (``gain_sets.<set>``, named freely) gives the gains and may override
+#: the timing; an override it does not give reads as the name of the top-level key it defaults to (the
+#: builder takes that key's value).
+CONTROLLER_SCHEMA = Schema("controller.yaml", (
+    *(_tunable_param("gain_sets.<set>." + name, name) for name in GAIN_NAMES),
+    *(_tunable_param("gain_sets.<set>." + name, name, default=name, note="; overrides the top-level key in this set")
+      for name in _TIMING),
+    *(_tunable_param(name, name, _TUNABLES[name].default, note="; default of every gain set")
+      for name in ("tau_max", "t_pow_max", "t_rec")),
+    Param("dt", "s", "control period: 100 Hz, the integrator step of the paper's simulation", 0.0, 1.0,
+          low_open=True, default=0.01, source="paper"),
+    Param("pairs", "", "the two leg pairs that alternate power and recovery strokes (a partition of legs 1-4); the "
+          "first starts with a half-duration recovery", kind="list",
+          default=[list(pair) for pair in DEFAULT_LEG_PAIRS], source="choice"),
+    Param("normalize_force_direction", "", "false: force direction tau_hat x r_hat as in the paper; true: divided "
+          "by its norm, so that every leg delivers its whole torque", kind="boolean", default=False, source="choice"),
+    Param("gyroscopic_feedforward", "", "the term + omega x (I omega) of eq. (pid)", kind="boolean", default=True,
+          source="paper"),
+    Param("buoyancy_feedforward", "", "the term - tau_buoyancy^B of eq. (pid), from the commanded foot positions",
+          kind="boolean", default=True, source="paper"),
+    Param("integral_limit", "rad s", "bound on the norm of the integral state z of eq. (pid) (not in the paper)",
+          0.0, 1e3, low_open=True, default=DEFAULT_INTEGRAL_LIMIT, source="choice"),
+    Param("max_angular_rate", "rad/s", "largest angular rate per axis a step accepts (the VN-100's range, 2000 "
+          "deg/s, plus 5 %)", 0.0, 100.0, low_open=True, default=DEFAULT_MAX_ANGULAR_RATE),
+    Param("max_step_factor", "", "an irregular step integrates the elapsed time clipped to [0, max_step_factor dt]",
+          1.0, 1000.0, default=5.0, source="choice"),
+    Param("rotation_tolerance", "", "largest deviation of R^T R from I accepted for a measured or desired attitude",
+          0.0, 0.1, low_open=True, default=1e-6, source="choice"),
+    Param("stroke.scheme", "", "stroke scheme: paper (the paper's power and recovery cycle) or coordinated "
+          "(docs/stroke_schemes.md)", kind="string", choices=SCHEMES, default=SCHEMES[0], source="choice"),
+    *COORDINATED_PARAMS,
+), names={"set": None})
+
+#: key -> declaration of CONTROLLER_SCHEMA (the constructors' checks)
+_PARAMS: Dict[str, Param] = {param.key: param for param in CONTROLLER_SCHEMA.params}
+
+
+def _read(key: str, value: Any) -> Any:
+    """``value`` of ``key`` through its declaration in :data:`CONTROLLER_SCHEMA`."""
+    return _PARAMS[key].read(value, key)
 
 
 @dataclass(frozen=True)
@@ -130,32 +187,27 @@ class ControllerConfig:
     """
 
     gains: Gains
-    tau_max: float = 2.0
-    t_rec: float = 1.5
-    t_pow_max: float = 0.5
-    dt: float = 0.01
+    tau_max: float = _PARAMS["tau_max"].default
+    t_rec: float = _PARAMS["t_rec"].default
+    t_pow_max: float = _PARAMS["t_pow_max"].default
+    dt: float = _PARAMS["dt"].default
     pairs: LegPairs = DEFAULT_LEG_PAIRS
-    normalize_force_direction: bool = False
-    gyroscopic_feedforward: bool = True
-    buoyancy_feedforward: bool = True
-    integral_limit: float = DEFAULT_INTEGRAL_LIMIT
-    max_angular_rate: float = DEFAULT_MAX_ANGULAR_RATE
-    max_step_factor: float = 5.0
-    rotation_tolerance: float = 1e-6
-    stroke_scheme: str = "paper"
+    normalize_force_direction: bool = _PARAMS["normalize_force_direction"].default
+    gyroscopic_feedforward: bool = _PARAMS["gyroscopic_feedforward"].default
+    buoyancy_feedforward: bool = _PARAMS["buoyancy_feedforward"].default
+    integral_limit: float = _PARAMS["integral_limit"].default
+    max_angular_rate: float = _PARAMS["max_angular_rate"].default
+    max_step_factor: float = _PARAMS["max_step_factor"].default
+    rotation_tolerance: float = _PARAMS["rotation_tolerance"].default
+    stroke_scheme: str = _PARAMS["stroke.scheme"].default
     coordinated: CoordinatedParams = dataclasses.field(default_factory=CoordinatedParams)
 
     def __post_init__(self) -> None:
         if not isinstance(self.gains, Gains):
             raise ParameterError("gains must be a Gains instance, got %r" % (self.gains,))
         set_ = object.__setattr__
-        set_(self, "tau_max", _tunable("tau_max", self.tau_max))
-        set_(self, "t_rec", _tunable("t_rec", self.t_rec))
-        set_(self, "t_pow_max", _tunable("t_pow_max", self.t_pow_max))
-        set_(self, "dt", _finite("dt", self.dt, low_open=True, high=1.0))
-        set_(self, "max_step_factor", _finite("max_step_factor", self.max_step_factor, low=1.0, high=1000.0))
-        set_(self, "rotation_tolerance", _finite("rotation_tolerance", self.rotation_tolerance,
-                                                 low_open=True, high=0.1))
+        for name in ("tau_max", "t_rec", "t_pow_max", "dt", "max_step_factor", "rotation_tolerance"):
+            set_(self, name, _read(name, getattr(self, name)))
         if self.t_rec < 2.0 * self.t_pow_max - _TIMING_SLACK:
             raise ParameterError("t_rec = %g s must be at least 2 t_pow_max = %g s (paper, section 'Power and "
                                  "Recovery Stroke Cycle')" % (self.t_rec, 2.0 * self.t_pow_max))
@@ -164,14 +216,12 @@ class ControllerConfig:
                                  % (self.t_pow_max, self.dt))
         set_(self, "pairs", leg_pairs(self.pairs))
         for name in ("normalize_force_direction", "gyroscopic_feedforward", "buoyancy_feedforward"):
-            if not isinstance(getattr(self, name), bool):
-                raise ParameterError("%s must be true or false, got %r" % (name, getattr(self, name)))
-        if self.stroke_scheme not in SCHEMES:
-            raise ParameterError("stroke.scheme must be one of %s, got %r" % (", ".join(SCHEMES), self.stroke_scheme))
+            _read(name, getattr(self, name))
+        _read("stroke.scheme", self.stroke_scheme)
         if not isinstance(self.coordinated, CoordinatedParams):
             raise ParameterError("coordinated must be a CoordinatedParams instance, got %r" % (self.coordinated,))
-        set_(self, "integral_limit", _finite("integral_limit", self.integral_limit, low_open=True, high=1e3))
-        set_(self, "max_angular_rate", _finite("max_angular_rate", self.max_angular_rate, low_open=True, high=100.0))
+        for name in ("integral_limit", "max_angular_rate"):
+            set_(self, name, _read(name, getattr(self, name)))
 
     @property
     def max_step(self) -> float:
@@ -202,59 +252,31 @@ def apply_tunables(config: ControllerConfig, values: Mapping[str, Any]) -> Contr
     return config.with_gains(config.gains.replace(**gains)).replace(**timing)
 
 
-def _bool(tree: Mapping[str, Any], key: str, default: bool) -> bool:
-    value = tree.get(key, default)
-    if not isinstance(value, bool):
-        raise ParameterError("parameter '%s' must be true or false, got %r" % (key, value))
-    return value
+def _config_for_set(v: Mapping[str, Any], name: str, chosen: Mapping[str, Any]) -> ControllerConfig:
+    """The ControllerConfig of gain set ``name`` from the values ``v`` of :data:`CONTROLLER_SCHEMA`; ``chosen``
+    (the set as in the file) says which timing keys the set overrides."""
+    prefix = "gain_sets.%s." % name
 
-
-def _config_for_set(tree: Mapping[str, Any], name: str, chosen: Any) -> ControllerConfig:
-    """The ControllerConfig of gain set ``name`` (its values named by their full key path in errors)."""
-    prefix = "gain_sets.%s" % name
-    if not isinstance(chosen, Mapping):
-        raise ParameterError("parameter '%s' must be a mapping of gains" % prefix)
-    for key in chosen:
-        if key not in GAIN_SET_KEYS:
-            raise ParameterError("unknown parameter '%s.%s' (allowed: %s)" % (prefix, key, ", ".join(GAIN_SET_KEYS)))
-    for key in ("k_p", "k_i", "k_d", "k_aw"):
-        if key not in chosen:
-            raise ParameterError("missing parameter '%s.%s'" % (prefix, key))
-    for key in GAIN_SET_KEYS:  # every value of the set against the live-tuning bounds, by its own name
-        if key in chosen:
-            _tunable("%s.%s" % (prefix, key), chosen[key], key)
-
-    stroke = tree.get("stroke", {}) or {}
-    if not isinstance(stroke, Mapping) or sorted(set(stroke) - {"scheme", "coordinated"}):
-        raise ParameterError("parameter 'stroke' must be a mapping with keys scheme, coordinated, got %r" % (stroke,))
-    coordinated_tree = stroke.get("coordinated", {}) or {}
-    if not isinstance(coordinated_tree, Mapping):
-        raise ParameterError("parameter 'stroke.coordinated' must be a mapping, got %r" % (coordinated_tree,))
-    known = {f.name for f in dataclasses.fields(CoordinatedParams)}
-    if sorted(set(coordinated_tree) - known):
-        raise ParameterError("unknown parameters stroke.coordinated.%s (allowed: %s)"
-                             % (sorted(set(coordinated_tree) - known), ", ".join(sorted(known))))
-
-    def timing(key: str, default: float) -> Any:
-        return chosen.get(key, tree.get(key, default))
+    def timing(key: str) -> float:
+        return v[prefix + key] if key in chosen else v[key]
 
     try:
         return ControllerConfig(
-            gains=Gains(k_p=chosen["k_p"], k_i=chosen["k_i"], k_d=chosen["k_d"], k_aw=chosen["k_aw"]),
-            tau_max=timing("tau_max", 2.0),
-            t_rec=timing("t_rec", 1.5),
-            t_pow_max=timing("t_pow_max", 0.5),
-            dt=tree.get("dt", 0.01),
-            pairs=tree.get("pairs", DEFAULT_LEG_PAIRS),
-            normalize_force_direction=_bool(tree, "normalize_force_direction", False),
-            gyroscopic_feedforward=_bool(tree, "gyroscopic_feedforward", True),
-            buoyancy_feedforward=_bool(tree, "buoyancy_feedforward", True),
-            integral_limit=tree.get("integral_limit", DEFAULT_INTEGRAL_LIMIT),
-            max_angular_rate=tree.get("max_angular_rate", DEFAULT_MAX_ANGULAR_RATE),
-            max_step_factor=tree.get("max_step_factor", 5.0),
-            rotation_tolerance=tree.get("rotation_tolerance", 1e-6),
-            stroke_scheme=stroke.get("scheme", "paper"),
-            coordinated=CoordinatedParams(**coordinated_tree),
+            gains=Gains(**{key: v[prefix + key] for key in GAIN_NAMES}),
+            tau_max=timing("tau_max"),
+            t_rec=timing("t_rec"),
+            t_pow_max=timing("t_pow_max"),
+            dt=v["dt"],
+            pairs=v["pairs"],
+            normalize_force_direction=v["normalize_force_direction"],
+            gyroscopic_feedforward=v["gyroscopic_feedforward"],
+            buoyancy_feedforward=v["buoyancy_feedforward"],
+            integral_limit=v["integral_limit"],
+            max_angular_rate=v["max_angular_rate"],
+            max_step_factor=v["max_step_factor"],
+            rotation_tolerance=v["rotation_tolerance"],
+            stroke_scheme=v["stroke.scheme"],
+            coordinated=CoordinatedParams(**{p.key.rsplit(".", 1)[1]: v[p.key] for p in COORDINATED_PARAMS}),
         )
     except ParameterError as exc:
         raise ParameterError("gain set '%s': %s" % (name, exc)) from None
@@ -265,23 +287,16 @@ def controller_config_from_dict(tree: Mapping[str, Any], gain_set: str = DEFAULT
 
     Top-level keys give the defaults (``tau_max``, ``t_rec``, ``t_pow_max``, ``dt``, ``pairs``, ...);
     ``gain_sets.<name>`` gives k_p, k_i, k_d, k_aw and may override t_rec, t_pow_max and tau_max.
-    Every gain set of the file is validated (a bad set is an error even when another one is chosen).
+    Every value is read through :data:`CONTROLLER_SCHEMA`, and every gain set of the file is validated (a bad
+    set is an error even when another one is chosen).
     """
-    known_top = {"gain_sets", "tau_max", "t_rec", "t_pow_max", "dt", "pairs", "normalize_force_direction",
-                 "gyroscopic_feedforward", "buoyancy_feedforward", "integral_limit", "max_angular_rate",
-                 "max_step_factor", "rotation_tolerance", "stroke"}
-    for key in tree:
-        if key not in known_top:
-            raise ParameterError("unknown controller parameter '%s'" % key)
     sets = tree.get("gain_sets")
     if not isinstance(sets, Mapping) or not sets:
         raise ParameterError("missing parameter 'gain_sets' (a mapping of named gain sets)")
     if gain_set not in sets:
         raise ParameterError("unknown gain set %r; available: %s" % (gain_set, ", ".join(sorted(sets))))
-    for key in ("tau_max", "t_rec", "t_pow_max"):  # top-level defaults, even where every set overrides them
-        if key in tree:
-            _tunable(key, tree[key])
-    configs = {name: _config_for_set(tree, name, chosen) for name, chosen in sets.items()}
+    v = CONTROLLER_SCHEMA.read(tree)
+    configs = {name: _config_for_set(v, name, chosen) for name, chosen in sets.items()}
     return configs[gain_set]
 
 

@@ -17,18 +17,9 @@ from typing import Any, Dict, Mapping, Optional
 
 import numpy as np
 
-from quadruped_common.config import ParameterError, check_keys, load_config, lookup, number, vector
-from quadruped_common.robot import LEGS, MIRROR_DIAG, JointLimits, joint_limits_from_dict, servo_no_load_speed_from_dict
-
-
-def _number(tree: Mapping[str, Any], dotted: str, low: float = -math.inf, high: float = math.inf,
-            low_open: bool = False) -> float:
-    return number(lookup(tree, dotted), dotted, low, high, low_open=low_open)
-
-
-def _vector(tree: Mapping[str, Any], dotted: str, length: int, low: float = -math.inf,
-            high: float = math.inf) -> np.ndarray:
-    return np.array(vector(lookup(tree, dotted), dotted, length, low, high))
+from quadruped_common.config import ParameterError, load_config
+from quadruped_common.robot import (LEGS, MIRROR_DIAG, ROBOT_SCHEMA, JointLimits, joint_limits_from_dict,
+                                    servo_no_load_speed_from_dict)
 
 
 @dataclass(frozen=True)
@@ -94,66 +85,39 @@ class RobotParams:
 
 
 def robot_params_from_dict(tree: Mapping[str, Any]) -> RobotParams:
-    """Validate a parsed ``robot.yaml`` mapping and build :class:`RobotParams`."""
-    inertia_diag = _vector(tree, "body.inertia_diag", 3, -100.0, 100.0)  # kg m^2
-    if np.any(inertia_diag <= 0.0):
-        raise ParameterError("parameter 'body.inertia_diag' must be positive, got %s" % inertia_diag)
-    ixx, iyy, izz = inertia_diag
-    # The inertia-box model (eq. inertia_box) takes square roots of I_yy + I_zz - I_xx etc.: a
-    # physical body satisfies the triangle inequality on its principal moments.
-    if ixx > iyy + izz or iyy > izz + ixx or izz > ixx + iyy:
-        raise ParameterError("parameter 'body.inertia_diag' %s violates the triangle inequality of "
-                             "principal moments (no physical body has it)" % inertia_diag)
-    dims = _vector(tree, "body.dimensions", 3, -5.0, 5.0)  # m
-    if np.any(dims <= 0.0):
-        raise ParameterError("parameter 'body.dimensions' must be positive, got %s" % dims)
-
-    five_bar = FiveBar(
-        a1=_number(tree, "five_bar.a1", 0.0, 1.0, low_open=True),
-        a2=_number(tree, "five_bar.a2", 0.0, 1.0, low_open=True),
-        a3=_number(tree, "five_bar.a3", 0.0, 1.0, low_open=True),
-        a4=_number(tree, "five_bar.a4", 0.0, 1.0, low_open=True),
-        c=_number(tree, "five_bar.c", 0.0, 1.0),
-    )
+    """Validate a parsed ``robot.yaml`` mapping against :data:`~quadruped_common.robot.ROBOT_SCHEMA` and build
+    :class:`RobotParams`."""
+    v = ROBOT_SCHEMA.read(tree)
+    five_bar = FiveBar(*(v["five_bar." + name] for name in ("a1", "a2", "a3", "a4", "c")))
     # The paper's FK (eq. fk_EFG) and IK exploit the symmetric mechanism a1 = a2, a3 = a4.
     if not (math.isclose(five_bar.a1, five_bar.a2) and math.isclose(five_bar.a3, five_bar.a4)):
         raise ParameterError("the paper's five-bar kinematics need a1 == a2 and a3 == a4, got %s" % (five_bar,))
-
-    # Keys are the leg numbers as strings ("1".."4"; the strict loader refuses non-string keys).
-    leg_keys = [str(leg) for leg in LEGS]
-    origins_raw = check_keys(lookup(tree, "leg_origins"), "leg_origins", leg_keys, leg_keys)
-    leg_origins = {leg: np.array(vector(origins_raw[str(leg)], "leg_origins.%d" % leg, 3, -2.0, 2.0)) for leg in LEGS}
-
-    return RobotParams(
-        mass=_number(tree, "body.mass", 0.0, 1000.0, low_open=True),
-        inertia=np.diag(inertia_diag),
-        body_dimensions=dims,
-        rho=_number(tree, "fluid.density", 0.0, 2000.0, low_open=True),
-        beta=_number(tree, "fluid.viscosity", 0.0, 1.0),
-        gravity=_number(tree, "fluid.gravity", 0.0, 20.0),
-        paw_diameter=_number(tree, "paw.diameter", 0.0, 1.0, low_open=True),
-        drag_coefficient=_number(tree, "paw.drag_coefficient", 0.0, 10.0, low_open=True),
-        paw_mass=_number(tree, "paw.mass", 0.0, 10.0),
-        paw_volume=_number(tree, "paw.volume", 0.0, 0.01),
-        five_bar=five_bar,
-        l_y=_number(tree, "hip.l_y", -1.0, 1.0),
-        l_z=_number(tree, "hip.l_z", 0.0, 1.0, low_open=True),
-        leg_origins=leg_origins,
-        joint_limits=joint_limits_from_dict(tree),
-        nominal_foot_leg=_vector(tree, "nominal_foot_leg", 3, -1.0, 1.0),
-        servo_stall_torque=_number(tree, "servo.stall_torque", 0.0, 100.0, low_open=True),
-        servo_no_load_speed=servo_no_load_speed_from_dict(tree),
-        imu_mount_xyz=_imu_mount(tree, dims),
-    )
-
-
-def _imu_mount(tree: Mapping[str, Any], dims: np.ndarray) -> np.ndarray:
-    """``imu.mount_xyz``: where the IMU sits in base_link; it must lie inside the body's box."""
-    xyz = _vector(tree, "imu.mount_xyz", 3)
-    if np.any(np.abs(xyz) > 0.5 * dims):
+    dims = np.array(v["body.dimensions"])
+    imu_mount = np.array(v["imu.mount_xyz"])
+    if np.any(np.abs(imu_mount) > 0.5 * dims):
         raise ParameterError("parameter 'imu.mount_xyz' %s lies outside the body (half extents %s)"
-                             % (xyz.tolist(), (0.5 * dims).tolist()))
-    return xyz
+                             % (imu_mount.tolist(), (0.5 * dims).tolist()))
+    return RobotParams(
+        mass=v["body.mass"],
+        inertia=np.diag(v["body.inertia_diag"]),
+        body_dimensions=dims,
+        rho=v["fluid.density"],
+        beta=v["fluid.viscosity"],
+        gravity=v["fluid.gravity"],
+        paw_diameter=v["paw.diameter"],
+        drag_coefficient=v["paw.drag_coefficient"],
+        paw_mass=v["paw.mass"],
+        paw_volume=v["paw.volume"],
+        five_bar=five_bar,
+        l_y=v["hip.l_y"],
+        l_z=v["hip.l_z"],
+        leg_origins={leg: np.array(v["leg_origins.%d" % leg]) for leg in LEGS},
+        joint_limits=joint_limits_from_dict(tree),
+        nominal_foot_leg=np.array(v["nominal_foot_leg"]),
+        servo_stall_torque=v["servo.stall_torque"],
+        servo_no_load_speed=servo_no_load_speed_from_dict(tree),
+        imu_mount_xyz=imu_mount,
+    )
 
 
 def load_robot_params(path: Optional[str] = None) -> RobotParams:

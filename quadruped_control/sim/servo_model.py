@@ -27,8 +27,9 @@ from typing import Any, Mapping, Optional, Sequence, Union
 
 import numpy as np
 
-from quadruped_common.config import ParameterError, check_keys, load_config, lookup, number
+from quadruped_common.config import ParameterError, load_config, lookup
 from quadruped_common.jit import jitable, kernel
+from quadruped_common.schema import Param, Schema
 from quadruped_control.sim.plants.rigid_body import check_dt
 
 ArrayLike = Union[Sequence[float], Sequence[Sequence[float]], np.ndarray]
@@ -40,6 +41,7 @@ __all__ = [
     "IdealServo",
     "RateLimitedServo",
     "SERVO_MODELS",
+    "SERVO_SCHEMA",
     "ServoModel",
     "ServoParams",
     "dead_band_command",
@@ -291,17 +293,26 @@ def tank_servo_params(params: ServoParams, tank: Any) -> ServoParams:
                    dead_band=tank.servo_dead_band)
 
 
+#: The ``simulation.servo`` keys of ``config/simulation.yaml`` (the rate-limited servo; part of
+#: :data:`~quadruped_control.sim.simulation.SIMULATION_SCHEMA`).
+SERVO_SCHEMA = Schema("simulation.yaml", (
+    Param("simulation.servo.speed_scale", "", "fraction of robot.yaml's servo no-load speed reachable under load in "
+          "water", 0.0, 1.0, low_open=True, default=1.0, source="estimate"),
+    Param("simulation.servo.time_constant", "s", "time constant T of the position loop's first-order lag, dq/dt = "
+          "clip((q_cmd - q) / T, -w_max, w_max)", 0.0, 10.0, source="estimate"),
+))
+
+
 def servo_params_from_dict(tree: Mapping[str, Any], robot_yaml: Optional[str] = None) -> ServoParams:
     """:class:`ServoParams` from a parsed simulation.yaml tree (its ``simulation.servo`` section: load
     scale and lag) and the no-load speed ``servo.no_load_speed_rpm`` of ``config/robot.yaml`` (or
     ``robot_yaml``), the one place the servo speed is kept."""
     from quadruped_control.model.params import load_robot_params
 
-    key = "simulation.servo"
-    servo = check_keys(lookup(tree, key), key, ("speed_scale", "time_constant"), ("time_constant",))
-    scale = number(servo.get("speed_scale", 1.0), key + ".speed_scale", 0.0, 1.0, low_open=True)
-    tau = number(servo["time_constant"], key + ".time_constant", 0.0, 10.0)
-    return ServoParams(max_speed=load_robot_params(robot_yaml).servo_no_load_speed * scale, time_constant=tau)
+    v = SERVO_SCHEMA.read({"simulation": {"servo": lookup(tree, "simulation.servo")}})
+    scale = v["simulation.servo.speed_scale"]
+    return ServoParams(max_speed=load_robot_params(robot_yaml).servo_no_load_speed * scale,
+                       time_constant=v["simulation.servo.time_constant"])
 
 
 def load_servo_params(path: Optional[str] = None, tree: Optional[Mapping[str, Any]] = None,

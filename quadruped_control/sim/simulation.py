@@ -31,8 +31,9 @@ from typing import Any, Callable, Dict, List, Mapping, NamedTuple, Optional, Seq
 
 import numpy as np
 
-from quadruped_common.config import ParameterError, check_keys, integer, load_config, lookup, number, string, vector
+from quadruped_common.config import load_config
 from quadruped_common.robot import LEGS
+from quadruped_common.schema import Param, Schema
 from quadruped_common.so3 import exp_so3, geodesic_angles, is_rotation, rotations_to_quaternions, rotations_to_rpy
 from quadruped_control.analysis.metrics import compute_metrics, moving_average_centered
 from quadruped_control.control.controller import AttitudeController, ControllerOutput
@@ -41,8 +42,8 @@ from quadruped_control.model.kinematics import UnreachableError, joint_angles
 from quadruped_control.model.params import RobotParams
 from quadruped_control.sim.magnetic_heading import reported_rotation
 from quadruped_control.sim.plants.paper import FloatingBaseModel, RigidBodyState
-from quadruped_control.sim.servo_model import (IdealServo, RateLimitedServo, ServoModel, ServoParams, make_servo_model,
-                                              servo_params_from_dict)
+from quadruped_control.sim.servo_model import (SERVO_MODELS, SERVO_SCHEMA, IdealServo, RateLimitedServo, ServoModel,
+                                              ServoParams, make_servo_model, servo_params_from_dict)
 
 ArrayLike = Union[Sequence[float], Sequence[Sequence[float]], np.ndarray]
 
@@ -52,6 +53,7 @@ ProgressCallback = Callable[[float, float], None]
 __all__ = [
     "ClosedLoopSimulation",
     "PlantSimulator",
+    "SIMULATION_SCHEMA",
     "SimulationError",
     "SimulationResult",
     "SimulationSettings",
@@ -69,6 +71,40 @@ class SimulationError(RuntimeError):
 # Settings
 # --------------------------------------------------------------------------------------------------
 
+def _seeds_problem(seeds: list) -> Optional[str]:
+    if not seeds or any(isinstance(seed, bool) or not isinstance(seed, int) or not 0 <= seed < 2 ** 32
+                        for seed in seeds):
+        return "must be a non-empty list of integers in [0, 2^32 - 1]"
+    return None
+
+
+#: ``config/simulation.yaml``: the ``simulation:`` section (the simulator) and the study sections ``paper_sim``
+#: and ``robustness`` (read by the simulate CLI's studies), all optional but ``simulation.servo.time_constant``.
+SIMULATION_SCHEMA = Schema("simulation.yaml", (
+    Param("simulation.dt", "s", "RK4 step and control period", 0.0, 1.0, low_open=True, default=0.01, source="paper"),
+    Param("simulation.servo_model", "", "servo model unless a caller asks for another: ideal (the paper's, commanded "
+          "angles reached at once) or rate-limited (simulation.servo)", kind="string", choices=SERVO_MODELS,
+          default="ideal", source="choice"),
+    *SERVO_SCHEMA.params,
+    Param("simulation.sensor_noise.attitude_deg", "deg", "IMU noise: std of a random rotation-vector perturbation "
+          "(0: the paper's noiseless simulation)", 0.0, 90.0, default=0.0, source="choice"),
+    Param("simulation.sensor_noise.gyro", "rad/s", "IMU noise: std per gyro axis", 0.0, 10.0, default=0.0,
+          source="choice"),
+    Param("paper_sim.setpoints_deg", "deg", "setpoints of the paper-sim study, each applied to roll, pitch and yaw "
+          "at once (one trial each)", -360.0, 360.0, kind="vector", default=[15.0, 45.0, 75.0], source="paper"),
+    Param("paper_sim.initial_rpy_deg", "deg", "initial roll, pitch, yaw of its trials (not in the paper: level, at "
+          "rest)", -360.0, 360.0, kind="vector", length=3, default=[0.0, 0.0, 0.0], source="estimate"),
+    Param("paper_sim.duration", "s", "length of its trials (not in the paper: long enough to check the 30 s settling "
+          "criterion)", 0.0, 1e5, low_open=True, default=120.0, source="estimate"),
+    Param("paper_sim.gains", "", "gain set of controller.yaml its trials run", kind="string", default="simulation",
+          source="paper"),
+    Param("robustness.initial_perturbation_deg", "deg", "robustness study: uniform +- perturbation of each initial "
+          "Euler angle", 0.0, 90.0, default=0.5, source="choice"),
+    Param("robustness.seeds", "", "robustness study: one perturbed trial per seed (integers in [0, 2^32 - 1]) and "
+          "setpoint", kind="list", default=[1, 2, 3], source="choice", check=_seeds_problem),
+))
+
+
 @dataclass(frozen=True)
 class SimulationSettings:
     """The ``simulation:`` section of ``config/simulation.yaml``.
@@ -78,39 +114,23 @@ class SimulationSettings:
     ``gyro_noise``: std per gyro axis (rad/s).
     """
 
-    dt: float = 0.01
-    servo_model: str = "ideal"
+    dt: float = SIMULATION_SCHEMA["simulation.dt"].default
+    servo_model: str = SIMULATION_SCHEMA["simulation.servo_model"].default
     servo: ServoParams = field(default_factory=lambda: ServoParams(95.0 * math.pi / 30.0, 0.03))
-    attitude_noise: float = 0.0
-    gyro_noise: float = 0.0
+    attitude_noise: float = math.radians(SIMULATION_SCHEMA["simulation.sensor_noise.attitude_deg"].default)
+    gyro_noise: float = SIMULATION_SCHEMA["simulation.sensor_noise.gyro"].default
 
 
 def simulation_settings_from_dict(tree: Mapping[str, Any]) -> SimulationSettings:
-    """Validate a parsed simulation.yaml tree: the ``simulation:`` section (typed result) and the study
-    sections ``paper_sim`` and ``robustness`` when present (read by the simulate CLI)."""
-    key = "simulation"
-    section = check_keys(lookup(tree, key), key, ("dt", "servo_model", "servo", "sensor_noise"))
-    noise = check_keys(section.get("sensor_noise", {}), key + ".sensor_noise", ("attitude_deg", "gyro"))
-    if "paper_sim" in tree:
-        paper = check_keys(tree["paper_sim"], "paper_sim", ("setpoints_deg", "initial_rpy_deg", "duration", "gains"))
-        vector(paper.get("setpoints_deg", [0.0]), "paper_sim.setpoints_deg", low=-360.0, high=360.0)
-        vector(paper.get("initial_rpy_deg", [0.0] * 3), "paper_sim.initial_rpy_deg", 3, -360.0, 360.0)
-        number(paper.get("duration", 1.0), "paper_sim.duration", 0.0, 1e5, low_open=True)
-        string(paper.get("gains", "simulation"), "paper_sim.gains")
-    if "robustness" in tree:
-        robust = check_keys(tree["robustness"], "robustness", ("initial_perturbation_deg", "seeds"))
-        number(robust.get("initial_perturbation_deg", 0.0), "robustness.initial_perturbation_deg", 0.0, 90.0)
-        seeds = robust.get("seeds", [1])
-        if not isinstance(seeds, list) or not seeds:
-            raise ParameterError("parameter 'robustness.seeds' must be a non-empty list of integers, got %r" % (seeds,))
-        for index, seed in enumerate(seeds):
-            integer(seed, "robustness.seeds[%d]" % index, 0, 2 ** 32 - 1)
+    """Read a parsed simulation.yaml tree through :data:`SIMULATION_SCHEMA`: the ``simulation:`` section (typed
+    result) and the study sections ``paper_sim`` and ``robustness`` (read by the simulate CLI)."""
+    v = SIMULATION_SCHEMA.read(tree)
     return SimulationSettings(
-        dt=number(section.get("dt", 0.01), key + ".dt", 0.0, 1.0, low_open=True),
-        servo_model=string(section.get("servo_model", "ideal"), key + ".servo_model", ("ideal", "rate-limited")),
+        dt=v["simulation.dt"],
+        servo_model=v["simulation.servo_model"],
         servo=servo_params_from_dict(tree),
-        attitude_noise=math.radians(number(noise.get("attitude_deg", 0.0), key + ".sensor_noise.attitude_deg", 0.0, 90.0)),
-        gyro_noise=number(noise.get("gyro", 0.0), key + ".sensor_noise.gyro", 0.0, 10.0),
+        attitude_noise=math.radians(v["simulation.sensor_noise.attitude_deg"]),
+        gyro_noise=v["simulation.sensor_noise.gyro"],
     )
 
 

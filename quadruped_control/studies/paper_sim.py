@@ -15,21 +15,21 @@ import time
 from typing import Any, Dict, List, Optional
 
 from quadruped_common.config import config_path
-from quadruped_control.sim.simulation import load_simulation_tree
+from quadruped_control.sim.simulation import SIMULATION_SCHEMA, load_simulation_tree
 from quadruped_control.studies.trial import GAIN_ALIASES, TrialSpec, format_metrics_table, run_many, without_trace
 
 
 def paper_sim_specs(args: argparse.Namespace, tree: Dict[str, Any], out: Optional[str],
                     label_prefix: str = "", **overrides: Any) -> List[TrialSpec]:
     """The three trials of the paper's study (config ``paper_sim``), with ``overrides`` of TrialSpec fields."""
-    paper = tree.get("paper_sim", {})
-    setpoints = [float(v) for v in paper.get("setpoints_deg", [15.0, 45.0, 75.0])]
-    initial = tuple(float(v) for v in paper.get("initial_rpy_deg", [0.0, 0.0, 0.0]))
-    duration = args.duration if args.duration_given else float(paper.get("duration", 120.0))
+    values = SIMULATION_SCHEMA.read(tree)  # the file's values, else the schema's defaults
+    setpoints = [float(v) for v in values["paper_sim.setpoints_deg"]]
+    initial = tuple(float(v) for v in values["paper_sim.initial_rpy_deg"])
+    duration = args.duration if args.duration_given else float(values["paper_sim.duration"])
     specs = []
     for amplitude in setpoints:
         fields = dict(label="%s%g deg" % (label_prefix, amplitude), setpoint_rpy_deg=(amplitude,) * 3,
-                      initial_rpy_deg=initial, duration=duration, gains=str(paper.get("gains", "simulation")),
+                      initial_rpy_deg=initial, duration=duration, gains=str(values["paper_sim.gains"]),
                       servo_model="ideal", seed=args.seed,
                       restoring_offset=tuple(args.restoring_offset) if args.restoring_offset else None,
                       out_dir=os.path.join(out, "trial_%g" % amplitude) if out else None,

@@ -18,7 +18,7 @@ import numpy as np
 
 from quadruped_common.config import config_path
 from quadruped_control.model.params import load_robot_params
-from quadruped_control.sim.simulation import load_simulation_tree
+from quadruped_control.sim.simulation import SIMULATION_SCHEMA, load_simulation_tree
 from quadruped_control.studies.paper_sim import paper_sim_specs
 from quadruped_control.studies.trial import TrialSpec, format_value, run_many
 
@@ -27,11 +27,10 @@ def main_study(args: argparse.Namespace) -> int:
     """Run the study (exit status 0; the table says which variants settle)."""
     os.makedirs(args.out, exist_ok=True)
     tree = load_simulation_tree()
-    robust = tree.get("robustness", {})
-    delta = float(robust.get("initial_perturbation_deg", 0.5))
-    seeds = [int(s) for s in robust.get("seeds", [1, 2, 3])]
-    paper = tree.get("paper_sim", {})
-    base_initial = np.array([float(v) for v in paper.get("initial_rpy_deg", [0.0, 0.0, 0.0])])
+    values = SIMULATION_SCHEMA.read(tree)  # the file's values, else the schema's defaults
+    delta = float(values["robustness.initial_perturbation_deg"])
+    seeds = [int(s) for s in values["robustness.seeds"]]
+    base_initial = np.array([float(v) for v in values["paper_sim.initial_rpy_deg"]])
     variants: List[Tuple[str, List[TrialSpec]]] = []
     variants.append(("baseline (sim gains, ideal servos)", paper_sim_specs(args, tree, None, "base ")))
     for seed in seeds:

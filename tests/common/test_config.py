@@ -80,7 +80,8 @@ def _vn100_tree():
     ("command_timeout", 0.0, r"'command_timeout' = 0 is outside \(0"),
     ("port", 7, "'port' must be a non-empty string"),
     ("max_angular_rate", -1.0, "max_angular_rate"),
-    ("orientation_covariance_diagonal", [1e-4, -1e-4, 1e-4], r"orientation_covariance_diagonal\[1\]"),
+    ("orientation_covariance_diagonal", [1e-4, -1e-4, 1e-4], r"'orientation_covariance_diagonal' = .*: variance \[1\] "
+                                                              "= -0.0001 is negative"),
     ("angular_velocity_covariance_diagonal", [math.nan, 0.0, 0.0], r"angular_velocity_covariance_diagonal\[0\]"),
     ("linear_acceleration_covariance_diagonal", [1, 2, 3, 4], "3 variances"),
     ("typo_key", 1, "unknown vn100 parameter 'typo_key'"),

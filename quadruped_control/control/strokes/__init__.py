@@ -13,12 +13,12 @@ from typing import Optional, Sequence
 
 from quadruped_common.config import ParameterError
 from quadruped_control.control.strokes.base import PHASE_HOLD, PHASE_POWER, PHASE_RECOVERY, StrokeScheme
-from quadruped_control.control.strokes.coordinated import CoordinatedParams, CoordinatedStrokes
+from quadruped_control.control.strokes.coordinated import COORDINATED_PARAMS, CoordinatedParams, CoordinatedStrokes
 from quadruped_control.control.strokes.paper import StrokeCycle
 from quadruped_control.model.params import RobotParams
 
-__all__ = ["PHASE_HOLD", "PHASE_POWER", "PHASE_RECOVERY", "SCHEMES", "CoordinatedParams", "CoordinatedStrokes",
-           "StrokeCycle", "StrokeScheme", "make_stroke_scheme"]
+__all__ = ["COORDINATED_PARAMS", "PHASE_HOLD", "PHASE_POWER", "PHASE_RECOVERY", "SCHEMES", "CoordinatedParams",
+           "CoordinatedStrokes", "StrokeCycle", "StrokeScheme", "make_stroke_scheme"]
 
 #: Names of the stroke schemes, the first is the default.
 SCHEMES = ("paper", "coordinated")

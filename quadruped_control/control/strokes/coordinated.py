@@ -48,15 +48,15 @@ import math
 from dataclasses import dataclass
 from typing import List, Optional, Sequence, Tuple
 
-from quadruped_common.config import ParameterError
 from quadruped_common.robot import LEGS, MIRROR_DIAG
+from quadruped_common.schema import Param
 from quadruped_control.control.strokes.base import (PHASE_HOLD, PHASE_POWER, PHASE_RECOVERY, TIME_EPS, PairState,
                                                     StrokePath, StrokeScheme, Vec3, VelocityCommand, cubic_time_profile)
 from quadruped_control.control.strokes.workspace import Workspace, leg_workspace
 from quadruped_control.model.kinematics import UnreachableError, joint_angles_floats
 from quadruped_control.model.params import RobotParams
 
-__all__ = ["CoordinatedParams", "CoordinatedStrokes", "DRAG_OPTIMAL_RECOVERY_RATIO"]
+__all__ = ["COORDINATED_PARAMS", "CoordinatedParams", "CoordinatedStrokes", "DRAG_OPTIMAL_RECOVERY_RATIO"]
 
 #: T_rec / T_pow maximising the mean torque of one leg's cycle, (1/T_p - 1/T_r) / (T_p + T_r): 1 + sqrt(2).
 DRAG_OPTIMAL_RECOVERY_RATIO = 1.0 + math.sqrt(2.0)
@@ -65,6 +65,25 @@ CUBIC_PEAK_TO_MEAN = 1.5
 #: Share of tau_sat per leg while one pair strokes.
 PAIR_SHARE = 0.5
 _READY = "ready"  # internal: back at the start point, waiting for the hand-over (reported as recovery)
+
+#: The ``stroke.coordinated`` keys of config/controller.yaml, declared once for the file (they are part of
+#: :data:`~quadruped_control.control.controller_config.CONTROLLER_SCHEMA`) and for :class:`CoordinatedParams`.
+COORDINATED_PARAMS: Tuple[Param, ...] = (
+    Param("stroke.coordinated.joint_margin_deg", "deg", "workspace margin inside every servo range", 0.0, 30.0,
+          default=5.0, source="choice"),
+    Param("stroke.coordinated.speed_fraction", "", "fraction of the servo no-load speed the planned foot paths may "
+          "use", 0.05, 1.0, default=0.8, source="choice"),
+    Param("stroke.coordinated.recovery_ratio", "", "T_rec / T_pow: 1 + sqrt(2) maximises a leg's mean torque with "
+          "drag ~ v^2", 0.1, 100.0, default=DRAG_OPTIMAL_RECOVERY_RATIO, source="choice"),
+    Param("stroke.coordinated.path_sample", "m", "spacing of the IK samples along a recovery path", 0.002, 0.1,
+          default=0.02, source="choice"),
+    Param("stroke.coordinated.replan_fraction", "", "a waiting pair re-plans when its stroke has less than this "
+          "fraction of the best range", 0.0, 1.0, default=0.6, source="choice"),
+    Param("stroke.coordinated.workspace_radius", "m", "strokes stay within this distance of the nominal foot point",
+          0.01, 0.3, default=0.035, source="choice"),
+)
+#: field of CoordinatedParams -> its declaration
+_COORDINATED = {param.key.rsplit(".", 1)[1]: param for param in COORDINATED_PARAMS}
 
 
 @dataclass(frozen=True)
@@ -78,23 +97,16 @@ class CoordinatedParams:
     shorter than this fraction of the longest one.
     """
 
-    joint_margin_deg: float = 5.0
-    speed_fraction: float = 0.8
-    recovery_ratio: float = DRAG_OPTIMAL_RECOVERY_RATIO
-    path_sample: float = 0.02
-    replan_fraction: float = 0.6
-    workspace_radius: float = 0.035
+    joint_margin_deg: float = _COORDINATED["joint_margin_deg"].default
+    speed_fraction: float = _COORDINATED["speed_fraction"].default
+    recovery_ratio: float = _COORDINATED["recovery_ratio"].default
+    path_sample: float = _COORDINATED["path_sample"].default
+    replan_fraction: float = _COORDINATED["replan_fraction"].default
+    workspace_radius: float = _COORDINATED["workspace_radius"].default
 
     def __post_init__(self) -> None:
-        for name, low, high in (("joint_margin_deg", 0.0, 30.0), ("speed_fraction", 0.05, 1.0),
-                                ("recovery_ratio", 0.1, 100.0), ("path_sample", 0.002, 0.1),
-                                ("replan_fraction", 0.0, 1.0), ("workspace_radius", 0.01, 0.3)):
-            value = getattr(self, name)
-            if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value) \
-                    or not low <= value <= high:
-                raise ParameterError("stroke.coordinated.%s must be a number in [%g, %g], got %r"
-                                     % (name, low, high, value))
-            object.__setattr__(self, name, float(value))
+        for name, param in _COORDINATED.items():  # each value through its declaration (ParameterError otherwise)
+            object.__setattr__(self, name, param.read(getattr(self, name), param.key))
 
 
 class _Pair(PairState):

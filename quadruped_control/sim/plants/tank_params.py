@@ -24,6 +24,7 @@ from typing import Any, Callable, Dict, Mapping, Optional, Tuple
 import numpy as np
 
 from quadruped_common.config import ParameterError, boolean, check_keys, integer, load_config, number, vector
+from quadruped_common.schema import Param, range_text
 
 __all__ = ["SCHEMA", "SECTIONS", "Fit", "TankParameter", "TankParams", "fit_coordinates", "load_tank_params",
            "parameter", "parameter_table", "tank_params_from_dict", "yaml_path"]
@@ -80,25 +81,18 @@ class TankParameter:
         return "%s.%s" % (self.section, self.name)
 
     def read(self, value: Any, key: str, what: str = "parameter") -> Any:
-        """``value`` as this parameter's type within its range; ParameterError naming ``key`` otherwise."""
-        if isinstance(value, np.generic):
-            value = value.item()
-        if isinstance(self.default, bool):
-            return boolean(value, key, what=what)
-        if isinstance(self.default, int):
-            return integer(value, key, int(self.low), int(self.high), what=what)
-        if isinstance(self.default, tuple):
-            if isinstance(value, np.ndarray):
-                value = value.tolist()
-            result = tuple(vector(value, key, len(self.default), -math.inf, math.inf, what=what))
-            for i, item in enumerate(result):
-                number(item, "%s[%d]" % (key, i), self.low, self.high, self.low_open, self.high_open, what=what)
-        else:
-            result = number(value, key, self.low, self.high, self.low_open, self.high_open, what=what)
-        problem = self.check(result) if self.check is not None else None
-        if problem:
-            raise ParameterError("%s '%s' = %r: %s" % (what, key, value, problem))
-        return result
+        """``value`` as this parameter's type within its range (the common :class:`~quadruped_common.schema.Param`
+        reader; numpy values taken as Python ones); ParameterError naming ``key`` otherwise."""
+        if isinstance(value, (np.generic, np.ndarray)):
+            value = value.tolist()
+        default = self.default
+        kind = ("boolean" if isinstance(default, bool) else "integer" if isinstance(default, int)
+                else "vector" if isinstance(default, tuple) else "number")
+        spec = Param(self.path, self.unit, self.meaning, self.low, self.high, kind=kind,
+                     length=len(default) if kind == "vector" else None, low_open=self.low_open,
+                     high_open=self.high_open, check=self.check)
+        result = spec.read(value, key, what)
+        return tuple(result) if kind == "vector" else result
 
 
 def parameter(section: str, default: Any, unit: str, meaning: str, low: float = -math.inf, high: float = math.inf,
@@ -299,9 +293,7 @@ def load_tank_params(path: Optional[str] = None, tree: Optional[Mapping[str, Any
 
 
 def _range_text(spec: TankParameter) -> str:
-    if spec.low == -math.inf and spec.high == math.inf:
-        return "any"
-    return "%s%g, %g%s" % ("(" if spec.low_open else "[", spec.low, spec.high, ")" if spec.high_open else "]")
+    return range_text(spec.low, spec.high, spec.low_open, spec.high_open)
 
 
 def parameter_table() -> str:

@@ -158,7 +158,7 @@ def test_gain_set_may_override_timing(tmp_path):
 @pytest.mark.parametrize("mutate, match", [
     (lambda t: t["gain_sets"]["simulation"].pop("k_i"), "gain_sets.simulation.k_i"),
     (lambda t: t["gain_sets"]["simulation"].update(k_x=1.0), "unknown parameter .gain_sets.simulation.k_x."),
-    (lambda t: t.update(gain=1.0), "unknown controller parameter .gain."),
+    (lambda t: t.update(gain=1.0), r"unknown parameter 'gain' \(allowed: "),
     (lambda t: t.pop("gain_sets"), "gain_sets"),
     (lambda t: t.update(pairs=[[1, 2], [1, 4]]), "partition"),
     (lambda t: t.update(normalize_force_direction="no"), "normalize_force_direction"),
