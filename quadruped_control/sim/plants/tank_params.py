@@ -23,7 +23,7 @@ from typing import Any, Callable, Dict, Mapping, Optional, Tuple
 
 import numpy as np
 
-from quadruped_common.config import ParameterError, boolean, check_keys, integer, load_config, number, vector
+from quadruped_common.config import ParameterError, check_keys, load_config
 from quadruped_common.schema import Param, range_text
 
 __all__ = ["SCHEMA", "SECTIONS", "Fit", "TankParameter", "TankParams", "fit_coordinates", "load_tank_params",
