@@ -9,8 +9,8 @@ puts the middle of the range (-140, -40, 90 deg) at the 1500 us neutral pulse:
     pulse_us = neutral_us + direction * us_per_rad * (theta - neutral_angle_rad)          (command)
     theta    = feedback_slope * volts + feedback_offset                                 (feedback)
 
-``us_per_rad`` = 2000 us / pi for a 180 deg, 500..2500 us servo. The feedback map is fitted by
-``python -m quadruped_drivers.calibrate``; until then it is an estimate. Pulse limits are not applied
+``us_per_rad`` = 2000 us / pi for a 180 deg, 500..2500 us servo. Both maps are fitted against the robot's
+reference poses by ``python -m quadruped_control.bringup.calibrate``; until then they are estimates. Pulse limits are not applied
 here: they are per-channel hardware limits enforced by :class:`~quadruped_drivers.pwm_output.ServoPwmOutput`.
 The file lists every joint; each parameter of a joint's entry is declared once, in :data:`CALIBRATION_SCHEMA`.
 """
@@ -106,7 +106,7 @@ def _direction(value: int) -> Optional[str]:
     return "must be 1 or -1" if value == 0 else None
 
 
-#: ``config/servo_calibration.yaml`` (written by ``python -m quadruped_drivers.calibrate``): every joint's
+#: ``config/servo_calibration.yaml`` (written by ``python -m quadruped_control.bringup.calibrate``): every joint's
 #: command and feedback maps, in degrees and microseconds.
 CALIBRATION_SCHEMA = Schema("servo_calibration.yaml", (
     Param("joints.<joint>.neutral_angle_deg", "deg", "joint angle commanded by neutral_us (middle of its "
@@ -163,12 +163,11 @@ _HEADER = """\
 #   range (config/robot.yaml joint_limits_deg) is the servo's full 180 deg, so the middle of the range
 #   (theta1 -140, theta2 -40, theta3 90 deg) sits at 1500 us and the range maps onto 500..2500 us
 #   (us_per_deg = 2000 / 180).
-#   [estimate] neutral_us and direction: the servo horn zero offsets are not in the paper; trim
-#   neutral_us per joint so the leg sits at its mid angle, flip direction if a joint turns the wrong way.
+#   [estimate] neutral_us and direction until calibrated: the servo horn zero offsets are not in the paper.
 # Feedback map: angle_deg = feedback_deg_per_v * volts + feedback_offset_deg
 #   [estimate] unless feedback_fitted is true: assumes the feedback potentiometer reads 0.5 V .. 2.9 V
-#   over the travel. Fit it with:  python -m quadruped_drivers.calibrate  (rewrites this file, keeping
-#   the command maps).
+#   over the travel. Calibrate both against the reference poses (docs/on_the_robot.md):
+#   python -m quadruped_control.bringup.calibrate  (rewrites this file; a servo built wrong is reported).
 """
 
 

@@ -9,7 +9,9 @@ from __future__ import annotations
 import dataclasses
 import os
 import time
-from typing import Callable
+from typing import Callable, Optional
+
+from quadruped_drivers.i2c.bus_lock import lock_bus
 
 #: Failsafes a PWM channel can take when the command watchdog trips.
 FAILSAFES = ("hold", "neutral", "off")
@@ -17,13 +19,23 @@ FAILSAFES = ("hold", "neutral", "off")
 BACKENDS = ("real", "sim")
 
 
-def open_bus(backend: str, bus_number: int, socket_path: str, wait: float = 15.0,
-             sleep: Callable[[float], None] = time.sleep, clock: Callable[[], float] = time.monotonic):
-    """Return a bus object with the adafruit bus-device interface for ``backend``.
+def bus_name(backend: str, bus_number: int, socket_path: str) -> str:
+    """The name of the bus a backend opens, for its lock: ``i2c-7``, or ``sim-<socket file>``."""
+    return "i2c-%d" % bus_number if backend == "real" else "sim-" + os.path.basename(socket_path)
 
-    Raises ``ValueError`` for an unknown backend and ``OSError`` when the bus cannot be opened (for
-    ``sim``: the socket did not appear within ``wait`` seconds).
+
+def open_bus(backend: str, bus_number: int, socket_path: str, role: Optional[str] = None, wait: float = 15.0,
+             sleep: Callable[[float], None] = time.sleep, clock: Callable[[], float] = time.monotonic):
+    """Return a bus object with the adafruit bus-device interface for ``backend``, holding the bus's lock
+    (:mod:`quadruped_drivers.i2c.bus_lock`) for ``role`` (a driver node's; None: a tool, alone).
+
+    Raises ``ValueError`` for an unknown backend, :class:`~quadruped_drivers.i2c.bus_lock.BusBusyError` when
+    another process holds the bus, and ``OSError`` when the bus cannot be opened (for ``sim``: the socket did
+    not appear within ``wait`` seconds).
     """
+    if backend not in BACKENDS:
+        raise ValueError("unknown bus backend %r, expected one of %s" % (backend, ", ".join(BACKENDS)))
+    lock_bus(bus_name(backend, bus_number, socket_path), role)
     if backend == "real":
         from quadruped_drivers.i2c.real_bus import open_i2c_bus
         return open_i2c_bus(bus_number)

@@ -44,7 +44,8 @@ class PwmNode:
         self.hardware = with_failsafe(load_hardware_config(rospy.get_param("~hardware_yaml", "") or None),
                                       rospy.get_param("~failsafe", ""))
         backend = rospy.get_param("~backend", "real")
-        bus = open_bus(backend, self.hardware.i2c_bus, rospy.get_param("~bus_socket", "/tmp/uq_sim_i2c.sock"))
+        bus = open_bus(backend, self.hardware.i2c_bus, rospy.get_param("~bus_socket", "/tmp/uq_sim_i2c.sock"),
+                       role="pwm")
         self.lock = threading.Lock()  # one thread at a time owns the bus (docs/hardware_libraries.md: PCA9685 library)
         period = 1.0 / float(rospy.get_param("~update_rate", 100.0))
         # The command watchdog judges a command's age on the clock its timer runs on: in lock-step a slow

@@ -42,7 +42,8 @@ class ServoFeedbackNode:
         hardware = load_hardware_config(rospy.get_param("~hardware_yaml", "") or None)
         calibration = load_servo_calibration(rospy.get_param("~calibration_yaml", "") or None)
         backend = rospy.get_param("~backend", "real")
-        bus = open_bus(backend, hardware.i2c_bus, rospy.get_param("~bus_socket", "/tmp/uq_sim_i2c.sock"))
+        bus = open_bus(backend, hardware.i2c_bus, rospy.get_param("~bus_socket", "/tmp/uq_sim_i2c.sock"),
+                       role="feedback")
         max_speed = None
         if bool(rospy.get_param("~joint_rate_check", True)):
             max_speed = load_servo_no_load_speed(rospy.get_param("~robot_yaml", "") or None)

@@ -4,7 +4,7 @@
 #   bash scripts/run_tests.sh                  the full tier (what CI runs): Python 3.8 check, lint,
 #                                              pytest, every rostest, lock-step determinism, install space
 #   bash scripts/run_tests.sh --fast [PATH..]  the fast tier, after every edit: the unit tests of common,
-#                                              drivers, model, control and analysis, no compiled kernels
+#                                              drivers, model, control, bring-up, analysis; no kernels
 #                                              (UQ_NO_JIT=1) and no test marked slow; PATHs run instead
 #   bash scripts/run_tests.sh --rostest NAME   one rostest, tests/rostest/NAME.test
 #
@@ -27,7 +27,7 @@ case "${1:-}" in
 esac
 
 #: the fast tier: the robot's pure code, the analysis, and the README's and the layers' checks
-FAST_PATHS=(tests/common tests/drivers tests/control/model tests/control/control tests/control/analysis
+FAST_PATHS=(tests/common tests/drivers tests/control/model tests/control/control tests/control/bringup tests/control/analysis
             tests/test_readme.py tests/test_code_shape.py tests/test_layers.py tests/test_package_manifest.py)
 
 section() { echo "== $* [at $((SECONDS / 60))m$((SECONDS % 60))s] =="; }

@@ -320,6 +320,34 @@ def five_bar_jacobian(theta1: float, theta2: float, geometry: FiveBar) -> np.nda
     return np.array([[j11, j12], [j21, j22]])
 
 
+#: How far (rad) a safe five-bar configuration stays from folding a link onto the next (:func:`five_bar_problem`).
+FIVE_BAR_MARGIN = math.radians(15.0)
+
+
+def five_bar_problem(theta1: float, theta2: float, geometry: FiveBar,
+                     margin: float = FIVE_BAR_MARGIN) -> Optional[str]:
+    """Why the five-bar may not be driven to (theta1, theta2), or None when it may: the passive links close
+    (eq. (fk_EFG)), the elbows stay out (theta4 in [margin, pi - margin], theta5 in [-pi + margin, -margin]: no
+    link crosses its neighbour, the IK's working mode) and the passive links stay ``margin`` from aligned (the
+    type-2 singularity of eq. (J_leg)). The calibration's sweeps and the reference poses keep to it."""
+    try:
+        _, _, phi, theta4, theta5 = five_bar_fk(theta1, theta2, geometry)
+    except UnreachableError as exc:
+        return str(exc)
+    where = "at theta1=%.1f deg, theta2=%.1f deg" % (math.degrees(theta1), math.degrees(theta2))
+    bound = math.degrees(margin)
+    if not margin <= theta4 <= math.pi - margin:
+        return "links a1 and a3 fold or cross (theta4 %.1f deg, safe [%.0f, %.0f]) %s" % (
+            math.degrees(theta4), bound, 180.0 - bound, where)
+    if not -math.pi + margin <= theta5 <= -margin:
+        return "links a2 and a4 fold or cross (theta5 %.1f deg, safe [%.0f, %.0f]) %s" % (
+            math.degrees(theta5), bound - 180.0, -bound, where)
+    psi = theta1 + theta4
+    if abs(math.sin(phi - psi)) < math.sin(margin):
+        return "passive links nearly aligned (singular, %.1f deg) %s" % (math.degrees(wrap_angle(phi - psi)), where)
+    return None
+
+
 # --------------------------------------------------------------------------------------------------
 # Whole leg
 # --------------------------------------------------------------------------------------------------

@@ -32,6 +32,8 @@ Parameters
   ~servo_model (rate-limited | ideal)  ~initial_rpy_deg ([0, 0, 0])  ~restoring_offset ([]: off)
   ~plant (paper | tank: the robot on its rope in the test tank, ~tank_yaml default config/tank.yaml;
     a ~tank_yaml with ~plant paper is refused)
+  ~hardware_faults ("": none; a file or an inline YAML mapping of quadruped_drivers.hardware_faults: a
+    robot built wrong, its faults unknown to the stack's configuration)
   ~physics_rate (100 Hz)  ~bus_socket (/tmp/uq_sim_i2c.sock)  ~imu_port (/tmp/uq_sim_vn100)
   ~imu_pump_period (0.05 s: longest sleep of the fake VN-100's pty pump; it wakes when the next packet
   is due, when the driver writes, or when the simulated clock moves)
@@ -78,6 +80,7 @@ from quadruped_control.sim.simulation import PlantSimulator, SimulationError, lo
 from quadruped_drivers.bus_bridge import BusBridgeServer
 from quadruped_drivers.calibration import load_servo_calibration
 from quadruped_drivers.hardware_config import load_hardware_config
+from quadruped_drivers.hardware_faults import BuiltRobot, load_hardware_faults
 from quadruped_drivers.i2c.fake_devices import build_fake_hardware
 from quadruped_drivers.vn100.fake import FakeVn100, PtyFakeVn100
 from underwater_quadruped.msg import ControllerState, ServoCommand
@@ -97,6 +100,10 @@ class SimNode:
         self.robot = load_robot_params(optional("~robot_yaml"))
         self.hardware = load_hardware_config(optional("~hardware_yaml"))
         self.calibration = load_servo_calibration(optional("~calibration_yaml"))
+        faults = load_hardware_faults(optional("~hardware_faults"))
+        self.built = BuiltRobot(self.calibration, faults)  # the robot as built: its wires and mounts
+        for line in faults.describe():
+            rospy.logwarn("sim_node: hardware fault (unknown to the stack's configuration): %s", line)
         rate = float(rospy.get_param("~physics_rate", 100.0))
         if not rate > 0:
             raise ParameterError("~physics_rate must be positive, got %r" % rate)
@@ -310,12 +317,8 @@ class SimNode:
         (lock-step), else the ROS clock now."""
         with self.lock:
             widths = np.asarray(self.fake.pulse_widths_us(), dtype=float)
-        driven = widths > 0.0
-        if np.any(driven):
-            angles = np.asarray(self.calibration.pulses_to_angles(np.where(driven, widths, 1500.0)))
-            self.commanded = np.where(driven, angles, self.plant.joint_positions.reshape(12))
-        else:
-            self.commanded = self.plant.joint_positions.reshape(12).copy()
+        targets = self.built.joint_targets(widths)  # NaN: that servo gets no pulse and holds where it is
+        self.commanded = np.where(np.isnan(targets), self.plant.joint_positions.reshape(12), targets)
         try:
             state = self.plant.step(self.commanded.reshape(4, 3), self.dt)
         except (SimulationError, ValueError) as exc:
@@ -345,12 +348,12 @@ class SimNode:
     def _write_sensors(self, acceleration_world: np.ndarray) -> None:
         state = self.plant.state
         R = state.rotation
-        volts = self.calibration.angles_to_volts(self.plant.joint_positions.reshape(12))
+        volts = self.built.feedback_volts(self.plant.joint_positions.reshape(12))
         with self.lock:
             self.fake.set_joint_voltages(volts)
         # Specific force in the body frame, what an accelerometer measures (REP-145: +g up when level).
         specific_force = R.T @ (acceleration_world + GRAVITY_UP)
-        self.vn100.set_state(rot_to_quat(R), state.omega, specific_force)
+        self.vn100.set_state(*self.built.imu_output(rot_to_quat(R), state.omega, specific_force))
 
     def _diagnose(self, stat: DiagnosticStatusWrapper) -> DiagnosticStatusWrapper:
         elapsed = time.monotonic() - self.started

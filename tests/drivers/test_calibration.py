@@ -1,5 +1,4 @@
-"""Calibration maps, config loaders and the calibrate CLI end-to-end on the simulated servo rig."""
-import math
+"""Calibration maps and the hardware and calibration loaders (the calibration procedure: tests/control/bringup)."""
 import os
 import tempfile
 
@@ -11,7 +10,6 @@ from hypothesis import given, strategies as st
 from quadruped_common.config import ParameterError, config_path
 from quadruped_common.robot import JOINT_NAMES
 from quadruped_control.model.params import load_robot_params
-from quadruped_drivers import calibrate
 from quadruped_drivers.calibration import (calibration_to_yaml, load_servo_calibration, save_servo_calibration,
                                            servo_calibration_from_dict)
 from quadruped_drivers.hardware_config import hardware_config_from_dict, load_hardware_config
@@ -107,58 +105,6 @@ def test_hardware_config_missing_joint():
     del tree["joints"]["leg4_hip"]
     with pytest.raises(ParameterError, match="joints.leg4_hip"):
         hardware_config_from_dict(tree)
-
-
-def test_fit_feedback_rejects_a_joint_that_does_not_move_or_fits_poorly():
-    angles = np.linspace(-1.0, 1.0, 7)
-    slope, offset, rms, r = calibrate.fit_feedback("j", angles, (angles - 0.2) / 1.3)
-    assert slope == pytest.approx(1.3) and offset == pytest.approx(0.2) and rms < 1e-9 and r > 0.999
-    with pytest.raises(calibrate.CalibrationError, match="does not move"):
-        calibrate.fit_feedback("j", angles, np.full(7, 1.65) + 0.001 * np.arange(7))
-    with pytest.raises(calibrate.CalibrationError, match="poor fit"):
-        calibrate.fit_feedback("j", angles, np.array([0.5, 2.5, 0.7, 2.2, 0.9, 2.9, 1.0]))
-
-
-def test_calibrate_cli_end_to_end_on_the_fake_rig(capsys):
-    directory = tempfile.mkdtemp(prefix="uqcal")
-    out = os.path.join(directory, "cal.yaml")
-    code = calibrate.main(["--fake", "--out", out, "--joints", "leg1_motor1", "leg3_hip", "--points", "5",
-                           "--settle", "0.2", "--seed", "3"])
-    assert code == 0, capsys.readouterr().err
-    result = load_servo_calibration(out)
-    rig = calibrate.SimulatedServoRig(HW, CAL)  # the same known map the CLI's rig uses
-    for index in (0, 8):
-        joint = result.joints[index]
-        assert joint.feedback_fitted
-        assert joint.feedback_slope == pytest.approx(rig.true_slope[index], rel=0.01)
-        assert joint.feedback_offset == pytest.approx(rig.true_offset[index], abs=math.radians(1.0))
-    untouched = result.joints[1]
-    assert not untouched.feedback_fitted and untouched.feedback_slope == CAL.joints[1].feedback_slope
-    q = np.radians([-150.0, -20.0, 60.0] * 4)
-    np.testing.assert_allclose(result.angles_to_pulses(q), CAL.angles_to_pulses(q))  # pulse maps kept
-    os.unlink(out)
-    os.rmdir(directory)
-
-
-def test_calibrate_reports_a_dead_feedback_and_writes_nothing(monkeypatch, capsys):
-    original = calibrate.SimulatedServoRig._feed
-
-    def dead_feed(self):
-        original(self)
-        self.hardware.adcs[2].set_input_voltage(0, 1.0)  # leg1_hip feedback stuck
-
-    monkeypatch.setattr(calibrate.SimulatedServoRig, "_feed", dead_feed)
-    out = os.path.join(tempfile.mkdtemp(prefix="uqcal"), "cal.yaml")
-    code = calibrate.main(["--fake", "--out", out, "--joints", "leg1_hip", "--points", "4", "--settle", "0.1"])
-    assert code == 1 and not os.path.exists(out)
-    assert "does not move" in capsys.readouterr().err
-
-
-def test_calibrate_cli_argument_errors():
-    with pytest.raises(SystemExit):
-        calibrate.main(["--fake", "--joints", "leg9_hip"])
-    with pytest.raises(SystemExit):
-        calibrate.main(["--fake", "--points", "2"])
 
 
 def test_save_is_atomic_and_loadable():

@@ -308,7 +308,7 @@ def test_package_imports_without_blinka():
             "import quadruped_drivers.i2c, quadruped_drivers.i2c.fake_bus, quadruped_drivers.i2c.fake_devices\n"
             "import quadruped_drivers.i2c.real_bus, quadruped_drivers.hardware_config\n"
             "import quadruped_drivers.calibration, quadruped_drivers.servo_feedback\n"
-            "import quadruped_drivers.pwm_output, quadruped_drivers.calibrate\n"
+            "import quadruped_drivers.pwm_output, quadruped_drivers.servo_rig\n"
             "bad = [m for m in sys.modules if m.split('.')[0] in ('busio', 'board', 'adafruit_blinka', "
             "'adafruit_platformdetect', 'adafruit_pca9685', 'adafruit_ads1x15', 'adafruit_tca9548a', "
             "'adafruit_extended_bus', 'rospy')]\n"

@@ -1,0 +1,289 @@
+"""Servo calibration against the reference poses, and the channel check: what finds a servo built wrong.
+
+:meth:`ServoCheck.calibrate` (``python -m quadruped_control.bringup.calibrate``):
+
+1. outputs off, the operator puts the limp legs in the ``open`` then the ``stance`` pose
+   (:mod:`~quadruped_control.bringup.reference`); each joint's feedback map (volts -> angle) is the line
+   through its two readings: fitted against the robot's geometry, not against a command;
+2. outputs on, the legs held at ``stance``; each joint in turn swept symmetrically about it (inside its limits
+   and the five-bar's safe set) while every joint's angle is read through those maps;
+3. from the sweeps: each servo's zero (the pulse that puts it at its neutral angle), direction and gain.
+
+:meth:`ServoCheck.check_channels` is step 2 with the maps of the calibration file (the pre-dive check).
+
+A joint whose feedback does not follow the geometry (stuck, or another servo's), whose sweep moves another
+joint, which moves against its command (mounted reversed), whose zero is more than ``zero_tolerance_deg``
+off (horn off a spline), or which follows only part of its command (blocked, overloaded) is a
+:class:`Finding` naming the joint and the fix; with any finding nothing is written.
+"""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field, replace
+from typing import Callable, Dict, List, Optional, Sequence, Tuple
+
+import numpy as np
+
+from quadruped_common.robot import JOINT_NAMES
+from quadruped_control.bringup.reference import ReferencePose, sweep_half_width
+from quadruped_control.model.params import RobotParams
+from quadruped_drivers.servo_rig import PoseDriver
+from quadruped_drivers.calibration import ServoCalibration
+from quadruped_drivers.pwm_output import ServoPwmOutput
+
+__all__ = ["Finding", "ServoCheck", "ServoCheckResult", "ServoCheckSettings"]
+
+
+@dataclass(frozen=True)
+class ServoCheckSettings:
+    """Tolerances and sweep of the check (degrees unless named otherwise)."""
+
+    sweep_deg: float = 20.0           # largest sweep each side of the stance
+    points: int = 5                   # sweep points per joint
+    settle_s: float = 0.4             # wait at each point before reading
+    samples: int = 5                  # feedback reads averaged per reading
+    min_span_v: float = 0.05          # feedback must change this much between the reference poses
+    slope_tolerance: float = 0.25     # |feedback slope| within this fraction of the servo's
+    zero_tolerance_deg: float = 3.0   # a zero further off is a horn off its spline
+    gain_tolerance: float = 0.2       # the joint follows 1 +- this of its command
+    cross_motion_deg: float = 3.0     # another joint moving more than this during a sweep is wired wrong
+
+
+@dataclass(frozen=True)
+class Finding:
+    """One problem: the ``joints`` it concerns, its ``kind`` (feedback, wiring, reversed, zero, tracking),
+    what was seen and the fix."""
+
+    joints: Tuple[str, ...]
+    kind: str
+    seen: str
+    fix: str
+
+    def __str__(self) -> str:
+        return "%s: %s. Fix: %s" % (", ".join(self.joints), self.seen, self.fix)
+
+
+@dataclass
+class JointSweep:
+    """One joint's sweep: the commanded offsets (rad, in the stack's angles) and every joint's angle read."""
+
+    offsets: np.ndarray
+    angles: np.ndarray  # points x 12, through the feedback maps; NaN where a map is unusable
+
+    def gain_and_zero(self, index: int) -> Tuple[float, float, float]:
+        """Line angle = zero + gain * offset through joint ``index``'s readings: (gain, zero, rms) (rad)."""
+        y = self.angles[:, index]
+        if not np.all(np.isfinite(y)):
+            return math.nan, math.nan, math.nan
+        gain, zero = np.polyfit(self.offsets, y, 1)
+        rms = float(np.sqrt(np.mean((y - (zero + gain * self.offsets)) ** 2)))
+        return float(gain), float(zero), rms
+
+
+@dataclass
+class ServoCheckResult:
+    """Findings, each joint's sweep, and the new calibration (None when anything was found)."""
+
+    findings: List[Finding] = field(default_factory=list)
+    sweeps: Dict[str, JointSweep] = field(default_factory=dict)
+    calibration: Optional[ServoCalibration] = None
+
+    @property
+    def passed(self) -> bool:
+        """No finding."""
+        return not self.findings
+
+    def named(self) -> List[str]:
+        """Every joint some finding names."""
+        return sorted({name for finding in self.findings for name in finding.joints})
+
+
+class ServoCheck:
+    """Runs the procedures of the module docstring through the real driver objects: ``driver`` (pulses,
+    ramps, feedback), ``pwm`` (outputs on and off) and ``place``, the operator putting the limp legs in a pose
+    (a prompt on the robot, the rig's hand in simulation)."""
+
+    def __init__(self, driver: PoseDriver, pwm: ServoPwmOutput, params: RobotParams,
+                 place: Callable[[ReferencePose], None], settings: ServoCheckSettings = ServoCheckSettings(),
+                 log: Callable[[str], None] = print) -> None:
+        self.driver = driver
+        self.pwm = pwm
+        self.params = params
+        self.place = place
+        self.settings = settings
+        self.log = log
+        self.calibration = driver.calibration
+
+    # ---- readings --------------------------------------------------------------------------------
+
+    def read_volts(self, powered: bool) -> np.ndarray:
+        """Every joint's feedback volts, mean of ``samples`` reads (NaN: never read); holds the pose if powered."""
+        rows = []
+        for _ in range(self.settings.samples):
+            rows.append(self.driver.feedback.read().volts)
+            if powered:
+                self.driver.hold(self.driver.current, 0.01)
+            else:
+                self.driver.sleep(0.01)
+        rows_array = np.array(rows, dtype=float)
+        counts = np.sum(np.isfinite(rows_array), axis=0)
+        sums = np.nansum(rows_array, axis=0)
+        return np.where(counts > 0, sums / np.maximum(counts, 1), math.nan)
+
+    def reference_maps(self, poses: Sequence[ReferencePose]) -> Tuple[np.ndarray, np.ndarray, List[Finding]]:
+        """Outputs off, the legs placed in ``poses`` (two) by the operator: each joint's feedback line through
+        its readings, (slope rad/V, offset rad), NaN where unusable, and the findings."""
+        self.pwm.disable()
+        volts, angles = [], []
+        for pose in poses:
+            self.log("place the limp legs: %s (%s)" % (pose.name, pose.instruction))
+            self.place(pose)
+            volts.append(self.read_volts(powered=False))
+            angles.append(pose.joint_angles())
+        (v0, v1), (q0, q1) = volts, angles
+        slope = (q1 - q0) / (v1 - v0)
+        offset = q0 - slope * v0
+        expected = np.array([j.feedback_slope for j in self.calibration.joints])
+        findings = []
+        for i, name in enumerate(JOINT_NAMES):
+            span = abs(v1[i] - v0[i])
+            if not span >= self.settings.min_span_v:
+                findings.append(Finding((name,), "feedback", "its feedback reads %.3f V and %.3f V in the two "
+                                        "reference poses (%.1f deg apart): it does not follow its servo"
+                                        % (v0[i], v1[i], math.degrees(abs(q1[i] - q0[i]))),
+                                        "check the feedback wire to its ADC input (stuck ADC, open wire, or "
+                                        "the wire of a joint that did not move)"))
+                slope[i] = offset[i] = math.nan
+            elif abs(abs(slope[i] / expected[i]) - 1.0) > self.settings.slope_tolerance:
+                findings.append(Finding((name,), "feedback", "its feedback changes %.1f deg/V between the poses, "
+                                        "the servo's is %.1f deg/V" % (math.degrees(slope[i]),
+                                                                      math.degrees(expected[i])),
+                                        "its ADC input reads another joint's servo: check the feedback wiring"))
+                slope[i] = offset[i] = math.nan
+        return slope, offset, findings
+
+    def sweep(self, index: int, stance: ReferencePose, slope: np.ndarray, offset: np.ndarray) -> JointSweep:
+        """Sweep joint ``index`` symmetrically about ``stance`` (others held), reading every joint."""
+        # the narrowest of the three joints' safe sweeps: a channel wired to another joint's servo turns that one
+        half = min(sweep_half_width(self.params, stance.leg_angles, j, math.radians(self.settings.sweep_deg))
+                   for j in range(3))
+        offsets = np.linspace(-half, half, self.settings.points)
+        hold = stance.joint_angles()
+        rows = []
+        for delta in offsets:
+            pose = hold.copy()
+            pose[index] += delta
+            self.driver.move_to(pose)
+            self.driver.hold(pose, self.settings.settle_s)
+            rows.append(slope * self.read_volts(powered=True) + offset)
+        self.driver.move_to(hold)
+        return JointSweep(offsets, np.array(rows))
+
+    # ---- judgement -------------------------------------------------------------------------------
+
+    def judge(self, index: int, sweep: JointSweep, stance: ReferencePose) -> List[Finding]:
+        """The findings of joint ``index``'s sweep (module docstring)."""
+        s = self.settings
+        name = JOINT_NAMES[index]
+        readable = np.all(np.isfinite(sweep.angles), axis=0)
+        filled = np.where(readable, sweep.angles, 0.0)
+        moved = filled.max(axis=0) - filled.min(axis=0)
+        span = float(sweep.offsets[-1] - sweep.offsets[0])
+        others = [k for k in range(len(JOINT_NAMES)) if k != index and moved[k] > math.radians(s.cross_motion_deg)]
+        gain, zero, _ = sweep.gain_and_zero(index)
+        findings = []
+        if others:
+            other_names = tuple(JOINT_NAMES[k] for k in others)
+            findings.append(Finding((name,) + other_names, "wiring", "commanding %s's channel moved %s by %s deg"
+                                    % (name, ", ".join(other_names),
+                                       ", ".join("%.0f" % math.degrees(moved[k]) for k in others)),
+                                    "the PWM cables or the feedback wires of these joints are swapped: jog %s and "
+                                    "watch which servo turns (it is its PWM cable if another one does, "
+                                    "its feedback wire if it does)" % name))
+        if not math.isfinite(gain):
+            return findings  # its feedback map is unusable: said by the reference maps
+        if gain < -(1.0 - s.gain_tolerance):
+            findings.append(Finding((name,), "reversed", "it turns against its command (%.2f deg per commanded "
+                                    "deg)" % gain, "the servo is mounted reversed: turn it round (or, if your "
+                                    "robot mounts it so, set its direction to -1 in servo_calibration.yaml)"))
+        elif abs(gain - 1.0) > s.gain_tolerance and not others:
+            findings.append(Finding((name,), "tracking", "it follows %.2f of its command over a %.0f deg sweep"
+                                    % (gain, math.degrees(span)), "it is blocked, overloaded or unpowered (free "
+                                    "it, check its supply, give it longer: --settle), or its feedback wire is on "
+                                    "another joint's input"))
+        else:
+            error = math.degrees(zero - stance.joint_angles()[index])
+            if abs(error) > s.zero_tolerance_deg:
+                findings.append(Finding((name,), "zero", "at its stance pulse it sits %+.1f deg from the stance "
+                                        "marks" % error, "its horn is off its spline: re-seat it so the joint is "
+                                        "within %.0f deg of the marks at the stance pulse (one spline of a 25-tooth "
+                                        "horn is 14.4 deg), then calibrate again" % s.zero_tolerance_deg))
+        return findings
+
+    # ---- procedures ------------------------------------------------------------------------------
+
+    def calibrate(self, poses: Tuple[ReferencePose, ReferencePose],
+                  indices: Sequence[int] = tuple(range(len(JOINT_NAMES)))) -> ServoCheckResult:
+        """The calibration of the module docstring; ``poses``: (stance, open)."""
+        stance, opened = poses
+        slope, offset, findings = self.reference_maps((opened, stance))
+        result = self._sweeps(stance, slope, offset, indices)
+        result.findings = _merge(findings + result.findings)
+        if result.passed:
+            result.calibration = self._new_calibration(result, stance, slope, offset, indices)
+        return result
+
+    def check_channels(self, stance: ReferencePose,
+                       indices: Sequence[int] = tuple(range(len(JOINT_NAMES)))) -> ServoCheckResult:
+        """Each channel moves its own joint, only it, the right way, by its command: the sweeps read through
+        the calibration file's feedback maps. The legs start limp at ``stance`` (the operator's)."""
+        self.pwm.disable()
+        self.place(stance)
+        slope = np.array([j.feedback_slope for j in self.calibration.joints])
+        offset = np.array([j.feedback_offset for j in self.calibration.joints])
+        result = self._sweeps(stance, slope, offset, indices)
+        result.findings = _merge(result.findings)
+        return result
+
+    def _sweeps(self, stance: ReferencePose, slope: np.ndarray, offset: np.ndarray,
+                indices: Sequence[int]) -> ServoCheckResult:
+        result = ServoCheckResult()
+        self.pwm.enable()
+        self.driver.current = stance.joint_angles()
+        self.driver.hold(self.driver.current, self.settings.settle_s)
+        for index in indices:
+            sweep = self.sweep(index, stance, slope, offset)
+            result.sweeps[JOINT_NAMES[index]] = sweep
+            result.findings.extend(self.judge(index, sweep, stance))
+        return result
+
+    def _new_calibration(self, result: ServoCheckResult, stance: ReferencePose, slope: np.ndarray,
+                         offset: np.ndarray, indices: Sequence[int]) -> ServoCalibration:
+        """The file's maps with each swept joint's feedback line, zero and gain from the sweeps."""
+        joints = list(self.calibration.joints)
+        for index in indices:
+            joint = joints[index]
+            gain, zero, rms = result.sweeps[JOINT_NAMES[index]].gain_and_zero(index)
+            # the stance pulse puts the joint at `zero`; the joint turns `gain` per commanded radian
+            stance_angle = stance.joint_angles()[index]
+            stance_us = joint.neutral_us + joint.direction * joint.us_per_rad * (stance_angle - joint.neutral_angle_rad)
+            us_per_rad = joint.us_per_rad / gain
+            neutral_us = stance_us + joint.direction * us_per_rad * (joint.neutral_angle_rad - zero)
+            joints[index] = replace(joint, neutral_us=float(neutral_us), us_per_rad=float(us_per_rad),
+                                    feedback_slope=float(slope[index]), feedback_offset=float(offset[index]),
+                                    feedback_fitted=True, feedback_rms_rad=float(rms))
+        return ServoCalibration(joints)
+
+
+def _merge(findings: List[Finding]) -> List[Finding]:
+    """One finding per wiring fault: the sweep of each of two swapped joints reports the other."""
+    out: List[Finding] = []
+    pairs = set()
+    for finding in findings:
+        if finding.kind == "wiring":
+            key = frozenset(finding.joints)
+            if key in pairs:
+                continue
+            pairs.add(key)
+        out.append(finding)
+    return out
