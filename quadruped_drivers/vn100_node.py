@@ -8,10 +8,12 @@ Publishes
   diagnostics   rate, CRC errors, resync bytes, disconnects, last serial error, samples dropped as
                 implausible (per reason), sensor time anomalies, reader errors
 Parameters
-  ~port (/dev/vn100, the udev rule's link)  ~baud (921600)  ~rate (200 Hz; 800 must be divisible by it)
-  ~frame_id (imu_link)  ~orientation_covariance_diagonal ~angular_velocity_covariance_diagonal
-  ~linear_acceleration_covariance_diagonal  ~read_timeout ~reconnect_interval ~command_timeout
-  ~stale_timeout (s)  ~max_angular_rate (rad/s)  ~max_acceleration (m/s^2)  ~quaternion_norm_tolerance
+  ~port (/dev/vn100, the udev rule's link)  ~baud (921600: the sensor is looked for at the other standard
+  rates too and switched to it)  ~save_baud (false: never write the sensor's flash)  ~rate (200 Hz; 800
+  must be divisible by it)  ~frame_id (imu_link)  ~orientation_covariance_diagonal
+  ~angular_velocity_covariance_diagonal  ~linear_acceleration_covariance_diagonal  ~read_timeout
+  ~probe_timeout ~reconnect_initial_delay ~reconnect_max_delay ~command_timeout ~stale_timeout (s)
+  ~max_angular_rate (rad/s)  ~max_acceleration (m/s^2)  ~quaternion_norm_tolerance
   ~config_yaml (package config/vn100.yaml supplies the defaults of all of the above)
 
 The node reads in its own thread (the serial read blocks for at most the port timeout); framing, CRC,
@@ -68,11 +70,15 @@ class Vn100Node:
             key: _diagonal(param(key + "_covariance_diagonal"))
             for key in ("orientation", "angular_velocity", "linear_acceleration")}
         self.driver = Vn100Driver(serial_port_factory(self.port, self.baud, float(param("read_timeout"))),
-                                  rate_hz=self.rate_hz,
-                                  reconnect_interval=float(param("reconnect_interval")),
+                                  rate_hz=self.rate_hz, baud=self.baud, save_baud=bool(param("save_baud")),
+                                  probe_timeout=float(param("probe_timeout")),
+                                  reconnect_initial_delay=float(param("reconnect_initial_delay")),
+                                  reconnect_max_delay=float(param("reconnect_max_delay")),
                                   command_timeout=float(param("command_timeout")),
                                   stale_timeout=float(param("stale_timeout")),
-                                  link_clock=stack_clock())  # silence on simulated time in lock-step
+                                  link_clock=stack_clock(),  # silence on simulated time in lock-step
+                                  port_name=self.port,
+                                  log=lambda line: rospy.logwarn("vn100_node: %s", line))
         self.gate = SampleGate(sensor_limits(settings), max_backdate=float(param("stale_timeout")))
         self.publisher = rospy.Publisher("imu/data", Imu, queue_size=10, tcp_nodelay=True)
         self.monitor = RateMonitor(2.0)
@@ -83,6 +89,7 @@ class Vn100Node:
         self.last_stamp: Optional[rospy.Time] = None
         self.logged_connects = 0
         self.logged_disconnects = 0
+        self.logged_failures = 0
         self.diagnostics = Updater()
         # The hardware ID is the sensor's serial number (register 3), set once the sensor has answered
         # (diagnostic_updater's convention: "wait until the device is open before calling setHardwareID").
@@ -126,14 +133,19 @@ class Vn100Node:
             rospy.logwarn_throttle(1.0, "vn100_node: sample dropped: %s" % self.gate.last_drop)
 
     def _log_link_changes(self) -> None:
-        """One log line per connection and per loss of the link (the diagnostics count them)."""
+        """One log line per connection and per loss of the link (the diagnostics count them); failed
+        attempts to connect (sensor absent, not found at any rate) at most every 10 s."""
         connects, disconnects = self.driver.connects, self.driver.disconnects
+        failures = self.driver.connect_failures
         if connects != self.logged_connects:
             rospy.loginfo("vn100_node: sensor configured on %s (connection %d)", self.port, connects)
         if disconnects != self.logged_disconnects:
-            rospy.logwarn("vn100_node: link lost (%s); reconnecting every %.3g s",
-                          self.driver.last_error, self.driver.reconnect_interval)
+            rospy.logwarn("vn100_node: link lost (%s); reconnecting at once, then backing off up to %.3g s",
+                          self.driver.last_error, self.driver.reconnect_max_delay)
+        if failures != self.logged_failures and not self.driver.connected:
+            rospy.logerr_throttle(10.0, "vn100_node: %s" % self.driver.last_error)
         self.logged_connects, self.logged_disconnects = connects, disconnects
+        self.logged_failures = failures
 
     def _publish(self, reading, stamp: rospy.Time) -> None:
         # Dating a burst back can land before the previous sample when the transport delay varied:

@@ -1,11 +1,19 @@
 """A byte-level fake VN-100 for tests and simulation, an in-memory serial port and a pty bridge.
 
 :class:`FakeVn100` speaks the subset of the VN-100 serial protocol the driver uses (UM001 Sec. 3.8,
-3.9, 4.2-4.4): ASCII commands ``$VNRRG``, ``$VNWRG`` (registers 1, 3, 5, 6, 7, 75-77), ``$VNASY``, with
-checksum verification (8-bit XOR, 16-bit CRC, or the ``XX`` bypass) and ``$VNERR`` replies; and the
-binary output message of register 75 at 800 Hz / RateDivisor. Like a factory-fresh sensor it starts
-with ASCII asynchronous output on (``$VNYMR`` at 40 Hz) and binary output off, and it returns to
-that state after a power cycle, so the driver's configuration handshake is exercised every time.
+3.9, 4.2-4.4): ASCII commands ``$VNRRG``, ``$VNWRG`` (registers 1, 3, 5, 6, 7, 75-77), ``$VNASY``,
+``$VNWNV``, with checksum verification (8-bit XOR, 16-bit CRC, or the ``XX`` bypass) and ``$VNERR``
+replies; and the binary output message of register 75 at 800 Hz / RateDivisor. Like a factory-fresh
+sensor it starts with ASCII asynchronous output on (``$VNYMR`` at 40 Hz) and binary output off, and it
+returns to the settings in its flash (factory ones unless ``$VNWNV`` wrote others) after a power cycle,
+so the driver's configuration handshake is exercised every time.
+
+Baud rate: the fake talks at one rate (register 5; power-up: the rate in its flash, ``baud=`` of the
+constructor, factory 115200). The host passes the rate its port is set to with every read and write;
+bytes only pass intact when both agree, otherwise each side sees noise (never a ``$`` or a line end,
+so no command or reply can form), as two UARTs at different rates do. ``$VNWRG,05`` is answered at the
+old rate, then the fake switches. A host that passes no rate (``baud=None``) is not modelled: its bytes
+always pass.
 
 The simulator feeds it ROS-frame truth with :meth:`FakeVn100.set_state` (ENU world, FLU body,
 REP-145 specific force); :func:`~quadruped_drivers.vn100.conversions.ros_to_vn` turns that into the
@@ -17,6 +25,7 @@ serial device path through pyserial (simulated robot).
 """
 from __future__ import annotations
 
+import collections
 import errno
 import math
 import os
@@ -25,7 +34,7 @@ import threading
 import time
 import tty
 from dataclasses import dataclass
-from typing import Callable, List, Optional, Sequence, Tuple, Union
+from typing import Any, Callable, Deque, Dict, List, Optional, Sequence, Tuple, Union
 
 import numpy as np
 
@@ -33,11 +42,34 @@ from quadruped_common.so3 import exp_so3, quat_multiply, rot_to_quat
 from quadruped_drivers.vn100 import protocol as vp
 from quadruped_drivers.vn100.conversions import ros_to_vn
 
+try:  # Linux only: the pty's configured speed (the pty bridge works without it, unmodelled)
+    import array
+    import fcntl
+    import termios
+except ImportError:  # pragma: no cover - not Linux
+    fcntl = None  # type: ignore[assignment]
+
 GRAVITY = 9.80665
 DEFAULT_MODEL = "VN-100T-CR"
 DEFAULT_SERIAL_NUMBER = "0100012345"
 _DEFAULT_ASCII_RATE_HZ = 40
 _ADOR_YMR = 14  # Async Data Output Type "VNYMR" (factory default)
+
+#: What a byte sent at one baud rate looks like to a UART listening at another: noise. Never a printable
+#: character or a line end (no '$', no '\n': no command or reply can form from it), now and then 0xFA (a
+#: false binary sync byte, which the parser must reject by its CRC).
+_GARBLE = bytes(0x80 | ((b * 37 + 0x5B) & 0x7F) for b in range(256))
+
+
+def garble(data: bytes) -> bytes:
+    """``data`` as received by a UART set to another baud rate than the sender's (one byte per byte)."""
+    return bytes(data).translate(_GARBLE)
+
+
+def _factory_settings() -> Dict[str, Any]:
+    """The settings of a factory-fresh VN-100 (its flash before any ``$VNWNV``)."""
+    return {"baud": vp.FACTORY_BAUD, "ascii_output_type": _ADOR_YMR, "ascii_rate_hz": _DEFAULT_ASCII_RATE_HZ,
+            "binary_config": {register: (0, 0, {1: vp.DEFAULT_GROUP1_FIELDS}) for register in (75, 76, 77)}}
 
 
 class ManualClock:
@@ -83,11 +115,13 @@ class FakeVn100:
                  noise_std: Union[NoiseModel, float] = 0.0,
                  corrupt_probability: float = 0.0, drop_probability: float = 0.0,
                  rng: Union[np.random.Generator, int, None] = 0,
-                 boot_time: float = 0.0) -> None:
+                 boot_time: float = 0.0, baud: int = vp.FACTORY_BAUD) -> None:
         for name, p in (("corrupt_probability", corrupt_probability),
                         ("drop_probability", drop_probability)):
             if not 0.0 <= p <= 1.0:
                 raise ValueError("%s must be in [0, 1], got %r" % (name, p))
+        if baud not in vp.BAUD_RATES:
+            raise ValueError("baud must be one of %s, got %r" % (vp.BAUD_RATES, baud))
         self.model = model
         self.serial_number = serial_number
         self.noise = noise_std if isinstance(noise_std, NoiseModel) else \
@@ -96,10 +130,17 @@ class FakeVn100:
         self.drop_probability = drop_probability
         self.rng = rng if isinstance(rng, np.random.Generator) else np.random.default_rng(rng)
         self._lock = threading.RLock()
-        self._out = bytearray()
+        # Output not yet read by the host, as (baud rate it was sent at, bytes) runs, oldest first.
+        self._out: Deque[Tuple[int, bytearray]] = collections.deque()
+        self._out_len = 0
         self._in = bytearray()
         self.connected = True
+        self.silent = False  # link interrupted: no bytes either way, the port stays open
         self.commands: List[bytes] = []  # every command line received (for tests / diagnostics)
+        self.flash_writes = 0
+        self.baud_switches = 0
+        # Non-volatile settings ($VNWNV writes them; a power cycle reads them back).
+        self.flash: Dict[str, Any] = dict(_factory_settings(), baud=int(baud))
         self.packets_sent = 0
         self.packets_dropped = 0
         self.packets_corrupted = 0
@@ -115,14 +156,20 @@ class FakeVn100:
     def _power_on(self, now: float) -> None:
         self.boot_time = float(now)
         self.async_paused = False
-        self.ascii_output_type = _ADOR_YMR
-        self.ascii_rate_hz = _DEFAULT_ASCII_RATE_HZ
-        self.baud = 115200
-        self.binary_config = {75: (0, 0, {1: vp.DEFAULT_GROUP1_FIELDS}),
-                              76: (0, 0, {1: vp.DEFAULT_GROUP1_FIELDS}),
-                              77: (0, 0, {1: vp.DEFAULT_GROUP1_FIELDS})}
+        self.ascii_output_type = int(self.flash["ascii_output_type"])
+        self.ascii_rate_hz = int(self.flash["ascii_rate_hz"])
+        self.baud = int(self.flash["baud"])
+        self.binary_config = dict(self.flash["binary_config"])
         self._next_tick = 0  # next 800 Hz IMU tick index to consider for output
         self._in = bytearray()
+
+    def _settings(self) -> Dict[str, Any]:
+        return {"baud": self.baud, "ascii_output_type": self.ascii_output_type,
+                "ascii_rate_hz": self.ascii_rate_hz, "binary_config": dict(self.binary_config)}
+
+    def _clear_output(self) -> None:
+        self._out.clear()
+        self._out_len = 0
 
     def set_state(self, orientation_xyzw_ros: Sequence[float],
                   angular_velocity_ros: Sequence[float],
@@ -133,17 +180,31 @@ class FakeVn100:
             self._q_vn, self._rate_vn, self._accel_vn = q, w, a
 
     def power_cycle(self, now: Optional[float] = None) -> None:
-        """Reset to factory output settings (ASCII async on, binary off), clearing queues."""
+        """Reset to the settings in flash (factory: ASCII async on, binary off, 115200 baud), clearing
+        queues."""
         with self._lock:
-            self._out = bytearray()
-            self._power_on(self._now if now is None else now)
+            self._clear_output()
+            if now is None:
+                now = self._now if self._now is not None else self.boot_time
+            self._power_on(now)
 
     def disconnect(self) -> None:
         """Unplug: host reads and writes raise ``OSError`` until :meth:`reconnect`."""
         with self._lock:
             self.connected = False
-            self._out = bytearray()
+            self._clear_output()
             self._in = bytearray()
+
+    def set_silent(self, silent: bool) -> None:
+        """Interrupt (True) or restore (False) the link without unplugging: while silent no byte passes
+        either way (host writes are lost, reads find nothing, the output due meanwhile is gone) but the
+        port stays open and keeps its configuration, as with a loose wire or a stalled adapter. (Behind
+        a pty, :meth:`disconnect` looks the same to the host: the bridge swallows the errors.)"""
+        with self._lock:
+            self.silent = bool(silent)
+            if self.silent:
+                self._clear_output()
+                self._in = bytearray()
 
     def reconnect(self, power_cycle: bool = True) -> None:
         """Plug back in; by default the sensor has lost power and forgotten its configuration."""
@@ -161,28 +222,44 @@ class FakeVn100:
     def in_waiting(self) -> int:
         with self._lock:
             self._check_connected()
-            return len(self._out)
+            return 0 if self.silent else self._out_len
 
-    def read(self, n: int) -> bytes:
-        """Up to ``n`` queued output bytes (never blocks)."""
+    def read(self, n: int, baud: Optional[int] = None) -> bytes:
+        """Up to ``n`` queued output bytes (never blocks), as a host port set to ``baud`` receives them:
+        intact if they were sent at that rate, noise otherwise (``None``: always intact)."""
         with self._lock:
             self._check_connected()
-            data = bytes(self._out[:max(0, n)])
-            del self._out[:len(data)]
-            return data
+            if self.silent:
+                return b""
+            data = bytearray()
+            while self._out and len(data) < n:
+                sent_at, run = self._out[0]
+                part = bytes(run[:n - len(data)])
+                del run[:len(part)]
+                if not run:
+                    self._out.popleft()
+                data += part if baud is None or baud == sent_at else garble(part)
+            self._out_len -= len(data)
+            return bytes(data)
 
-    def write(self, data: bytes) -> int:
-        """Receive host bytes; complete command lines are answered immediately."""
+    def write(self, data: bytes, baud: Optional[int] = None) -> int:
+        """Receive host bytes sent at ``baud`` (``None``: at the fake's rate, whatever it is); complete
+        command lines are answered immediately. Bytes at another rate arrive as noise."""
         with self._lock:
             self._check_connected()
-            self._in += data
+            if self.silent:
+                return len(data)
+            self._in += data if baud is None or baud == self.baud else garble(data)
             while True:
                 end = self._in.find(b"\n")
                 if end < 0:
                     break
                 line = bytes(self._in[:end + 1])
                 del self._in[:end + 1]
+                rate = self.baud
                 self._handle_line(line)
+                if self.baud != rate:  # switched: the rest was sent at the old rate
+                    self._in = bytearray(garble(self._in))
             if len(self._in) > 256:  # UM001 Sec. 3.8: 256 character input buffer
                 self._in = bytearray()
                 self._reply("VNERR,02")
@@ -192,8 +269,13 @@ class FakeVn100:
         self._emit(vp.ascii_command(body))
 
     def _emit(self, data: bytes) -> None:
-        if len(self._out) + len(data) <= self.OUTPUT_LIMIT:
-            self._out += data
+        if self._out_len + len(data) > self.OUTPUT_LIMIT:
+            return
+        if self._out and self._out[-1][0] == self.baud:
+            self._out[-1][1].extend(data)
+        else:
+            self._out.append((self.baud, bytearray(data)))
+        self._out_len += len(data)
 
     def _handle_line(self, raw: bytes) -> None:
         text = raw.strip(b"\r\n")
@@ -232,6 +314,13 @@ class FakeVn100:
             self._read_register(args)
         elif command == "VNWRG":
             self._write_register(args)
+        elif command == "VNWNV":
+            if args:
+                self._reply("VNERR,06")
+                return
+            self.flash = self._settings()
+            self.flash_writes += 1
+            self._reply("VNWNV")
         else:
             self._reply("VNERR,04")
 
@@ -286,10 +375,13 @@ class FakeVn100:
                 return
             if register == 5:
                 baud = int(values[0])
-                if baud not in (9600, 19200, 38400, 57600, 115200, 128000, 230400, 460800,
-                                921600):
+                if baud not in vp.BAUD_RATES or len(values) > 1:
                     raise ValueError(baud)
-                self.baud = baud  # the pty / in-memory link has no real baud rate
+                self._reply("VNWRG,%02d,%d" % (register, baud))  # still at the old rate
+                if baud != self.baud:
+                    self.baud = baud
+                    self.baud_switches += 1
+                return
             elif register == 6:
                 self.ascii_output_type = int(values[0])
                 if not 0 <= self.ascii_output_type <= 30:
@@ -325,7 +417,7 @@ class FakeVn100:
             tick_now = int(math.floor((now - self.boot_time) * vp.IMU_RATE_HZ + 1e-9))
             if tick_now < 0:
                 return
-            if not self.connected:
+            if not self.connected or self.silent:
                 self._next_tick = tick_now + 1  # unplugged: that output is gone, not sent on replug
                 return
             first = max(self._next_tick, tick_now - int(vp.IMU_RATE_HZ) + 1)
@@ -346,7 +438,7 @@ class FakeVn100:
         """Device time of the next output (binary packet or ASCII line) :meth:`advance` would queue,
         or ``None`` when nothing is due (unplugged, output paused or off). A pump sleeps until then."""
         with self._lock:
-            if not self.connected or self.async_paused:
+            if not self.connected or self.silent or self.async_paused:
                 return None
             mode, divisor, _selection = self.binary_config[75]
             divisors = [divisor] if mode in (1, 3) and divisor > 0 else []
@@ -398,30 +490,39 @@ class FakeVn100:
 
 class InMemoryPort:
     """pyserial-like port onto a :class:`FakeVn100` (``read``, ``write``, ``in_waiting``,
-    ``reset_input_buffer``, ``close``, ``is_open``, ``timeout``).
+    ``reset_input_buffer``, ``close``, ``is_open``, ``timeout``, ``baudrate``).
 
     Each I/O call first lets the device catch up to ``clock()``. A read that finds fewer bytes than
     asked "blocks" for ``timeout`` by calling ``sleep`` (with a :class:`ManualClock` this advances
-    simulated time; with ``sleep=None`` reads never block).
+    simulated time; with ``sleep=None`` reads never block). ``baud``: the rate the port is set to; bytes
+    only pass intact while the device talks at the same rate (``None``: always, rate not modelled).
     """
 
     def __init__(self, device: FakeVn100, clock: Callable[[], float] = time.monotonic,
-                 sleep: Optional[Callable[[float], None]] = None, timeout: float = 0.01) -> None:
+                 sleep: Optional[Callable[[float], None]] = None, timeout: float = 0.01,
+                 baud: Optional[int] = None) -> None:
         device._check_connected()
         self.device = device
         self.clock = clock
         self.sleep = sleep
         self.timeout = timeout
+        self.baudrate = baud
         self.is_open = True
         self.bytes_written = bytearray()
 
     @classmethod
     def factory(cls, device: FakeVn100, clock: Callable[[], float] = time.monotonic,
                 sleep: Optional[Callable[[float], None]] = None,
-                timeout: float = 0.01) -> Callable[[], "InMemoryPort"]:
-        """A port factory for :class:`~quadruped_drivers.vn100.driver.Vn100Driver`; opening fails
-        with ``OSError`` while the device is unplugged, like a missing ``/dev`` node."""
-        return lambda: cls(device, clock=clock, sleep=sleep, timeout=timeout)
+                timeout: float = 0.01, baud: Optional[int] = None) -> Callable[..., "InMemoryPort"]:
+        """A port factory for :class:`~quadruped_drivers.vn100.driver.Vn100Driver`: ``factory()``
+        opens at ``baud``, ``factory(rate)`` at ``rate`` (as :func:`~quadruped_drivers.vn100.driver.
+        serial_port_factory`'s). Opening fails with ``OSError`` while the device is unplugged, like a
+        missing ``/dev`` node."""
+        def open_port(rate: Optional[int] = None) -> "InMemoryPort":
+            return cls(device, clock=clock, sleep=sleep, timeout=timeout,
+                       baud=baud if rate is None else rate)
+
+        return open_port
 
     def _check_open(self) -> None:
         if not self.is_open:
@@ -436,26 +537,36 @@ class InMemoryPort:
     def read(self, size: int = 1) -> bytes:
         self._check_open()
         self.device.advance(self.clock())
-        data = self.device.read(size)
+        data = self.device.read(size, self.baudrate)
         if len(data) < size and self.sleep is not None and self.timeout:
             self.sleep(self.timeout)
             self.device.advance(self.clock())
-            data += self.device.read(size - len(data))
+            data += self.device.read(size - len(data), self.baudrate)
         return data
 
     def write(self, data: bytes) -> int:
         self._check_open()
         self.device.advance(self.clock())
         self.bytes_written += data
-        return self.device.write(bytes(data))
+        return self.device.write(bytes(data), self.baudrate)
 
     def reset_input_buffer(self) -> None:
         self._check_open()
         self.device.advance(self.clock())
-        self.device.read(1 << 30)
+        self.device.read(1 << 30, self.baudrate)
 
     def close(self) -> None:
         self.is_open = False
+
+
+_TCGETS2 = 0x802C542A  # _IOR('T', 0x2A, struct termios2), asm-generic (x86, ARM); else tcgetattr below
+#: termios speed constant -> baud, for the fallback without TCGETS2.
+_TERMIOS_SPEEDS: Dict[int, int] = {}
+if fcntl is not None:
+    for _rate in vp.BAUD_RATES:
+        _code = getattr(termios, "B%d" % _rate, None)
+        if _code is not None:
+            _TERMIOS_SPEEDS[_code] = _rate
 
 
 class PtyFakeVn100:
@@ -470,6 +581,11 @@ class PtyFakeVn100:
     With ``realtime=False`` (``clock`` is a simulated clock that only the owner advances) it sleeps
     until :meth:`wake` or host bytes, ``period`` at most. ``stop()`` ends the thread and removes the pty
     and the symlink.
+
+    Baud rate: the kernel does not clock a pty's bytes at its termios speed, so the bridge models it: it
+    reads the speed the host (pyserial) set on the pty (:meth:`host_baud`) and passes it with every
+    byte to and from the fake, which garbles the bytes unless it talks at that speed. A driver opening
+    the pty at another rate than the fake's sees noise, as on a real serial line.
     """
 
     PENDING_LIMIT = 1 << 16
@@ -528,6 +644,25 @@ class PtyFakeVn100:
             except (BlockingIOError, OSError):
                 pass  # already woken (pipe full) or stopped
 
+    def host_baud(self) -> Optional[int]:
+        """The speed the host's side of the pty is set to (the rate pyserial opened it at), ``None`` if
+        unknown (then bytes pass unmodelled). Read on the bridge's own slave descriptor: termios is the
+        pty's, shared by every descriptor open on it."""
+        fd = self._slave
+        if fd is None or fcntl is None:
+            return None
+        try:  # struct termios2 (Linux): c_ospeed holds the speed in baud, standard or not (BOTHER)
+            buf = array.array("i", [0] * 64)
+            fcntl.ioctl(fd, _TCGETS2, buf)
+            if buf[10] > 0:
+                return int(buf[10])
+        except (OSError, ValueError):
+            pass
+        try:
+            return _TERMIOS_SPEEDS.get(termios.tcgetattr(fd)[5])
+        except (termios.error, OSError, ValueError):
+            return None
+
     def _sleep_time(self, pending: bool) -> float:
         if pending:
             return min(self.period, 0.001)  # the pty buffer was full: retry soon
@@ -546,7 +681,7 @@ class PtyFakeVn100:
             while not self._stop.is_set():
                 self.device.advance(self.clock())
                 try:
-                    pending += self.device.read(self.PENDING_LIMIT)
+                    pending += self.device.read(self.PENDING_LIMIT, self.host_baud())
                 except OSError:
                     pending = bytearray()  # unplugged: nothing leaves the device
                 if len(pending) > self.PENDING_LIMIT:
@@ -570,7 +705,7 @@ class PtyFakeVn100:
                         data = b""
                     if data:
                         try:
-                            self.device.write(data)
+                            self.device.write(data, self.host_baud())
                         except OSError:
                             pass  # unplugged: the bytes are lost
         except BaseException as exc:  # surfaced to the owner via .error

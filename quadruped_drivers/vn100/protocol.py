@@ -515,8 +515,14 @@ def write_register_command(register: int, values: Sequence[str]) -> bytes:
 
 MODEL_REGISTER = 1
 SERIAL_NUMBER_REGISTER = 3
+BAUD_RATE_REGISTER = 5
 ASYNC_OUTPUT_TYPE_REGISTER = 6
 BINARY_OUTPUT_REGISTERS = (75, 76, 77)
+
+#: Baud rates of the VN-100's serial port (UM001, Serial Baud Rate register 5).
+BAUD_RATES = (9600, 19200, 38400, 57600, 115200, 128000, 230400, 460800, 921600)
+#: The rate a factory-fresh VN-100 talks at (UM001, register 5 default).
+FACTORY_BAUD = 115200
 
 
 def read_model_command() -> bytes:
@@ -527,6 +533,20 @@ def read_model_command() -> bytes:
 def read_serial_number_command() -> bytes:
     """``$VNRRG,03``: serial number register (a 32-bit number, e.g. ``0100012345``)."""
     return read_register_command(SERIAL_NUMBER_REGISTER)
+
+
+def write_baud_rate_command(baud: int) -> bytes:
+    """``$VNWRG,05,<baud>``: switch the port the command arrives on to ``baud`` (UM001, register 5). The
+    sensor answers at the old rate, then changes; the new rate is lost at power-off unless written to flash
+    (:func:`write_settings_command`)."""
+    if baud not in BAUD_RATES:
+        raise ProtocolError("not a VN-100 baud rate: %r (%s)" % (baud, ", ".join(str(b) for b in BAUD_RATES)))
+    return write_register_command(BAUD_RATE_REGISTER, [str(int(baud))])
+
+
+def write_settings_command() -> bytes:
+    """``$VNWNV``: write the current register settings to the sensor's flash (they survive a power cycle)."""
+    return ascii_command("VNWNV")
 
 
 def disable_ascii_output_command() -> bytes:

@@ -10,9 +10,11 @@ fall back to a default).
 Bounds and their sources:
 
 * ``baud``: the rates the VN-100 supports (UM001, Serial Baud Rate register 5);
+* ``save_baud``: false unless asked: writing the sensor's flash is a deliberate act (``$VNWNV``);
 * ``rate_hz``: 800 Hz / an integer divisor (UM001, binary output register 75);
 * timeouts and intervals: positive and at most a few seconds (a NaN or infinite timeout blocks reads
-  or disables stale detection);
+  or disables stale detection); the reconnection back-off starts no later than it ends
+  (``reconnect_initial_delay`` <= ``reconnect_max_delay``);
 * ``max_angular_rate``, ``max_acceleration``: the sensor's range (datasheet: +-2000 deg/s, +-16 g)
   with a margin, so at most 2x the range;
 * ``quaternion_norm_tolerance``: (0, 0.1];
@@ -24,16 +26,16 @@ from __future__ import annotations
 import math
 from typing import Any, Callable, Dict, Mapping, Optional
 
-from quadruped_common.config import check_keys, load_config
+from quadruped_common.config import ParameterError, check_keys, load_config
 from quadruped_common.imu_plausibility import SensorLimits
 from quadruped_common.schema import Param, Schema
-from quadruped_drivers.vn100.protocol import rate_divisor_for
+from quadruped_drivers.vn100.protocol import BAUD_RATES, rate_divisor_for
 
 __all__ = ["SUPPORTED_BAUDS", "VN100_KEYS", "VN100_SCHEMA", "load_vn100_settings", "sensor_limits",
            "vn100_settings_from_dict"]
 
 #: Baud rates of the VN-100's serial port (UM001, register 5).
-SUPPORTED_BAUDS = (9600, 19200, 38400, 57600, 115200, 128000, 230400, 460800, 921600)
+SUPPORTED_BAUDS = BAUD_RATES
 
 
 def _rate_problem(rate: float) -> Optional[str]:
@@ -80,15 +82,23 @@ def _covariance(key: str, unit: str, meaning: str) -> Param:
 VN100_SCHEMA = Schema("vn100.yaml", (
     Param("port", "", "serial device (/dev/vn100 from the udev rule; the fake sensor's pty in simulation)",
           kind="string"),
-    Param("baud", "baud", "the sensor's stored baud rate (register 5; the driver does not change it): one of "
-          + ", ".join(str(b) for b in SUPPORTED_BAUDS), SUPPORTED_BAUDS[0], SUPPORTED_BAUDS[-1], kind="integer",
-          check=_baud_problem),
+    Param("baud", "baud", "the rate the driver talks to the sensor at; a sensor answering at another standard "
+          "rate is switched to it (register 5) at connect: one of " + ", ".join(str(b) for b in SUPPORTED_BAUDS),
+          SUPPORTED_BAUDS[0], SUPPORTED_BAUDS[-1], kind="integer", check=_baud_problem),
+    Param("save_baud", "", "after switching the sensor to `baud`, write its settings to flash ($VNWNV) so that it "
+          "keeps the rate over a power cycle; false: the sensor's flash is never written", kind="boolean",
+          source="choice"),
+    _positive("probe_timeout", "s", "wait for the answer to the identification read ($VNRRG,01) at each baud rate "
+              "tried, plus 2000 bit times of that rate; 3 tries at `baud`, 1 at each other rate", 1.0),
     Param("rate_hz", "Hz", "binary output rate: 800 Hz / an integer divisor (800, 400, 200, 160, 100, ...)", 0.0,
           800.0, low_open=True, source="choice", check=_rate_problem),
     Param("frame_id", "", "frame of the published sensor_msgs/Imu", kind="string"),
     _positive("command_timeout", "s", "wait for each ASCII reply ($VNRRG/$VNWRG); each command is tried 3 times",
               10.0),
-    _positive("reconnect_interval", "s", "between reconnection attempts after a serial error", 60.0),
+    _positive("reconnect_initial_delay", "s", "link lost: the first reconnection attempt is immediate, the second "
+              "follows after this delay, which doubles after each failed attempt", 60.0),
+    _positive("reconnect_max_delay", "s", "longest wait between reconnection attempts (cap of the doubling "
+              "back-off)", 60.0),
     _positive("read_timeout", "s", "pyserial read timeout (one read blocks at most this long)", 1.0),
     _positive("stale_timeout", "s", "no valid packet for this long: link lost, /imu/data stops, reconnect", 10.0),
     _positive("max_angular_rate", "rad/s", "plausibility: largest rate per axis (gyro range 2000 deg/s + 5 %)",
@@ -131,6 +141,9 @@ def vn100_settings_from_dict(tree: Mapping[str, Any], overrides: Optional[Mappin
         if overrides and param.key in overrides:
             label = "%s (overrides %s)" % ((override_names or {}).get(param.key, "~" + param.key), param.key)
         settings[param.key] = param.read(merged[param.key], label) if param.key in merged else param.default
+    if settings["reconnect_initial_delay"] > settings["reconnect_max_delay"]:
+        raise ParameterError("parameter 'reconnect_initial_delay' = %g must not exceed 'reconnect_max_delay' = %g"
+                             % (settings["reconnect_initial_delay"], settings["reconnect_max_delay"]))
     return settings
 
 

@@ -21,13 +21,14 @@ class Driver:
     """Reads scripted results: a list of samples, or an exception to raise."""
 
     connected = True
-    reconnect_interval = 1.0
+    reconnect_max_delay = 1.0
 
     def __init__(self, script):
         self.script = list(script)
         self.closed = False
         self.connects = 1
         self.disconnects = 0
+        self.connect_failures = 0
         self.last_error = ""
 
     def read_samples(self):
@@ -61,7 +62,7 @@ def test_reader_survives_exceptions_and_absurd_packets(monkeypatch):
     node.reader_errors = 0
     node.last_reader_error = ""
     node.last_stamp = None
-    node.logged_connects, node.logged_disconnects = 1, 0
+    node.logged_connects, node.logged_disconnects, node.logged_failures = 1, 0, 0
     node.frame_id = "imu_link"
     node.covariances = {key: [0.0] * 9 for key in ("orientation", "angular_velocity", "linear_acceleration")}
     calls = {"n": 0}
@@ -85,14 +86,36 @@ def test_each_connection_and_each_loss_of_the_link_is_logged_once(monkeypatch):
     lines = []
     monkeypatch.setattr(vn100_node.rospy, "loginfo", lambda fmt, *args: lines.append(("info", fmt % args)))
     monkeypatch.setattr(vn100_node.rospy, "logwarn", lambda fmt, *args: lines.append(("warn", fmt % args)))
+    monkeypatch.setattr(vn100_node.rospy, "logerr_throttle", lambda period, msg: lines.append(("error", msg)))
     node = vn100_node.Vn100Node.__new__(vn100_node.Vn100Node)
     node.driver = Driver([])
     node.port = "/dev/vn100"
-    node.logged_connects, node.logged_disconnects = 0, 0
+    node.logged_connects, node.logged_disconnects, node.logged_failures = 0, 0, 0
     node._log_link_changes()
     node._log_link_changes()
     assert lines == [("info", "vn100_node: sensor configured on /dev/vn100 (connection 1)")]
     node.driver.disconnects, node.driver.last_error = 1, "no valid packet for 0.12 s"
     node._log_link_changes()
     node._log_link_changes()
-    assert lines[1:] == [("warn", "vn100_node: link lost (no valid packet for 0.12 s); reconnecting every 1 s")]
+    assert lines[1:] == [("warn", "vn100_node: link lost (no valid packet for 0.12 s); reconnecting at once, "
+                                  "then backing off up to 1 s")]
+    # A failed attempt to connect (here: no sensor at any rate) is an error in the log (throttled).
+    node.driver.connected = False
+    node.driver.connect_failures = 1
+    node.driver.last_error = "connect failed: no VN-100 answered on /dev/vn100 at 921600, 115200 baud"
+    node._log_link_changes()
+    node._log_link_changes()
+    assert lines[2:] == [("error", "vn100_node: connect failed: no VN-100 answered on /dev/vn100 at 921600, "
+                                   "115200 baud")]
+
+
+def test_every_setting_the_node_reads_is_in_the_schema():
+    """The node builds the driver from vn100.yaml's keys (a renamed key must not fail only on the robot)."""
+    import inspect
+    import re
+
+    from quadruped_drivers.vn100.settings import VN100_KEYS
+
+    used = set(re.findall(r'param\("(\w+)"\)', inspect.getsource(vn100_node.Vn100Node.__init__)))
+    assert {"baud", "save_baud", "probe_timeout", "reconnect_initial_delay", "reconnect_max_delay"} <= used
+    assert used <= set(VN100_KEYS)

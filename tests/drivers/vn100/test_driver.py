@@ -1,4 +1,5 @@
-"""VN-100 driver against the byte-level fake: handshake, decoding, corruption, reconnect, pty."""
+"""VN-100 driver against the byte-level fake: handshake, decoding, corruption, reconnect, pty; the baud
+rate search and the reconnection back-off are in test_baud_and_reconnect.py."""
 from __future__ import annotations
 
 import math
@@ -24,23 +25,37 @@ TRUTH_A = np.array([0.5, -1.0, 9.7])
 
 
 class Rig:
-    """Fake sensor + in-memory port + driver sharing one manual clock."""
+    """Fake sensor + in-memory port + driver sharing one manual clock.
 
-    def __init__(self, rate_hz: float = 200.0, link_clock=None, **fake_kwargs) -> None:
-        self.clock = ManualClock(100.0)
-        self.device = FakeVn100(boot_time=99.0, **fake_kwargs)
+    ``baud``: the driver's configured rate (with it the port models the rate and the driver searches;
+    ``None``: rate not modelled, no search); ``sensor_baud``: the rate stored in the fake (factory
+    115200); ``driver_kwargs`` go to the driver, ``fake_kwargs`` to the fake. ``open_times`` /
+    ``port_rates``: when and at which rate the driver opened the port; ``log``: the driver's log lines."""
+
+    def __init__(self, rate_hz: float = 200.0, link_clock=None, baud=None, sensor_baud=115200,
+                 driver_kwargs=None, clock=None, **fake_kwargs) -> None:
+        self.clock = clock if clock is not None else ManualClock(100.0)
+        self.device = FakeVn100(boot_time=99.0, baud=sensor_baud, **fake_kwargs)
         self.ports = []
         self.open_attempts = 0
+        self.open_times = []
+        self.port_rates = []
+        self.log = []
         inner = InMemoryPort.factory(self.device, clock=self.clock, sleep=self.clock.sleep)
 
-        def factory():
+        def factory(rate=None):
             self.open_attempts += 1
-            port = inner()
+            self.open_times.append(self.clock.now)
+            self.port_rates.append(rate)
+            port = inner(rate)
             self.ports.append(port)
             return port
 
-        self.driver = Vn100Driver(factory, rate_hz=rate_hz, clock=self.clock,
-                                  reconnect_interval=1.0, link_clock=link_clock)
+        kwargs = dict(reconnect_initial_delay=0.02, reconnect_max_delay=1.0, baud=baud,
+                      port_name="/dev/vn100", log=self.log.append)
+        kwargs.update(driver_kwargs or {})
+        self.driver = Vn100Driver(factory, rate_hz=rate_hz, clock=self.clock, link_clock=link_clock,
+                                  **kwargs)
 
     def run(self, seconds: float, step: float = 0.01):
         out = []
@@ -48,6 +63,15 @@ class Rig:
             self.clock.sleep(step)
             out += self.driver.read_samples()
         return out
+
+    def run_until_sample(self, limit: float, step: float = 0.001):
+        """Read every ``step`` until a sample arrives; the clock time then (None within ``limit`` s)."""
+        end = self.clock.now + limit
+        while self.clock.now < end:
+            self.clock.sleep(step)
+            if self.driver.read_samples():
+                return self.clock.now
+        return None
 
 
 def test_handshake_bytes_exact_and_model_read():
@@ -121,13 +145,12 @@ def test_disconnect_and_reconnect_with_injected_clock():
     assert not rig.driver.connected and rig.driver.disconnects == 1
     assert "serial error" in rig.driver.last_error
     attempts = rig.open_attempts
-    assert rig.run(0.9) == []
-    assert rig.open_attempts == attempts  # waits for reconnect_interval
-    assert rig.run(0.2) == []
-    assert rig.open_attempts == attempts + 1 and rig.driver.connect_failures == 1
-    assert "connect failed" in rig.driver.last_error
+    assert rig.driver.read_samples() == []
+    assert rig.open_attempts == attempts + 1  # the first attempt is immediate
+    assert rig.driver.connect_failures == 1 and "connect failed" in rig.driver.last_error
+    assert rig.driver.read_samples() == []
+    assert rig.open_attempts == attempts + 1  # then the back-off (0.02 s, doubling)
     rig.device.reconnect()  # the sensor power-cycled: factory settings, must be reconfigured
-    rig.clock.sleep(1.0)
     samples = rig.run(0.5)
     assert len(samples) > 80 and rig.driver.connected
     assert rig.device.binary_config[75] == (1, 4, {1: 0x0131})
@@ -153,14 +176,15 @@ def test_sensor_error_fails_connect_with_reason_and_read_samples_survives():
     with pytest.raises(Vn100Error, match="insufficient baud rate"):
         driver.connect()
     assert not driver.connected
-    assert driver.read_samples() == []  # no new attempt before reconnect_interval
+    assert driver.read_samples() == []  # no new attempt before the back-off delay
+    assert driver.connect_failures == 1
     clock.sleep(1.5)
     assert driver.read_samples() == []
     assert driver.connect_failures == 2 and "insufficient baud rate" in driver.last_error
 
 
 class SilentFake(FakeVn100):
-    def write(self, data):
+    def write(self, data, baud=None):
         self._check_connected()
         return len(data)
 
@@ -169,11 +193,11 @@ def test_silent_device_times_out_after_retries():
     clock = ManualClock()
     device = SilentFake()
     driver = Vn100Driver(InMemoryPort.factory(device, clock=clock, sleep=clock.sleep),
-                         clock=clock, command_timeout=0.2, command_retries=2)
+                         clock=clock, probe_timeout=0.2, command_retries=2)
     with pytest.raises(Vn100Error, match="no reply to \\$VNRRG,01"):
         driver.connect()
     assert not driver.connected
-    assert 0.2 * 4 <= clock.now < 2.0  # optional VNASY wait + 3 attempts of the model read
+    assert 0.2 * 3 <= clock.now < 1.0  # 3 probes ($VNASY,0 + $VNRRG,01) of probe_timeout each
 
 
 def test_handshake_tolerates_binary_stream_already_running():
@@ -197,11 +221,16 @@ def test_stale_stream_triggers_reconfiguration():
     rig.driver.stale_timeout = 0.25
     assert rig.run(0.2)
     rig.device.power_cycle()  # watchdog reset: output back to ASCII, no binary packets
-    assert rig.run(0.3) == []
+    start = rig.clock.now
+    while rig.driver.disconnects == 0 and rig.clock.now < start + 1.0:
+        assert rig.driver.read_samples() == []
+        rig.clock.sleep(0.001)
     assert rig.driver.disconnects == 1 and "no valid packet" in rig.driver.last_error
-    rig.clock.sleep(1.0)
+    assert 0.25 < rig.clock.now - start < 0.3
+    back = rig.run_until_sample(0.1)  # reconfigured at once
+    assert back is not None and back - start < 0.3
+    assert rig.driver.connects == 2 and rig.driver.disconnects == 1
     assert len(rig.run(0.2)) > 20
-    assert rig.driver.connects == 2
 
 
 def test_fake_answers_errors_and_checksum_bypass():
@@ -230,12 +259,12 @@ def test_close_is_idempotent_and_port_closed():
 
 def test_pty_end_to_end_with_pyserial(tmp_path):
     pytest.importorskip("serial")
-    device = FakeVn100(boot_time=time.monotonic())
+    device = FakeVn100(boot_time=time.monotonic(), baud=921600)
     device.set_state(TRUTH_Q, TRUTH_W, TRUTH_A)
     link = str(tmp_path / "vn100")
     with PtyFakeVn100(device, symlink_path=link) as pty:
         driver = Vn100Driver(serial_port_factory(link, 921600, timeout=0.01), rate_hz=200.0,
-                             command_timeout=1.0)
+                             command_timeout=1.0, baud=921600)
         try:
             driver.connect()
             assert driver.model == "VN-100T-CR"
@@ -264,7 +293,9 @@ def test_config_file_is_consistent():
     cfg = load_yaml(config_path("vn100.yaml"))
     assert vp.rate_divisor_for(cfg["rate_hz"]) == 4
     assert cfg["baud"] == 921600 and cfg["frame_id"] == "imu_link"
-    assert 0 < cfg["stale_timeout"] < 1.0 and cfg["reconnect_interval"] > 0
+    assert 0 < cfg["stale_timeout"] < 1.0
+    assert 0 < cfg["reconnect_initial_delay"] <= cfg["stale_timeout"] < cfg["reconnect_max_delay"]
+    assert cfg["save_baud"] is False  # the sensor's flash is written only on request
     for key in ("orientation", "angular_velocity", "linear_acceleration"):
         values = cfg[key + "_covariance_diagonal"]
         assert len(values) == 3 and all(0 < v < 1 for v in values)
@@ -291,11 +322,11 @@ def test_next_output_time_follows_the_configured_outputs():
 def test_pty_on_a_simulated_clock_sends_only_what_is_due_when_woken(tmp_path):
     pytest.importorskip("serial")
     clock = ManualClock(0.0)
-    device = FakeVn100(boot_time=0.0)
+    device = FakeVn100(boot_time=0.0, baud=921600)
     link = str(tmp_path / "vn100")
     with PtyFakeVn100(device, clock=clock, symlink_path=link, realtime=False, period=0.01) as pty:
         driver = Vn100Driver(serial_port_factory(link, 921600, timeout=0.01), rate_hz=200.0,
-                             command_timeout=1.0)
+                             command_timeout=1.0, baud=921600)
         try:
             driver.connect()  # the handshake runs while the simulated clock stands still
             samples = []
