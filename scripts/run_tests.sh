@@ -2,7 +2,8 @@
 # Runs the tests. Does its own set-up first (scripts/setup.sh).
 #
 #   bash scripts/run_tests.sh                  the full tier (what CI runs): Python 3.8 check, lint,
-#                                              pytest, every rostest, lock-step determinism, install space
+#                                              pytest, every rostest, lock-step determinism, install space,
+#                                              the fault-free rostests with the nodes on Python 3.8
 #   bash scripts/run_tests.sh --fast [PATH..]  the fast tier, after every edit: the unit tests of common,
 #                                              drivers, model, control, bring-up, analysis; no kernels
 #                                              (UQ_NO_JIT=1) and no test marked slow; PATHs run instead
@@ -179,6 +180,9 @@ unset UQ_TRAJECTORY_FILE
 section "install space: catkin_make install into a temporary prefix, sim.launch from there"
 run_step install_space bash tests/install_space.sh
 
+section "the node graph under Python 3.8: fault-free rostests, every node on 3.8 (tests/python38_graph.sh)"
+UQ_PY38_GRAPH_OUT="$RESULTS/python38_graph" run_step python38_graph bash tests/python38_graph.sh
+
 fi
 
 # Count pytest cases from its JUnit file so that the closing line covers the whole run.
@@ -198,6 +202,6 @@ PYEOF
 )
 echo "time: $((SECONDS / 60))m$((SECONDS % 60))s (set-up included)"
 echo "rostest: $rostest_passed passed, $rostest_failed failed"
-echo "steps (catkin_lint, lint_imports, python38, install_space): $steps_passed passed, $steps_failed failed"
+echo "steps (catkin_lint, lint_imports, python38, install_space, python38_graph): $steps_passed passed, $steps_failed failed"
 echo "$((py_passed + rostest_passed + steps_passed)) passed, $((py_failed + rostest_failed + steps_failed)) failed"
 [ "$failures" -eq 0 ]
