@@ -9,7 +9,7 @@ from __future__ import annotations
 
 import math
 import time
-from typing import Callable, Sequence
+from typing import Callable, List, Sequence
 
 import numpy as np
 
@@ -117,9 +117,13 @@ class PoseDriver:
 
     def move_to(self, angles: np.ndarray) -> None:
         """Ramp from the current pose to ``angles`` at ``speed`` rad/s."""
-        target = np.asarray(angles, dtype=float)
-        distance = float(np.max(np.abs(target - self.current)))
-        steps = max(1, int(math.ceil(distance / (self.speed * COMMAND_PERIOD))))
-        start = self.current.copy()
-        for step in range(1, steps + 1):
-            self.hold(start + (target - start) * step / steps, COMMAND_PERIOD)
+        for pose in ramp(self.current, angles, self.speed):
+            self.hold(pose, COMMAND_PERIOD)
+
+
+def ramp(start: np.ndarray, target: np.ndarray, speed: float) -> List[np.ndarray]:
+    """The poses, one per :data:`COMMAND_PERIOD`, that take every joint from ``start`` to ``target`` (rad) at
+    most ``speed`` rad/s, ending at ``target``."""
+    start, target = np.array(start, dtype=float), np.asarray(target, dtype=float)
+    steps = max(1, int(math.ceil(float(np.max(np.abs(target - start))) / (speed * COMMAND_PERIOD))))
+    return [start + (target - start) * step / steps for step in range(1, steps + 1)]

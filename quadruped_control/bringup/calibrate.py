@@ -19,7 +19,7 @@ from typing import Callable, Optional, Sequence
 
 from quadruped_common.config import ParameterError, config_path
 from quadruped_control.bringup.reference import ReferencePose, reference_poses
-from quadruped_control.bringup.servo_check import ServoCheck, ServoCheckResult, ServoCheckSettings
+from quadruped_control.bringup.servo_check import DriverBench, ServoCheck, ServoCheckResult, ServoCheckSettings
 from quadruped_control.model.params import RobotParams, load_robot_params
 from quadruped_drivers.servo_rig import PoseDriver, SimulatedServoRig
 from quadruped_drivers.calibration import ServoCalibration, load_servo_calibration, save_servo_calibration
@@ -47,8 +47,8 @@ def _run(bus, clock, sleep, place: Callable[[ReferencePose], None], hardware: Ha
     try:
         pwm.start()
         feedback.start()
-        driver = PoseDriver(pwm, feedback, calibration, clock=clock, sleep=sleep)
-        return ServoCheck(driver, pwm, params, place, settings, log).calibrate(reference_poses(params))
+        bench = DriverBench(PoseDriver(pwm, feedback, calibration, clock=clock, sleep=sleep), pwm)
+        return ServoCheck(bench, params, calibration, place, settings, log).calibrate(reference_poses(params))
     finally:
         pwm.shutdown()
 

@@ -27,11 +27,11 @@ import numpy as np
 from quadruped_common.robot import JOINT_NAMES
 from quadruped_control.bringup.reference import ReferencePose, sweep_half_width
 from quadruped_control.model.params import RobotParams
-from quadruped_drivers.servo_rig import PoseDriver
 from quadruped_drivers.calibration import ServoCalibration
 from quadruped_drivers.pwm_output import ServoPwmOutput
+from quadruped_drivers.servo_rig import PoseDriver
 
-__all__ = ["Finding", "ServoCheck", "ServoCheckResult", "ServoCheckSettings"]
+__all__ = ["Bench", "DriverBench", "Finding", "ServoCheck", "ServoCheckResult", "ServoCheckSettings"]
 
 
 @dataclass(frozen=True)
@@ -98,33 +98,103 @@ class ServoCheckResult:
         return sorted({name for finding in self.findings for name in finding.joints})
 
 
-class ServoCheck:
-    """Runs the procedures of the module docstring through the real driver objects: ``driver`` (pulses,
-    ramps, feedback), ``pwm`` (outputs on and off) and ``place``, the operator putting the limp legs in a pose
-    (a prompt on the robot, the rig's hand in simulation)."""
+class Bench:
+    """What the procedures drive: the servos through the calibration file's command map, and the feedback.
+    :class:`DriverBench` is the driver objects on a bus; the pre-dive check's is the running stack's topics."""
 
-    def __init__(self, driver: PoseDriver, pwm: ServoPwmOutput, params: RobotParams,
-                 place: Callable[[ReferencePose], None], settings: ServoCheckSettings = ServoCheckSettings(),
-                 log: Callable[[str], None] = print) -> None:
+    #: the pose last commanded (rad, JOINT_NAMES order)
+    current: np.ndarray
+
+    def outputs(self, on: bool) -> None:
+        """PWM outputs on, or off (every servo limp)."""
+        raise NotImplementedError
+
+    def hold(self, angles: np.ndarray, duration: float) -> None:
+        """Command ``angles`` for ``duration`` s (feeding the PWM watchdog)."""
+        raise NotImplementedError
+
+    def move_to(self, angles: np.ndarray) -> None:
+        """Ramp from :attr:`current` to ``angles`` at a bounded joint speed."""
+        raise NotImplementedError
+
+    def wait(self, seconds: float) -> None:
+        """Let ``seconds`` pass without commanding (outputs off)."""
+        raise NotImplementedError
+
+    def read_volts(self) -> np.ndarray:
+        """One feedback reading, volts per joint (NaN: none); ValueError where only angles are available."""
+        raise NotImplementedError
+
+    def read_angles(self) -> np.ndarray:
+        """One feedback reading through the calibration file's feedback map, rad per joint (NaN: none)."""
+        raise NotImplementedError
+
+
+class DriverBench(Bench):
+    """The driver objects on a bus (the calibration CLI, the simulated rig)."""
+
+    def __init__(self, driver: PoseDriver, pwm: ServoPwmOutput) -> None:
         self.driver = driver
         self.pwm = pwm
+
+    @property
+    def current(self) -> np.ndarray:  # type: ignore[override]
+        return self.driver.current
+
+    @current.setter
+    def current(self, angles: np.ndarray) -> None:
+        self.driver.current = np.array(angles, dtype=float)
+
+    def outputs(self, on: bool) -> None:
+        if on:
+            self.pwm.enable()
+        else:
+            self.pwm.disable()
+
+    def hold(self, angles: np.ndarray, duration: float) -> None:
+        self.driver.hold(angles, duration)
+
+    def move_to(self, angles: np.ndarray) -> None:
+        self.driver.move_to(angles)
+
+    def wait(self, seconds: float) -> None:
+        self.driver.sleep(seconds)
+
+    def read_volts(self) -> np.ndarray:
+        return np.asarray(self.driver.feedback.read().volts, dtype=float)
+
+    def read_angles(self) -> np.ndarray:
+        volts = self.read_volts()
+        good = np.isfinite(volts)
+        return np.where(good, self.driver.calibration.volts_to_angles(np.where(good, volts, 0.0)), math.nan)
+
+
+class ServoCheck:
+    """Runs the procedures of the module docstring on a :class:`Bench` with the calibration file's maps
+    ``calibration``; ``place`` is the operator putting the limp legs in a pose (a prompt on the robot, the
+    rig's hand in simulation)."""
+
+    def __init__(self, bench: Bench, params: RobotParams, calibration: ServoCalibration,
+                 place: Callable[[ReferencePose], None], settings: ServoCheckSettings = ServoCheckSettings(),
+                 log: Callable[[str], None] = print) -> None:
+        self.bench = bench
         self.params = params
         self.place = place
         self.settings = settings
         self.log = log
-        self.calibration = driver.calibration
+        self.calibration = calibration
 
     # ---- readings --------------------------------------------------------------------------------
 
-    def read_volts(self, powered: bool) -> np.ndarray:
-        """Every joint's feedback volts, mean of ``samples`` reads (NaN: never read); holds the pose if powered."""
+    def _mean(self, read: Callable[[], np.ndarray], powered: bool) -> np.ndarray:
+        """The mean of ``samples`` readings (NaN where a joint was never read); holds the pose if powered."""
         rows = []
         for _ in range(self.settings.samples):
-            rows.append(self.driver.feedback.read().volts)
+            rows.append(read())
             if powered:
-                self.driver.hold(self.driver.current, 0.01)
+                self.bench.hold(self.bench.current, 0.01)
             else:
-                self.driver.sleep(0.01)
+                self.bench.wait(0.01)
         rows_array = np.array(rows, dtype=float)
         counts = np.sum(np.isfinite(rows_array), axis=0)
         sums = np.nansum(rows_array, axis=0)
@@ -133,12 +203,12 @@ class ServoCheck:
     def reference_maps(self, poses: Sequence[ReferencePose]) -> Tuple[np.ndarray, np.ndarray, List[Finding]]:
         """Outputs off, the legs placed in ``poses`` (two) by the operator: each joint's feedback line through
         its readings, (slope rad/V, offset rad), NaN where unusable, and the findings."""
-        self.pwm.disable()
+        self.bench.outputs(False)
         volts, angles = [], []
         for pose in poses:
             self.log("place the limp legs: %s (%s)" % (pose.name, pose.instruction))
             self.place(pose)
-            volts.append(self.read_volts(powered=False))
+            volts.append(self._mean(self.bench.read_volts, powered=False))
             angles.append(pose.joint_angles())
         (v0, v1), (q0, q1) = volts, angles
         slope = (q1 - q0) / (v1 - v0)
@@ -162,8 +232,8 @@ class ServoCheck:
                 slope[i] = offset[i] = math.nan
         return slope, offset, findings
 
-    def sweep(self, index: int, stance: ReferencePose, slope: np.ndarray, offset: np.ndarray) -> JointSweep:
-        """Sweep joint ``index`` symmetrically about ``stance`` (others held), reading every joint."""
+    def sweep(self, index: int, stance: ReferencePose, read: Callable[[], np.ndarray]) -> JointSweep:
+        """Sweep joint ``index`` symmetrically about ``stance`` (others held), reading every joint's angle."""
         # the narrowest of the three joints' safe sweeps: a channel wired to another joint's servo turns that one
         half = min(sweep_half_width(self.params, stance.leg_angles, j, math.radians(self.settings.sweep_deg))
                    for j in range(3))
@@ -173,10 +243,10 @@ class ServoCheck:
         for delta in offsets:
             pose = hold.copy()
             pose[index] += delta
-            self.driver.move_to(pose)
-            self.driver.hold(pose, self.settings.settle_s)
-            rows.append(slope * self.read_volts(powered=True) + offset)
-        self.driver.move_to(hold)
+            self.bench.move_to(pose)
+            self.bench.hold(pose, self.settings.settle_s)
+            rows.append(self._mean(read, powered=True))
+        self.bench.move_to(hold)
         return JointSweep(offsets, np.array(rows))
 
     # ---- judgement -------------------------------------------------------------------------------
@@ -224,10 +294,11 @@ class ServoCheck:
 
     def calibrate(self, poses: Tuple[ReferencePose, ReferencePose],
                   indices: Sequence[int] = tuple(range(len(JOINT_NAMES)))) -> ServoCheckResult:
-        """The calibration of the module docstring; ``poses``: (stance, open)."""
+        """The calibration of the module docstring; ``poses``: (stance, open). The legs end placed at stance."""
         stance, opened = poses
         slope, offset, findings = self.reference_maps((opened, stance))
-        result = self._sweeps(stance, slope, offset, indices)
+        self.bench.current = stance.joint_angles()  # where the operator left the legs
+        result = self._sweeps(stance, lambda: slope * self.bench.read_volts() + offset, indices)
         result.findings = _merge(findings + result.findings)
         if result.passed:
             result.calibration = self._new_calibration(result, stance, slope, offset, indices)
@@ -235,24 +306,27 @@ class ServoCheck:
 
     def check_channels(self, stance: ReferencePose,
                        indices: Sequence[int] = tuple(range(len(JOINT_NAMES)))) -> ServoCheckResult:
-        """Each channel moves its own joint, only it, the right way, by its command: the sweeps read through
-        the calibration file's feedback maps. The legs start limp at ``stance`` (the operator's)."""
-        self.pwm.disable()
-        self.place(stance)
-        slope = np.array([j.feedback_slope for j in self.calibration.joints])
-        offset = np.array([j.feedback_offset for j in self.calibration.joints])
-        result = self._sweeps(stance, slope, offset, indices)
+        """Each channel moves its own joint, only it, the right way, by its command, with its zero at the stance
+        marks: the sweeps read through the calibration file's maps. The servos start where they are (held at
+        their feedback angles) and are ramped to ``stance``."""
+        self.bench.current = self._mean(self.bench.read_angles, powered=False)
+        if not np.all(np.isfinite(self.bench.current)):
+            missing = [JOINT_NAMES[i] for i in np.flatnonzero(~np.isfinite(self.bench.current))]
+            return ServoCheckResult([Finding(tuple(missing), "feedback", "no feedback angle",
+                                             "check the feedback node and the ADCs (/diagnostics)")])
+        result = self._sweeps(stance, self.bench.read_angles, indices)
         result.findings = _merge(result.findings)
         return result
 
-    def _sweeps(self, stance: ReferencePose, slope: np.ndarray, offset: np.ndarray,
+    def _sweeps(self, stance: ReferencePose, read: Callable[[], np.ndarray],
                 indices: Sequence[int]) -> ServoCheckResult:
         result = ServoCheckResult()
-        self.pwm.enable()
-        self.driver.current = stance.joint_angles()
-        self.driver.hold(self.driver.current, self.settings.settle_s)
+        self.bench.outputs(True)
+        self.bench.hold(self.bench.current, self.settings.settle_s)
+        self.bench.move_to(stance.joint_angles())
+        self.bench.hold(stance.joint_angles(), self.settings.settle_s)
         for index in indices:
-            sweep = self.sweep(index, stance, slope, offset)
+            sweep = self.sweep(index, stance, read)
             result.sweeps[JOINT_NAMES[index]] = sweep
             result.findings.extend(self.judge(index, sweep, stance))
         return result

@@ -77,12 +77,14 @@ class ControlSupervisor:
 
     ``imu_limits``: the sensor's plausible ranges; ``max_implausible_run``: this many implausible IMU
     samples in a row hold the controller; ``joint_margin`` (rad): how far beyond the servo range a joint
-    reading is still plausible; ``max_joint_age`` (s): older joint feedback is not used.
+    reading is still plausible; ``max_joint_age`` (s): older joint feedback is not used;
+    ``require_preflight``: arming is refused until :meth:`set_preflight` reports a passed pre-dive check.
     """
 
     def __init__(self, controller: AttitudeController, pulse_map: PulseMap, max_imu_age: float = 0.05,
                  armed: bool = False, imu_limits: Optional[SensorLimits] = None, max_implausible_run: int = 3,
-                 joint_margin: float = math.radians(15.0), max_joint_age: float = 0.1) -> None:
+                 joint_margin: float = math.radians(15.0), max_joint_age: float = 0.1,
+                 require_preflight: bool = False) -> None:
         if not (math.isfinite(max_imu_age) and max_imu_age > 0):
             raise ValueError("max_imu_age must be a positive number of seconds, got %r" % (max_imu_age,))
         if not (isinstance(max_implausible_run, int) and max_implausible_run >= 1):
@@ -99,7 +101,10 @@ class ControlSupervisor:
         limits = controller.robot.joint_limits.as_array()  # rows theta1..3, columns low, high
         self._joint_low = np.tile(limits[:, 0] - joint_margin, 4)
         self._joint_high = np.tile(limits[:, 1] + joint_margin, 4)
-        self._armed = bool(armed)
+        self.require_preflight = bool(require_preflight)
+        self.preflight_passed = False
+        self.preflight_summary = ""
+        self._armed = bool(armed) and self.arming_refusal() is None
         self._imu: Optional[ImuInput] = None
         self._joint_positions: Optional[np.ndarray] = None
         self._joint_velocities: Optional[np.ndarray] = None
@@ -118,8 +123,25 @@ class ControlSupervisor:
     def armed(self) -> bool:
         return self._armed
 
+    def set_preflight(self, passed: bool, summary: str) -> None:
+        """The latest pre-dive check's verdict (the arming gate of :attr:`require_preflight`)."""
+        self.preflight_passed = bool(passed)
+        self.preflight_summary = str(summary)
+
+    def arming_refusal(self) -> Optional[str]:
+        """Why arming is refused now, or None."""
+        if self.require_preflight and not self.preflight_passed:
+            return ("no pre-dive check has passed since the stack started (%s): run the check "
+                    "(docs/on_the_robot.md), or start with require_preflight false"
+                    % (self.preflight_summary or "none has run"))
+        return None
+
     def arm(self, armed: bool) -> str:
-        """Arm or disarm; returns a message for the caller. Arming starts a fresh stroke cycle."""
+        """Arm or disarm; returns a message for the caller. Arming starts a fresh stroke cycle; it is refused
+        (the message says why, :meth:`arming_refusal`) while a gate is closed."""
+        refusal = self.arming_refusal() if armed and not self._armed else None
+        if refusal:
+            return "arming refused: " + refusal
         if armed and not self._armed:
             self.controller.reset()
             self._armed = True

@@ -10,19 +10,22 @@ Subscribes
   attitude_setpoint      geometry_msgs/QuaternionStamped R_d, world ENU <- body FLU
   attitude_setpoint_rpy_deg  geometry_msgs/Vector3Stamped  R_d as roll, pitch, yaw in DEGREES (unit in the name, REP-103)
                                                          (R = Rz(yaw) Ry(pitch) Rx(roll))
+  preflight/result       diagnostic_msgs/DiagnosticStatus  the pre-dive check's verdict (latched; OK: passed)
 Publishes
   servo_command          underwater_quadruped/ServoCommand   12 pulse widths (us) + joint targets,
                                                              header.stamp = the IMU sample's stamp
   controller_state       underwater_quadruped/ControllerState  telemetry of every step (stamp: step time)
   diagnostics            diagnostic_msgs/DiagnosticArray
 Services
-  ~arm                   std_srvs/SetBool   legs move only when armed
+  ~arm                   std_srvs/SetBool   legs move only when armed; refused (success false, the reason in
+                                            the message) while ~require_preflight and no check has passed
 Parameters
   ~gain_set (experiment) ~controller_yaml ~robot_yaml ~hardware_yaml ~calibration_yaml ~vn100_yaml
                          (package config/; vn100.yaml gives the IMU's plausible ranges)
   ~loop_rate (100 Hz)    ~imu_rate (200 Hz: the loop steps on every imu_rate/loop_rate-th sample, so
                           the command leaves right after the sample that caused it)
   ~imu_max_age (0.05 s)  ~arm_on_start (false: applies to the first start only)   ~setpoint_rpy_deg ([0, 0, 0])
+  ~require_preflight (false; robot.launch: true): arming waits for a passed pre-dive check
   ~starts                the node's starts since the launch file set it to 0: a respawned node (start > 1)
                          comes back disarmed whatever ~arm_on_start says
   ~stroke_scheme (stroke.scheme of controller.yaml: paper | coordinated)
@@ -118,9 +121,13 @@ class AttitudeControllerNode:
         if self.starts > 1:
             rospy.logwarn("attitude controller: restart %d: disarmed until %s is called",
                           self.starts - 1, rospy.resolve_name("~arm"))
+        require_preflight = bool(rospy.get_param("~require_preflight", False))
         self.supervisor = ControlSupervisor(controller, make_pulse_map(calibration, hardware),
                                             max_imu_age=float(rospy.get_param("~imu_max_age", 0.05)),
-                                            armed=arm_on_start, imu_limits=imu_limits)
+                                            armed=arm_on_start, imu_limits=imu_limits,
+                                            require_preflight=require_preflight)
+        if arm_on_start and not self.supervisor.armed:
+            rospy.logwarn("attitude controller: ~arm_on_start refused: %s", self.supervisor.arming_refusal())
         self.reported_imu_drops = 0
         self.lock = threading.Lock()
         self.imu_count = 0
@@ -159,6 +166,7 @@ class AttitudeControllerNode:
         self.reconfigure = ReconfigureServer(AttitudeControllerConfig, self._on_reconfigure)
 
         rospy.Service("~arm", SetBool, self._on_arm)
+        rospy.Subscriber("preflight/result", DiagnosticStatus, self._on_preflight, queue_size=1)
         rospy.Subscriber("joint_states", JointState, self._on_joint_states, queue_size=5)
         rospy.Subscriber("attitude_setpoint", QuaternionStamped, self._on_setpoint, queue_size=1)
         rospy.Subscriber("attitude_setpoint_rpy_deg", Vector3Stamped, self._on_setpoint_rpy, queue_size=1)
@@ -244,8 +252,15 @@ class AttitudeControllerNode:
     def _on_arm(self, request) -> SetBoolResponse:
         with self.lock:
             message = self.supervisor.arm(bool(request.data))
+            success = self.supervisor.armed == bool(request.data)
         rospy.logwarn("attitude controller %s", message)
-        return SetBoolResponse(success=True, message=message)
+        return SetBoolResponse(success=success, message=message)
+
+    def _on_preflight(self, msg: DiagnosticStatus) -> None:
+        passed = msg.level == DiagnosticStatus.OK
+        with self.lock:
+            self.supervisor.set_preflight(passed, msg.message)
+        rospy.loginfo("attitude controller: pre-dive check %s: %s", "passed" if passed else "FAILED", msg.message)
 
     def _on_reconfigure(self, config, _level):
         """Validate and apply live gains/timing; an invalid update (NaN, out of range, t_rec < 2 t_pow_max)

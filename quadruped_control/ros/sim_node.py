@@ -23,6 +23,9 @@ Two clocks (``~lockstep``):
   step (:mod:`quadruped_control.sim.lockstep`): deterministic results, independent of the machine's load,
   as fast as the machine allows. The drivers run their real byte-level code on the simulated clock.
 
+Subscribes
+  sim/stand_rpy_deg geometry_msgs/Vector3Stamped  the body held at rest at this roll, pitch, yaw (deg): the robot
+                                                  on its stand (the pre-dive check's guided poses); NaN: floating
 Publishes (ground truth, for tests and reports; nothing in the control path subscribes to these)
   sim/pose          geometry_msgs/PoseStamped  odom (ENU, REP-105) <- base_link, true attitude
   sim/servo_output  underwater_quadruped/ServoCommand  pulse widths the fake PCA9685 really produces and
@@ -62,7 +65,7 @@ import rosgraph
 import rospy
 from diagnostic_msgs.msg import DiagnosticStatus
 from diagnostic_updater import DiagnosticStatusWrapper
-from geometry_msgs.msg import PoseStamped
+from geometry_msgs.msg import PoseStamped, Vector3Stamped
 from rosgraph_msgs.msg import Clock
 from std_srvs.srv import SetBool, SetBoolResponse
 
@@ -169,6 +172,8 @@ class SimNode:
             self.command_sub = rospy.Subscriber("servo_command", ServoCommand, self._on_command,
                                                 queue_size=100, tcp_nodelay=True)
 
+        self.stand: Optional[np.ndarray] = None
+        rospy.Subscriber("sim/stand_rpy_deg", Vector3Stamped, self._on_stand, queue_size=1)
         self.pose_pub = rospy.Publisher("sim/pose", PoseStamped, queue_size=10)
         self.output_pub = rospy.Publisher("sim/servo_output", ServoCommand, queue_size=10)
         rospy.Service("~imu_streaming", SetBool, self._on_imu_streaming)
@@ -326,6 +331,10 @@ class SimNode:
             self.step_errors += 1
             rospy.logerr_throttle(1.0, "sim_node: plant step rejected: %s" % exc)
             state = self.plant.state
+        stand = self.stand
+        if stand is not None:  # on the stand, held by the operator
+            self.plant.place_body(stand)
+            state = self.plant.state
         acceleration_world = (state.velocity - self.previous_velocity) / self.dt
         self.previous_velocity = state.velocity.copy()
         self._write_sensors(acceleration_world)
@@ -380,6 +389,15 @@ class SimNode:
         stat.add("PCA9685 powered", str(self.fake.pca_powered))
         stat.add("fake VN-100 packets", str(self.vn100.packets_sent))
         return stat
+
+    def _on_stand(self, msg: Vector3Stamped) -> None:
+        rpy = (msg.vector.x, msg.vector.y, msg.vector.z)
+        if not all(math.isfinite(v) for v in rpy):
+            self.stand = None
+            rospy.loginfo("sim_node: off the stand, floating")
+            return
+        self.stand = rpy_to_rot(*(math.radians(v) for v in rpy))
+        rospy.loginfo("sim_node: on the stand at roll %.1f, pitch %.1f, yaw %.1f deg", *rpy)
 
     def _on_imu_streaming(self, request) -> SetBoolResponse:
         # "Unplugging" the fake sensor silences the stream while the pty stays open, exactly what a

@@ -227,6 +227,13 @@ class PlantSimulator:
         self.time = 0.0
         self.clamped_joints = 0
 
+    def place_body(self, rotation: ArrayLike) -> None:
+        """Hold the body at rest at ``rotation`` where it is (the joints keep moving): a robot on a stand, held
+        level or tilted by the operator (the pre-dive check's guided poses)."""
+        R = _rotation(rotation, "stand rotation")
+        self._state = RigidBodyState(position=self._state.position.copy(), rotation=R)
+        self.model.attach(self._state)
+
     @property
     def state(self) -> RigidBodyState:
         """Current floating-base state (a copy)."""

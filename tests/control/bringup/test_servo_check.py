@@ -10,7 +10,7 @@ import pytest
 from quadruped_common.robot import JOINT_NAMES
 from quadruped_control.bringup import calibrate
 from quadruped_control.bringup.reference import reference_poses
-from quadruped_control.bringup.servo_check import ServoCheck, ServoCheckSettings
+from quadruped_control.bringup.servo_check import DriverBench, ServoCheck, ServoCheckSettings
 from quadruped_control.model.params import load_robot_params
 from quadruped_drivers.servo_rig import PoseDriver, SimulatedServoRig
 from quadruped_drivers.calibration import load_servo_calibration
@@ -34,8 +34,8 @@ def run(faults: HardwareFaults, seed: int = 0, indices=None, channels: bool = Fa
     feedback = ServoFeedbackArray(rig.bus, HW, CAL, clock=rig.clock)
     pwm.start()
     feedback.start()
-    driver = PoseDriver(pwm, feedback, CAL, clock=rig.clock, sleep=rig.sleep)
-    check = ServoCheck(driver, pwm, PARAMS, lambda pose: rig.place(pose.joint_angles()), QUICK, log=lambda s: None)
+    bench = DriverBench(PoseDriver(pwm, feedback, CAL, clock=rig.clock, sleep=rig.sleep), pwm)
+    check = ServoCheck(bench, PARAMS, CAL, lambda pose: rig.place(pose.joint_angles()), QUICK, log=lambda s: None)
     stance = reference_poses(PARAMS)[0]
     all_joints = tuple(range(len(JOINT_NAMES)))
     if channels:

@@ -164,3 +164,21 @@ def test_an_imu_rate_spike_inside_the_range_is_dropped_and_counted(supervisor):
     assert problem is not None and "angular acceleration" in problem
     assert supervisor.imu_drop_reasons == {"angular acceleration": 1}
     assert supervisor.set_imu(LEVEL, (0.0, 0.0, 0.05), 1.01) is None
+
+
+def test_arming_waits_for_a_passed_preflight_when_required(supervisor):
+    gated = ControlSupervisor(supervisor.controller, supervisor.pulse_map, require_preflight=True)
+    message = gated.arm(True)
+    assert not gated.armed and message.startswith("arming refused: no pre-dive check has passed")
+    assert "none has run" in message
+    gated.set_preflight(False, "FAILED: channels")
+    assert not gated.armed and "FAILED: channels" in gated.arm(True)
+    gated.set_preflight(True, "passed")
+    assert gated.arming_refusal() is None and gated.arm(True) == "armed: legs will stroke" and gated.armed
+    assert gated.arm(False).startswith("disarmed")  # disarming is never refused
+
+
+def test_arm_on_start_is_refused_while_the_gate_is_closed(supervisor):
+    assert not ControlSupervisor(supervisor.controller, supervisor.pulse_map, armed=True,
+                                 require_preflight=True).armed
+    assert ControlSupervisor(supervisor.controller, supervisor.pulse_map, armed=True).armed  # not required
