@@ -2,8 +2,12 @@
 
 :func:`start_node` is each node's ``main`` up to ``rospy.spin()``:
 
-* ``rospy.init_node``, then the node object; a configuration error is a FATAL log naming the node and
-  exit status 1, not a traceback;
+* ``rospy.init_node``, then the node object. A start-up error a restart cannot fix (a configuration
+  refused, a device file missing, no permission, a library missing, the bus held by another process:
+  :mod:`quadruped_common.startup_errors`) is one FATAL line ``"<node> cannot start: <cause>. Fix: <fix>"``
+  and exit status :data:`~quadruped_common.startup_errors.EX_CONFIG` (78), not a traceback: the node's
+  supervisor (:mod:`quadruped_common.supervise`) does not start it again. Any other error raised there
+  keeps its traceback and exit status 1: the supervisor starts the node again after its back-off;
 * the start-up heap frozen (:mod:`quadruped_common.heap`): no full garbage collection walks it again;
 * :func:`stop_xmlrpc_server_on_shutdown`, the work-around for ros/ros_comm#2238 below.
 
@@ -27,13 +31,10 @@ from typing import Callable, Tuple, Type, TypeVar
 import rospy
 import rosgraph.xmlrpc
 
-from quadruped_common.config import ParameterError
 from quadruped_common.heap import frozen_startup_heap
+from quadruped_common.startup_errors import EX_CONFIG, cannot_start_line, permanent_cause
 
 NodeT = TypeVar("NodeT")
-
-#: Start-up errors that mean "this configuration cannot run": FATAL log and exit status 1.
-CONFIGURATION_ERRORS: Tuple[Type[BaseException], ...] = (ParameterError, ValueError, OSError)
 
 
 def stop_xmlrpc_server(node: rosgraph.xmlrpc.XmlRpcNode, timeout: float = 2.0) -> bool:
@@ -78,9 +79,11 @@ def stack_clock() -> Callable[[], float]:
     return rospy.get_time if rospy.get_param("/use_sim_time", False) else time.monotonic
 
 
-def start_node(name: str, build: Callable[[], NodeT],
-               errors: Tuple[Type[BaseException], ...] = CONFIGURATION_ERRORS) -> NodeT:
+def start_node(name: str, build: Callable[[], NodeT], errors: Tuple[Type[BaseException], ...] = ()) -> NodeT:
     """``rospy.init_node(name)`` and ``build()`` (module docstring); returns the node object.
+
+    ``errors``: more exception types that mean "this configuration cannot run" (exit 78, one line), beyond
+    those of :func:`quadruped_common.startup_errors.permanent_cause`.
 
     Call ``rospy.spin()`` (or the node's own loop) after it. The XML-RPC hook is registered after the
     node object: rospy runs client hooks in registration order, so the node's own ``rospy.on_shutdown``
@@ -91,11 +94,14 @@ def start_node(name: str, build: Callable[[], NodeT],
         rospy.init_node(name)
         try:
             node = build()
-        except errors as exc:
-            rospy.logfatal("%s cannot start: %s", name, exc)
-            raise SystemExit(1)
+        except Exception as exc:  # noqa: BLE001 - sorted into permanent (one line, 78) and the rest (re-raised)
+            cause = permanent_cause(exc, errors)
+            if cause is None:
+                raise  # a restart may fix it: traceback, exit status 1
+            rospy.logfatal(cannot_start_line(name, cause))
+            raise SystemExit(EX_CONFIG) from None
         stop_xmlrpc_server_on_shutdown()
     return node
 
 
-__all__ = ["CONFIGURATION_ERRORS", "stack_clock", "start_node", "stop_xmlrpc_server", "stop_xmlrpc_server_on_shutdown"]
+__all__ = ["stack_clock", "start_node", "stop_xmlrpc_server", "stop_xmlrpc_server_on_shutdown"]

@@ -8,7 +8,7 @@ rqt and rviz would), and injects faults at seeded random moments:
 ============================  =====================================================================  ======
 kind                          injection                                                             expect
 ============================  =====================================================================  ======
-kill_vn100_node               SIGKILL, roslaunch respawns it                                         safe
+kill_vn100_node               SIGKILL, its supervisor starts it again                                safe
 kill_servo_feedback_node      SIGKILL, respawned (the controller does not steer on joint feedback)  track
 kill_pwm_node                 SIGKILL, respawned                                                     safe
 kill_attitude_controller      SIGKILL, respawned disarmed; the operator's arm command after 1 s      safe

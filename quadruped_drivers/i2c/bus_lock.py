@@ -20,6 +20,8 @@ import sys
 import tempfile
 from typing import Dict, List, Optional, Tuple
 
+from quadruped_common.startup_errors import FIX_BUSY
+
 __all__ = ["BusBusyError", "BusLock", "lock_bus", "lock_dir"]
 
 #: The roles the driver nodes take; any other name is refused.
@@ -90,8 +92,11 @@ class BusLock:
             os.close(fd)
             if exc.errno not in (errno.EWOULDBLOCK, errno.EAGAIN, errno.EACCES):
                 raise
-            busy = BusBusyError("the I2C bus %s is in use by %s: stop it first" % (self.bus, self._holders(path)))
+            holders = self._holders(path)
+            busy = BusBusyError("the I2C bus %s is in use by %s: stop it first" % (self.bus, holders))
             busy.errno = errno.EBUSY
+            busy.cause = "the I2C bus %s is in use by %s" % (self.bus, holders)  # a node's one start-up line
+            busy.fix = FIX_BUSY
             raise busy from None
         self._fds.append(fd)
         if write:

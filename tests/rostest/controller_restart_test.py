@@ -1,5 +1,5 @@
 #!/usr/bin/env python3
-"""rostest: the attitude controller killed with SIGKILL while armed comes back (roslaunch respawn) disarmed.
+"""rostest: the attitude controller killed with SIGKILL while armed comes back (its supervisor restarts it) disarmed.
 
 Sequence: armed at start-up (arm:=true) and stroking; SIGKILL; the respawned process publishes
 controller_state with armed false and no servo_command for 3 s, counts the restart in its diagnostics;
