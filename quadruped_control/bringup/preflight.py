@@ -94,9 +94,10 @@ class SensorReadings:
 def run_preflight(bench: Bench, sensors: SensorReadings, guide: Callable[[str, str, float, float], None],
                   params: RobotParams, calibration: ServoCalibration, expected_rates: Dict[str, float],
                   settings: ServoCheckSettings = ServoCheckSettings(),
-                  log: Callable[[str], None] = print) -> PreflightReport:
+                  log: Callable[[str], None] = print, min_rate_fraction: float = 0.9) -> PreflightReport:
     """The four checks of the module docstring. ``guide(name, instruction, roll_deg, pitch_deg)`` has the operator
-    hold the robot in a guided pose (returns when it is held); ``expected_rates``: ``imu`` and ``joints`` (Hz)."""
+    hold the robot in a guided pose (returns when it is held); ``expected_rates``: ``imu`` and ``joints`` (Hz), each
+    passing from ``min_rate_fraction`` of it."""
     report = PreflightReport()
     stance = reference_poses(params)[0]
 
@@ -104,7 +105,7 @@ def run_preflight(bench: Bench, sensors: SensorReadings, guide: Callable[[str, s
     rates = sensors.rates(2.0)
     angles = sensors.joint_angles()
     slow = ["%s %.0f Hz (expected %.0f)" % (name, rates.get(name, 0.0), rate)
-            for name, rate in expected_rates.items() if not rates.get(name, 0.0) >= 0.9 * rate]
+            for name, rate in expected_rates.items() if not rates.get(name, 0.0) >= min_rate_fraction * rate]
     missing = int(np.count_nonzero(~np.isfinite(angles)))
     problems = slow + (["%d joints without an angle" % missing] if missing else [])
     report.items.append(CheckItem("sensors", "FAILED" if problems else "passed",

@@ -12,7 +12,8 @@ Publishes   servo_command (underwater_quadruped/ServoCommand), preflight/result 
             sim/stand_rpy_deg (geometry_msgs/Vector3Stamped, with ~simulated_operator only)
 Parameters  ~simulated_operator (false: prompts on the terminal; true: holds the simulated robot's body in each
             guided pose through sim/stand_rpy_deg), ~report_dir (. : where preflight_<time>.md / .json go, beside
-            the bags), ~imu_rate (200), ~joint_rate (100), ~robot_yaml, ~calibration_yaml, ~settle (0.4 s),
+            the bags), ~imu_rate (200), ~joint_rate (100), ~min_rate_fraction (0.9: the least share of each rate
+            that passes), ~robot_yaml, ~calibration_yaml, ~settle (0.4 s), ~sweep_points (5: per joint),
             ~exit_when_done (false: the node stays up to keep the latched verdict; true: exits 0 if passed, else 1)
 """
 from __future__ import annotations
@@ -156,7 +157,9 @@ class PreflightNode:
         self.report_dir = os.path.expanduser(str(rospy.get_param("~report_dir", ".")))
         self.expected = {"imu": float(rospy.get_param("~imu_rate", 200.0)),
                          "joints": float(rospy.get_param("~joint_rate", 100.0))}
-        self.settings = ServoCheckSettings(settle_s=float(rospy.get_param("~settle", ServoCheckSettings.settle_s)))
+        self.settings = ServoCheckSettings(settle_s=float(rospy.get_param("~settle", ServoCheckSettings.settle_s)),
+                                           points=int(rospy.get_param("~sweep_points", ServoCheckSettings.points)))
+        self.min_rate_fraction = float(rospy.get_param("~min_rate_fraction", 0.9))
         self.result_pub = rospy.Publisher("preflight/result", DiagnosticStatus, queue_size=1, latch=True)
         self.stand_pub = rospy.Publisher("sim/stand_rpy_deg", Vector3Stamped, queue_size=1, latch=True)
         self.armed: Optional[bool] = None
@@ -190,7 +193,7 @@ class PreflightNode:
                 "armed" if self.armed else "not publishing controller_state"))
         else:
             report = run_preflight(self.bench, self.bench, self.guide, self.params, self.calibration, self.expected,
-                                   self.settings, log=rospy.loginfo)
+                                   self.settings, log=rospy.loginfo, min_rate_fraction=self.min_rate_fraction)
         path = self.save(report)
         status = DiagnosticStatus(level=DiagnosticStatus.OK if report.passed else DiagnosticStatus.ERROR,
                                   name="pre-dive check", message=report.summary(), hardware_id="none")

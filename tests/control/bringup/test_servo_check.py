@@ -2,6 +2,7 @@
 on a robot built right it writes the servos' real zeros and maps."""
 from __future__ import annotations
 
+import math
 import os
 
 import numpy as np
@@ -24,10 +25,11 @@ HW, CAL, PARAMS = load_hardware_config(), load_servo_calibration(), load_robot_p
 QUICK = ServoCheckSettings(points=3, settle_s=0.2, samples=2)
 
 
-def run(faults: HardwareFaults, seed: int = 0, indices=None, channels: bool = False):
+def run(faults: HardwareFaults, seed: int = 0, indices=None, channels: bool = False, speed_deg: float = 570.0):
     # the channel check reads through the file's maps: its rig's servos are the file's (as after a calibration)
     scale, shift = (1.0, 0.0) if channels else (1.04, 3.0)
-    rig = SimulatedServoRig(HW, CAL, seed=seed, faults=faults, slope_scale=scale, offset_shift_deg=shift)
+    rig = SimulatedServoRig(HW, CAL, seed=seed, faults=faults, slope_scale=scale, offset_shift_deg=shift,
+                            speed=math.radians(speed_deg))
     if indices is None and not channels:
         return calibrate.run_on_rig(rig, HW, CAL, PARAMS, QUICK), rig
     pwm = ServoPwmOutput(rig.bus, HW, clock=rig.clock, sleep=rig.sleep)
@@ -72,6 +74,13 @@ def test_each_servo_fault_is_found_and_named(spec, kind, joints):
     assert any(f.kind == kind and set(joints) <= set(f.joints) for f in result.findings), \
         [str(f) for f in result.findings]
     assert set(result.named()) == set(joints)  # and nothing else is blamed
+
+
+def test_servos_that_lag_their_commands_are_found():
+    result, _ = run(HardwareFaults(), indices=(0, 5), speed_deg=15.0)  # overloaded: 15 deg/s instead of 570
+    assert {f.kind for f in result.findings} == {"tracking"} and result.calibration is None
+    assert set(result.named()) == {"leg1_motor1", "leg2_hip"}
+    assert "follows 0." in result.findings[0].seen
 
 
 def test_a_feedback_wire_on_another_kind_of_joint_is_found_by_its_slope():
