@@ -2,9 +2,14 @@
 
 Subscribes
   servo_command   underwater_quadruped/ServoCommand  12 pulse widths (us) by joint name
+  estop           std_msgs/Empty    e-stop: every output off at once, latched (works with the controller dead)
 Services
-  ~enable         std_srvs/SetBool  outputs on / off (off = every channel full-off)
+  ~enable         std_srvs/SetBool  outputs on / off (off = every channel full-off); on is refused while the
+                                    e-stop is latched
+  estop           std_srvs/SetBool  true: e-stop (as the topic); false: reset it (the outputs stay off until
+                                    ~enable true)
 Publishes
+  estop_state     std_msgs/Bool (latched)  true while the e-stop is latched
   diagnostics     watchdog state, clamp, write-error and retry counters, chip resets, command latency
 Parameters
   ~backend (real | sim)  ~bus_socket (sim: the simulated robot's bus bridge)  ~hardware_yaml
@@ -27,6 +32,7 @@ import numpy as np
 import rospy
 from diagnostic_msgs.msg import DiagnosticStatus
 from diagnostic_updater import DiagnosticStatusWrapper
+from std_msgs.msg import Bool, Empty
 from std_srvs.srv import SetBool, SetBoolResponse
 
 from quadruped_common.monitoring import RateMonitor, WindowStatistics
@@ -68,6 +74,11 @@ class PwmNode:
         self.diagnostics.add("servo output", self._diagnose)
         rospy.on_shutdown(self._shutdown)
         rospy.Service("~enable", SetBool, self._on_enable)
+        # The e-stop acts here, on the chip, so it works with the controller dead.
+        self.estop_pub = rospy.Publisher("estop_state", Bool, queue_size=1, latch=True)
+        self.estop_pub.publish(Bool(False))
+        rospy.Subscriber("estop", Empty, lambda _msg: self._trip("estop topic"), queue_size=10, tcp_nodelay=True)
+        rospy.Service("estop", SetBool, self._on_estop)
         rospy.Subscriber("servo_command", ServoCommand, self._on_command, queue_size=1, tcp_nodelay=True)
         self.timer = rospy.Timer(rospy.Duration(period), self._on_timer)
         rospy.loginfo("pwm_node: PCA9685 at 0x%02x on %s bus, %.0f Hz PWM, watchdog %.0f ms",
@@ -127,8 +138,37 @@ class PwmNode:
                           self.hardware.watchdog_timeout * 1e3)
         self.diagnostics.update()
 
+    def _trip(self, source: str) -> None:
+        with self.lock:
+            if self.closed:
+                return
+            first = not self.output.estop_reason
+            off = self.output.estop("%s at %.3f s" % (source, rospy.get_time())) if first else True
+        if first:
+            self.estop_pub.publish(Bool(True))
+            (rospy.logerr if off else rospy.logfatal)(
+                "pwm_node: E-STOP (%s): every output %s; latched until %s false", source,
+                "off" if off else "off-write FAILED, retrying every update", rospy.resolve_name("estop"))
+
+    def _on_estop(self, request) -> SetBoolResponse:
+        if request.data:
+            self._trip("estop service")
+            return SetBoolResponse(success=True, message="e-stop latched: every output off")
+        with self.lock:
+            was = self.output.estop_reason
+            self.output.reset_estop()
+        if was:
+            self.estop_pub.publish(Bool(False))
+            rospy.logwarn("pwm_node: e-stop reset (was: %s); outputs stay off until %s true", was,
+                          rospy.resolve_name("~enable"))
+        return SetBoolResponse(success=True, message="e-stop reset; outputs off until enabled" if was
+                               else "e-stop was not latched")
+
     def _on_enable(self, request) -> SetBoolResponse:
         with self.lock:
+            if request.data and self.output.estop_reason:
+                return SetBoolResponse(success=False, message="refused: e-stop latched (%s); reset it with %s false"
+                                       % (self.output.estop_reason, rospy.resolve_name("estop")))
             if request.data:
                 self.output.enable()
             else:
@@ -143,7 +183,9 @@ class PwmNode:
         self.reported_write_errors = self.output.write_errors
         new_resets = self.output.chip_resets - self.reported_chip_resets
         self.reported_chip_resets = self.output.chip_resets
-        if new_resets:
+        if self.output.estop_reason:
+            stat.summary(DiagnosticStatus.ERROR, "E-STOP latched: every output off (%s)" % self.output.estop_reason)
+        elif new_resets:
             stat.summary(DiagnosticStatus.ERROR, "PCA9685 reset %d time(s) since the last report: set up again (%s)"
                          % (new_resets, self.output.last_fault))
         elif new_errors:
@@ -155,6 +197,7 @@ class PwmNode:
         else:
             stat.summary(DiagnosticStatus.OK, "driving servos")
         stat.add("enabled", str(self.output.enabled))
+        stat.add("e-stop", self.output.estop_reason or "not latched")
         stat.add("watchdog tripped", str(self.output.watchdog_tripped))
         stat.add("command rate [Hz]", "%.1f" % self.commands.rate(time.monotonic()))
         stat.add("latency p50 [ms]", "%.3f" % latency["p50"])

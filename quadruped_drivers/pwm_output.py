@@ -141,6 +141,8 @@ class ServoPwmOutput:
         self.clamp_count = 0
         self.invalid_count = 0
         self.watchdog_trips = 0
+        self._estop = ""
+        self._estop_off_pending = False
 
     # --- properties -------------------------------------------------------------------------
     @property
@@ -158,6 +160,26 @@ class ServoPwmOutput:
     def enabled(self) -> bool:
         """False: outputs are off and commands are recorded but not applied."""
         return self._enabled
+
+    @property
+    def estop_reason(self) -> str:
+        """Why the e-stop is latched; empty when it is not."""
+        return self._estop
+
+    def estop(self, reason: str) -> bool:
+        """Latch the e-stop: every output off at once (one ALL_LED full-off write, repeated by :meth:`update`
+        until it takes), commands recorded but not applied, :meth:`enable` refused until :meth:`reset_estop`.
+        Returns True when the outputs are off."""
+        self._require_started()
+        self._estop = reason or "e-stop"
+        self._enabled = False
+        self._pending_write = False
+        self._estop_off_pending = not self._all_off()
+        return not self._estop_off_pending
+
+    def reset_estop(self) -> None:
+        """Release the e-stop; the outputs stay off until :meth:`enable`."""
+        self._estop = ""
 
     @property
     def watchdog_tripped(self) -> bool:
@@ -363,6 +385,8 @@ class ServoPwmOutput:
         the watchdog (failsafe once) on the last check before ``watchdog_timeout`` without a command
         runs out, and retries a write that failed. Returns :attr:`watchdog_tripped`."""
         self._require_started()
+        if self._estop_off_pending:  # the e-stop's all-off write failed: again, every update, until it takes
+            self._estop_off_pending = not self._all_off()
         now = self._clock()
         if now >= self._next_mode_check:
             self._next_mode_check = now + self.mode_check_interval
@@ -414,8 +438,11 @@ class ServoPwmOutput:
             raise PwmOutputError("could not switch the PCA9685 outputs off")
 
     def enable(self) -> None:
-        """Accept commands again; outputs stay off until the next command (no jump to an old one)."""
+        """Accept commands again; outputs stay off until the next command (no jump to an old one).
+        :class:`EStopLatched` while the e-stop is latched."""
         self._require_started()
+        if self._estop:
+            raise EStopLatched("e-stop latched (%s): reset it first" % self._estop)
         self._enabled = True
         self._watchdog_tripped = False
         self._commanded[:] = False
@@ -453,4 +480,8 @@ class ServoPwmOutput:
         return ok
 
 
-__all__ = ["ServoPwmOutput", "PwmOutputError", "STAGGER_TICKS", "OFF"]
+class EStopLatched(RuntimeError):
+    """Outputs asked on while the e-stop is latched."""
+
+
+__all__ = ["EStopLatched", "ServoPwmOutput", "PwmOutputError", "STAGGER_TICKS", "OFF"]

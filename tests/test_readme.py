@@ -313,7 +313,13 @@ def check_rosrun(words: List[str]) -> None:
 def check_rosservice(words: List[str]) -> None:
     assert words[1] == "call", "rosservice %s: only 'call' is checked" % words[1]
     parts = words[2].strip("/").split("/")
-    assert len(parts) == 2, "service %s: expected /node/service" % words[2]
+    assert len(parts) in (1, 2), "service %s: expected /service or /node/service" % words[2]
+    assert words[3:] and words[3] in ("true", "false"), "SetBool takes true or false, not %s" % words[3:]
+    if len(parts) == 1:  # a node's public service (relative name): Service("name", SetBool, ...)
+        pattern = r"Service\(\s*[\"']%s[\"'],\s*SetBool" % re.escape(parts[0])
+        assert re.search(pattern, package_sources()), \
+            "no node offers the SetBool service %s" % words[2]
+        return
     node, service = parts
     nodes = launch_nodes()
     assert node in nodes, "no node %s in launch/ (nodes: %s)" % (node, ", ".join(sorted(nodes)))
@@ -531,6 +537,7 @@ def test_the_check_bites() -> None:
            ("make no-such-target", "no target no-such-target"),
            ("bash scripts/nothing.sh", "no script"),
            ("rosservice call /attitude_controller/disarm true", "no SetBool service ~disarm"),
+           ("rosservice call /e_stop true", "no node offers the SetBool service /e_stop"),
            ("rostopic pub -1 /attitude_setpoint geometry_msgs/Vector3Stamped '{}'", "nothing subscribes"),
            ("rqt_plot /controller_state/geodesic_err", "no field geodesic_err"),
            ("rosrun underwater_quadruped vn100_node _prot:=/dev/ttyUSB0", "does not read ~prot"),

@@ -104,6 +104,7 @@ class ControlSupervisor:
         self.require_preflight = bool(require_preflight)
         self.preflight_passed = False
         self.preflight_summary = ""
+        self.estop_latched = False
         self._armed = bool(armed) and self.arming_refusal() is None
         self._imu: Optional[ImuInput] = None
         self._joint_positions: Optional[np.ndarray] = None
@@ -128,13 +129,22 @@ class ControlSupervisor:
         self.preflight_passed = bool(passed)
         self.preflight_summary = str(summary)
 
+    def set_estop(self, latched: bool) -> None:
+        """The e-stop's state (pwm_node's ``estop_state``): latched disarms at once and refuses arming."""
+        self.estop_latched = bool(latched)
+        if latched:
+            self._armed = False
+
     def arming_refusal(self) -> Optional[str]:
-        """Why arming is refused now, or None."""
+        """Why arming is refused now (every reason, joined), or None."""
+        reasons = []
+        if self.estop_latched:
+            reasons.append("the e-stop is latched: reset it (rosservice call /estop false) and enable the outputs")
         if self.require_preflight and not self.preflight_passed:
-            return ("no pre-dive check has passed since the stack started (%s): run the check "
-                    "(docs/on_the_robot.md), or start with require_preflight false"
-                    % (self.preflight_summary or "none has run"))
-        return None
+            reasons.append("no pre-dive check has passed since the stack started (%s): run the check "
+                           "(docs/on_the_robot.md), or start with require_preflight false"
+                           % (self.preflight_summary or "none has run"))
+        return "; ".join(reasons) or None
 
     def arm(self, armed: bool) -> str:
         """Arm or disarm; returns a message for the caller. Arming starts a fresh stroke cycle; it is refused

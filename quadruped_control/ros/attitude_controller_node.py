@@ -11,6 +11,7 @@ Subscribes
   attitude_setpoint_rpy_deg  geometry_msgs/Vector3Stamped  R_d as roll, pitch, yaw in DEGREES (unit in the name, REP-103)
                                                          (R = Rz(yaw) Ry(pitch) Rx(roll))
   preflight/result       diagnostic_msgs/DiagnosticStatus  the pre-dive check's verdict (latched; OK: passed)
+  estop_state            std_msgs/Bool      pwm_node's e-stop: true disarms at once and refuses arming until reset
 Publishes
   servo_command          underwater_quadruped/ServoCommand   12 pulse widths (us) + joint targets,
                                                              header.stamp = the IMU sample's stamp
@@ -47,6 +48,7 @@ from diagnostic_updater import DiagnosticStatusWrapper
 from dynamic_reconfigure.server import Server as ReconfigureServer
 from geometry_msgs.msg import Point, Quaternion, QuaternionStamped, Vector3, Vector3Stamped
 from sensor_msgs.msg import Imu, JointState
+from std_msgs.msg import Bool
 from std_srvs.srv import SetBool, SetBoolResponse
 
 from quadruped_common.config import ParameterError
@@ -167,6 +169,7 @@ class AttitudeControllerNode:
 
         rospy.Service("~arm", SetBool, self._on_arm)
         rospy.Subscriber("preflight/result", DiagnosticStatus, self._on_preflight, queue_size=1)
+        rospy.Subscriber("estop_state", Bool, self._on_estop, queue_size=1, tcp_nodelay=True)
         rospy.Subscriber("joint_states", JointState, self._on_joint_states, queue_size=5)
         rospy.Subscriber("attitude_setpoint", QuaternionStamped, self._on_setpoint, queue_size=1)
         rospy.Subscriber("attitude_setpoint_rpy_deg", Vector3Stamped, self._on_setpoint_rpy, queue_size=1)
@@ -255,6 +258,16 @@ class AttitudeControllerNode:
             success = self.supervisor.armed == bool(request.data)
         rospy.logwarn("attitude controller %s", message)
         return SetBoolResponse(success=success, message=message)
+
+    def _on_estop(self, msg: Bool) -> None:
+        with self.lock:
+            was_armed = self.supervisor.armed
+            self.supervisor.set_estop(msg.data)
+        if msg.data:
+            rospy.logerr("attitude controller: e-stop latched%s; arming refused until it is reset",
+                         ": disarmed" if was_armed else "")
+        else:
+            rospy.logwarn("attitude controller: e-stop reset; disarmed until %s", rospy.resolve_name("~arm"))
 
     def _on_preflight(self, msg: DiagnosticStatus) -> None:
         passed = msg.level == DiagnosticStatus.OK

@@ -12,7 +12,7 @@ from quadruped_drivers.bus_bridge import BridgedI2CBus, BusBridgeServer
 from quadruped_drivers.calibration import load_servo_calibration
 from quadruped_drivers.hardware_config import load_hardware_config, pca9685_prescale
 from quadruped_drivers.i2c.fake_devices import build_fake_hardware
-from quadruped_drivers.pwm_output import PwmOutputError, ServoPwmOutput
+from quadruped_drivers.pwm_output import EStopLatched, PwmOutputError, ServoPwmOutput
 from quadruped_drivers.servo_feedback import ServoFeedbackArray
 
 HW = load_hardware_config()
@@ -314,3 +314,31 @@ def test_watchdog_fires_within_its_timeout_even_with_bus_errors(failsafe):
     assert max(latencies) <= HW.watchdog_timeout + 0.01 + 1e-9, max(latencies)
     without_errors = [failsafe_latency(HW, failsafe, 0.0, seed) for seed in range(10)]
     assert max(without_errors) <= HW.watchdog_timeout  # the trip itself is never late
+
+
+def test_estop_turns_every_output_off_at_once_and_latches():
+    fake, clock, pwm = make()
+    pwm.command(np.full(12, 1600.0))
+    assert np.all(fake.pulse_widths_us() > 0.0)
+    assert pwm.estop("test") and np.all(fake.pulse_widths_us() == 0.0)
+    pwm.command(np.full(12, 1500.0))  # recorded, not applied
+    clock.t += 0.05
+    pwm.update()
+    assert np.all(fake.pulse_widths_us() == 0.0) and pwm.estop_reason == "test"
+    with pytest.raises(EStopLatched, match="reset it first"):
+        pwm.enable()
+    pwm.reset_estop()
+    assert np.all(fake.pulse_widths_us() == 0.0)  # reset alone moves nothing
+    pwm.enable()
+    pwm.command(np.full(12, 1500.0))
+    assert np.all(fake.pulse_widths_us() > 0.0)
+
+
+def test_estop_whose_write_fails_is_repeated_until_the_outputs_are_off():
+    fake, clock, pwm = make()
+    pwm.command(np.full(12, 1600.0))
+    fake.bus.inject_fault(HW.pca_address, "oserror", count=1)
+    assert not pwm.estop("bus glitch")
+    clock.t += 0.01
+    pwm.update()
+    assert np.all(fake.pulse_widths_us() == 0.0) and pwm.estop_reason == "bus glitch"

@@ -182,3 +182,16 @@ def test_arm_on_start_is_refused_while_the_gate_is_closed(supervisor):
     assert not ControlSupervisor(supervisor.controller, supervisor.pulse_map, armed=True,
                                  require_preflight=True).armed
     assert ControlSupervisor(supervisor.controller, supervisor.pulse_map, armed=True).armed  # not required
+
+
+def test_the_estop_disarms_and_refuses_arming_until_reset(supervisor):
+    supervisor.arm(True)
+    supervisor.set_estop(True)
+    assert not supervisor.armed
+    assert "the e-stop is latched" in supervisor.arm(True) and not supervisor.armed
+    gated = ControlSupervisor(supervisor.controller, supervisor.pulse_map, require_preflight=True)
+    gated.set_estop(True)
+    reasons = gated.arming_refusal()
+    assert "e-stop" in reasons and "pre-dive check" in reasons  # every reason named
+    supervisor.set_estop(False)
+    assert not supervisor.armed and supervisor.arm(True) == "armed: legs will stroke"
