@@ -40,6 +40,10 @@ from quadruped_common.monitoring import time_problem
 from quadruped_common.so3 import quat_to_rot
 from quadruped_control.control.controller import AttitudeController, ControllerOutput, estimate_body_torque
 
+#: What the tether failsafe does when the heartbeat is lost: stop stroking (the servos hold where they are), or
+#: that and every output off (limp).
+TETHER_ACTIONS = ("disarm", "limp")
+
 #: Maps 12 joint angles (rad, JOINT_NAMES order) to 12 pulse widths (us), clamped to the limits.
 PulseMap = Callable[[np.ndarray], np.ndarray]
 
@@ -78,13 +82,16 @@ class ControlSupervisor:
     ``imu_limits``: the sensor's plausible ranges; ``max_implausible_run``: this many implausible IMU
     samples in a row hold the controller; ``joint_margin`` (rad): how far beyond the servo range a joint
     reading is still plausible; ``max_joint_age`` (s): older joint feedback is not used;
-    ``require_preflight``: arming is refused until :meth:`set_preflight` reports a passed pre-dive check.
+    ``require_preflight``: arming is refused until :meth:`set_preflight` reports a passed pre-dive check;
+    ``heartbeat_timeout`` (None: not watched): arming needs a tether heartbeat no older than this, and armed, its
+    loss for this long disarms (:meth:`check_tether`, ``tether_action``: disarm, or limp as well).
     """
 
     def __init__(self, controller: AttitudeController, pulse_map: PulseMap, max_imu_age: float = 0.05,
                  armed: bool = False, imu_limits: Optional[SensorLimits] = None, max_implausible_run: int = 3,
                  joint_margin: float = math.radians(15.0), max_joint_age: float = 0.1,
-                 require_preflight: bool = False) -> None:
+                 require_preflight: bool = False, heartbeat_timeout: Optional[float] = None,
+                 tether_action: str = "disarm") -> None:
         if not (math.isfinite(max_imu_age) and max_imu_age > 0):
             raise ValueError("max_imu_age must be a positive number of seconds, got %r" % (max_imu_age,))
         if not (isinstance(max_implausible_run, int) and max_implausible_run >= 1):
@@ -105,6 +112,16 @@ class ControlSupervisor:
         self.preflight_passed = False
         self.preflight_summary = ""
         self.estop_latched = False
+        if heartbeat_timeout is not None and not (math.isfinite(heartbeat_timeout) and heartbeat_timeout > 0):
+            raise ValueError("heartbeat_timeout must be a positive number of seconds, got %r" % (heartbeat_timeout,))
+        if tether_action not in TETHER_ACTIONS:
+            raise ValueError("tether_action must be one of %s, got %r" % (", ".join(TETHER_ACTIONS), tether_action))
+        self.watch_heartbeat = heartbeat_timeout is not None
+        self.heartbeat_timeout = float(heartbeat_timeout or 0.0)
+        self.tether_action = tether_action
+        self.last_heartbeat: Optional[float] = None
+        self.tether_losses = 0
+        self.clock_now = 0.0  # the node's clock at the last tick (the arming gate's heartbeat age)
         self._armed = bool(armed) and self.arming_refusal() is None
         self._imu: Optional[ImuInput] = None
         self._joint_positions: Optional[np.ndarray] = None
@@ -129,6 +146,24 @@ class ControlSupervisor:
         self.preflight_passed = bool(passed)
         self.preflight_summary = str(summary)
 
+    def set_heartbeat(self, now: float) -> None:
+        """A tether heartbeat arrived at ``now`` (the node's clock)."""
+        self.last_heartbeat = float(now)
+
+    def heartbeat_lost(self, now: float) -> bool:
+        """Is the heartbeat missing (never seen, or none for :attr:`heartbeat_timeout`)?"""
+        return self.last_heartbeat is None or now - self.last_heartbeat > self.heartbeat_timeout
+
+    def check_tether(self, now: float) -> Optional[str]:
+        """The tether failsafe: armed, watching, and no heartbeat for ``heartbeat_timeout`` -> disarm and return
+        the configured action (``disarm`` or ``limp``: the caller switches the outputs off) once; else None.
+        When the heartbeat returns nothing moves until the next arm."""
+        if not (self._armed and self.watch_heartbeat and self.heartbeat_lost(now)):
+            return None
+        self._armed = False
+        self.tether_losses += 1
+        return self.tether_action
+
     def set_estop(self, latched: bool) -> None:
         """The e-stop's state (pwm_node's ``estop_state``): latched disarms at once and refuses arming."""
         self.estop_latched = bool(latched)
@@ -140,6 +175,9 @@ class ControlSupervisor:
         reasons = []
         if self.estop_latched:
             reasons.append("the e-stop is latched: reset it (rosservice call /estop false) and enable the outputs")
+        if self.watch_heartbeat and self.heartbeat_lost(self.clock_now):
+            reasons.append("no tether heartbeat for %.1f s (tether/heartbeat: the monitor launch, or rosrun "
+                           "underwater_quadruped heartbeat_node on the laptop)" % self.heartbeat_timeout)
         if self.require_preflight and not self.preflight_passed:
             reasons.append("no pre-dive check has passed since the stack started (%s): run the check "
                            "(docs/on_the_robot.md), or start with require_preflight false"
@@ -223,6 +261,7 @@ class ControlSupervisor:
     def tick(self, t: float, now: float) -> SupervisorOutput:
         """One control tick at controller time ``t``; ``now`` is the clock the IMU stamps use."""
         self.ticks += 1
+        self.clock_now = now
         problem = self.imu_problem(now)
         imu = self._imu
         R = omega = None

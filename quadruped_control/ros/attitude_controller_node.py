@@ -12,6 +12,7 @@ Subscribes
                                                          (R = Rz(yaw) Ry(pitch) Rx(roll))
   preflight/result       diagnostic_msgs/DiagnosticStatus  the pre-dive check's verdict (latched; OK: passed)
   estop_state            std_msgs/Bool      pwm_node's e-stop: true disarms at once and refuses arming until reset
+  tether/heartbeat       std_msgs/Header    the laptop's heartbeat (heartbeat_node); watched with ~heartbeat_timeout
 Publishes
   servo_command          underwater_quadruped/ServoCommand   12 pulse widths (us) + joint targets,
                                                              header.stamp = the IMU sample's stamp
@@ -27,6 +28,8 @@ Parameters
                           the command leaves right after the sample that caused it)
   ~imu_max_age (0.05 s)  ~arm_on_start (false: applies to the first start only)   ~setpoint_rpy_deg ([0, 0, 0])
   ~require_preflight (false; robot.launch: true): arming waits for a passed pre-dive check
+  ~heartbeat_timeout (0: not watched; robot.launch: 2 s): arming needs the tether heartbeat, and armed, none for
+                         this long disarms; ~tether_action (disarm | limp: the outputs off too)
   ~starts                the node's starts since the launch file set it to 0: a respawned node (start > 1)
                          comes back disarmed whatever ~arm_on_start says
   ~stroke_scheme (stroke.scheme of controller.yaml: paper | coordinated)
@@ -48,7 +51,7 @@ from diagnostic_updater import DiagnosticStatusWrapper
 from dynamic_reconfigure.server import Server as ReconfigureServer
 from geometry_msgs.msg import Point, Quaternion, QuaternionStamped, Vector3, Vector3Stamped
 from sensor_msgs.msg import Imu, JointState
-from std_msgs.msg import Bool
+from std_msgs.msg import Bool, Header
 from std_srvs.srv import SetBool, SetBoolResponse
 
 from quadruped_common.config import ParameterError
@@ -124,10 +127,13 @@ class AttitudeControllerNode:
             rospy.logwarn("attitude controller: restart %d: disarmed until %s is called",
                           self.starts - 1, rospy.resolve_name("~arm"))
         require_preflight = bool(rospy.get_param("~require_preflight", False))
+        heartbeat_timeout = float(rospy.get_param("~heartbeat_timeout", 0.0))  # 0: not watched
         self.supervisor = ControlSupervisor(controller, make_pulse_map(calibration, hardware),
                                             max_imu_age=float(rospy.get_param("~imu_max_age", 0.05)),
                                             armed=arm_on_start, imu_limits=imu_limits,
-                                            require_preflight=require_preflight)
+                                            require_preflight=require_preflight,
+                                            heartbeat_timeout=heartbeat_timeout or None,
+                                            tether_action=str(rospy.get_param("~tether_action", "disarm")))
         if arm_on_start and not self.supervisor.armed:
             rospy.logwarn("attitude controller: ~arm_on_start refused: %s", self.supervisor.arming_refusal())
         self.reported_imu_drops = 0
@@ -170,6 +176,7 @@ class AttitudeControllerNode:
         rospy.Service("~arm", SetBool, self._on_arm)
         rospy.Subscriber("preflight/result", DiagnosticStatus, self._on_preflight, queue_size=1)
         rospy.Subscriber("estop_state", Bool, self._on_estop, queue_size=1, tcp_nodelay=True)
+        rospy.Subscriber("tether/heartbeat", Header, self._on_heartbeat, queue_size=1, tcp_nodelay=True)
         rospy.Subscriber("joint_states", JointState, self._on_joint_states, queue_size=5)
         rospy.Subscriber("attitude_setpoint", QuaternionStamped, self._on_setpoint, queue_size=1)
         rospy.Subscriber("attitude_setpoint_rpy_deg", Vector3Stamped, self._on_setpoint_rpy, queue_size=1)
@@ -259,6 +266,23 @@ class AttitudeControllerNode:
         rospy.logwarn("attitude controller %s", message)
         return SetBoolResponse(success=success, message=message)
 
+    def _on_heartbeat(self, _msg: Header) -> None:
+        with self.lock:
+            self.supervisor.set_heartbeat(rospy.get_time())
+
+    def _on_tether_lost(self, action: str) -> None:
+        rospy.logerr("attitude controller: TETHER LOST: no heartbeat for %.1f s: disarmed%s; arm again once it "
+                     "is back", self.supervisor.heartbeat_timeout, ", outputs off (limp)" if action == "limp" else "")
+        if action == "limp":  # off the control thread: a service call can wait
+            threading.Thread(target=self._outputs_off, name="tether-limp", daemon=True).start()
+
+    def _outputs_off(self) -> None:
+        try:
+            rospy.wait_for_service("pwm_node/enable", timeout=1.0)
+            rospy.ServiceProxy("pwm_node/enable", SetBool)(False)
+        except (rospy.ROSException, rospy.ServiceException) as exc:
+            rospy.logerr("attitude controller: tether failsafe could not switch the outputs off: %s", exc)
+
     def _on_estop(self, msg: Bool) -> None:
         with self.lock:
             was_armed = self.supervisor.armed
@@ -324,9 +348,12 @@ class AttitudeControllerNode:
             step_stamp = rospy.Time.now()
             now = step_stamp.to_sec()
             self.last_step_time = now
+            tether = self.supervisor.check_tether(now)
             result = self.supervisor.tick(now, now)
             held = bool(result.problem) and result.armed
             self.hold_episodes.update(now, held, hold_kind(result.problem) if held else "")
+        if tether is not None:
+            self._on_tether_lost(tether)
         # Log on a change of the kind of problem (numbers such as the sample age change every step).
         if _problem_kind(result.problem) != _problem_kind(self.last_problem):
             if result.problem:

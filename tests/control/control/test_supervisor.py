@@ -195,3 +195,32 @@ def test_the_estop_disarms_and_refuses_arming_until_reset(supervisor):
     assert "e-stop" in reasons and "pre-dive check" in reasons  # every reason named
     supervisor.set_estop(False)
     assert not supervisor.armed and supervisor.arm(True) == "armed: legs will stroke"
+
+
+def test_the_tether_heartbeat_gates_arming_and_its_loss_disarms(supervisor):
+    watched = ControlSupervisor(supervisor.controller, supervisor.pulse_map, heartbeat_timeout=2.0)
+    run(watched, 0.1)
+    assert "no tether heartbeat" in watched.arm(True) and not watched.armed
+    watched.set_heartbeat(0.05)
+    assert watched.arm(True) == "armed: legs will stroke"
+    assert watched.check_tether(2.0) is None  # 1.95 s without a heartbeat: within the timeout
+    assert watched.check_tether(2.06) == "disarm" and not watched.armed and watched.tether_losses == 1
+    assert watched.check_tether(2.5) is None  # acts once
+    watched.set_heartbeat(3.0)  # it returns: nothing moves until an arm
+    outputs = run(watched, 0.5, start=3.0)
+    assert not watched.armed and all(o.pulse_widths_us is None for o in outputs)
+    assert watched.arm(True) == "armed: legs will stroke"
+
+
+def test_the_tether_failsafe_can_go_limp_and_refuses_bad_settings(supervisor):
+    limp = ControlSupervisor(supervisor.controller, supervisor.pulse_map, heartbeat_timeout=1.0, tether_action="limp")
+    limp.set_heartbeat(0.0)
+    limp.arm(True)
+    assert limp.check_tether(1.5) == "limp"
+    with pytest.raises(ValueError, match="tether_action"):
+        ControlSupervisor(supervisor.controller, supervisor.pulse_map, heartbeat_timeout=1.0, tether_action="swim")
+    with pytest.raises(ValueError, match="heartbeat_timeout"):
+        ControlSupervisor(supervisor.controller, supervisor.pulse_map, heartbeat_timeout=-1.0)
+    unwatched = ControlSupervisor(supervisor.controller, supervisor.pulse_map)
+    unwatched.arm(True)
+    assert unwatched.check_tether(1e6) is None and unwatched.armed
