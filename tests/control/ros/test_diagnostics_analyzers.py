@@ -55,5 +55,7 @@ def test_monitor_launch_starts_the_tether_tools(launch_file):
         return set(out.stdout.split())
 
     assert nodes() == {"/diagnostic_aggregator", "/robot_monitor", "/reconfigure", "/robot_state_publisher",
-                       "/visualization", "/rviz"}
-    assert nodes("rviz:=false", "description:=false", "aggregator:=false") == {"/robot_monitor", "/reconfigure"}
+                       "/visualization", "/rviz", "/heartbeat"}
+    assert nodes("rviz:=false", "description:=false", "aggregator:=false") == {"/robot_monitor", "/reconfigure",
+                                                                                "/heartbeat"}
+    assert "/heartbeat" not in nodes("heartbeat:=false")
