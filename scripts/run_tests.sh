@@ -140,9 +140,21 @@ PYEOF
 }
 # The lock-step closed-loop rostest saves its simulated trajectory here for the determinism check below.
 export UQ_TRAJECTORY_FILE="$RESULTS/closed_loop_trajectory.npz"
+# Each rostest runs once: those the node graph under Python 3.8 runs (tests/python38_graph.sh, below) run
+# there only, with the nodes on the robot's interpreter, when a 3.8 is found; sim_closed_loop runs here too
+# (the determinism check below needs its trajectory).
+ON_PY38=()
+if [ -z "${ROSTEST_ONLY:-}" ] && bash tests/python38.sh --venv-only >/dev/null 2>&1; then
+  mapfile -t ON_PY38 < <(sed -n 's/^DEFAULT_TESTS=(\(.*\))$/\1/p' tests/python38_graph.sh | tr ' ' '\n' \
+                         | grep -vx sim_closed_loop)
+fi
 for t in tests/rostest/${ROSTEST_ONLY:-*}.test; do
   [ -e "$t" ] || continue
   name="$(basename "$t" .test)"
+  if printf '%s\n' "${ON_PY38[@]}" | grep -qx "$name"; then
+    echo "-- rostest $name: runs with the nodes on Python 3.8 (the python38_graph step)"
+    continue
+  fi
   echo "-- rostest $name"
   rm -rf "$ROS_HOME/test_results"
   timeout 900 rostest underwater_quadruped "$name.test" >"$RESULTS/rostest-$name.log" 2>&1
