@@ -100,9 +100,10 @@ if [ -n "${kernels_pid:-}" ] && ! wait "$kernels_pid"; then
   echo "   the kernels' warm-up failed (the tests compile them themselves); last lines of $RESULTS/kernels.log:"
   tail -5 "$RESULTS/kernels.log"
 fi
-# Both cores when pytest-xdist is installed (requirements.txt; not on the robot).
+# Both cores when pytest-xdist is installed (requirements.txt; not on the robot); an idle worker takes
+# tests queued on the other (worksteal), so one long study test does not end the step alone.
 workers=()
-if python -c "import xdist" 2>/dev/null; then workers=(-n 2); fi
+if python -c "import xdist" 2>/dev/null; then workers=(-n 2 --dist worksteal); fi
 
 section "pytest (pure modules)"
 python -m pytest -q -p no:cacheprovider "${workers[@]}" --junitxml="$RESULTS/pytest.xml" tests "$@"
