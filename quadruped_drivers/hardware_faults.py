@@ -12,12 +12,17 @@ pre-dive check. None by default. The faults (YAML, a file or one inline flow map
     swapped_feedback: [[leg1_motor1, leg2_motor1]]  # their feedback wires on each other's ADC inputs
     stuck_feedback_v: {leg4_motor2: 1.2}         # the ADC input reads this constant voltage
     imu_mount_rpy_deg: [0.0, 0.0, 90.0]          # the IMU's real mount relative to the one configured
+    servo_reversed: [leg3_motor2]                # the servo itself turns the other way (its feedback with it)
+    servo_stuck: [leg1_hip]                      # the servo's shaft does not move (stalled, seized)
+    servo_speed_scale: {leg2_motor1: 0.5}        # the servo reaches this fraction of its speed (worn, wet)
 
 The physics: a servo's shaft turns by u = (pulse - neutral_us) / us_per_rad from its centre, and its feedback
 potentiometer sits on the shaft, so it reads the volts the calibration gives for the angle
 neutral + direction u. The joint turns by direction u (minus u when reversed) plus the horn offset. So a
 reversed servo or an offset horn looks right to feedback fitted against the command; only a reference the
-robot's geometry gives (docs/on_the_robot.md) shows it.
+robot's geometry gives (docs/on_the_robot.md) shows it. The servo faults are the servo's own: a servo_reversed
+shaft turns by minus u, a stuck one stays where it is, a slowed one follows at its fraction of the speed; the
+feedback, on the shaft, sees each, so the tracking watch (quadruped_control/control/servo_watch.py) can.
 """
 from __future__ import annotations
 
@@ -33,7 +38,8 @@ from quadruped_common.so3 import quat_multiply, rot_to_quat, rpy_to_rot
 
 __all__ = ["BuiltRobot", "HardwareFaults", "hardware_faults_from_dict", "load_hardware_faults"]
 
-KINDS = ("reversed", "horn_offset_deg", "swapped_pwm", "swapped_feedback", "stuck_feedback_v", "imu_mount_rpy_deg")
+KINDS = ("reversed", "horn_offset_deg", "swapped_pwm", "swapped_feedback", "stuck_feedback_v", "imu_mount_rpy_deg",
+         "servo_reversed", "servo_stuck", "servo_speed_scale")
 
 Pair = Tuple[str, str]
 
@@ -48,6 +54,9 @@ class HardwareFaults:
     swapped_feedback: Tuple[Pair, ...] = ()
     stuck_feedback_v: Tuple[Tuple[str, float], ...] = ()
     imu_mount_rpy_deg: Tuple[float, float, float] = (0.0, 0.0, 0.0)
+    servo_reversed: Tuple[str, ...] = ()
+    servo_stuck: Tuple[str, ...] = ()
+    servo_speed_scale: Tuple[Tuple[str, float], ...] = ()
 
     def __bool__(self) -> bool:
         return self != HardwareFaults()
@@ -61,6 +70,9 @@ class HardwareFaults:
         lines += ["feedback ADC of %s stuck at %.2f V" % item for item in self.stuck_feedback_v]
         if any(self.imu_mount_rpy_deg):
             lines.append("IMU mounted rotated by rpy %s deg" % (list(self.imu_mount_rpy_deg),))
+        lines += ["servo %s turns the other way" % name for name in self.servo_reversed]
+        lines += ["servo %s stuck" % name for name in self.servo_stuck]
+        lines += ["servo %s at %.0f %% of its speed" % (name, 100.0 * scale) for name, scale in self.servo_speed_scale]
         return lines
 
 
@@ -90,21 +102,28 @@ def _per_joint(value: Any, key: str, low: float, high: float) -> Tuple[Tuple[str
                  for name in JOINT_NAMES if name in tree)
 
 
+def _joints(tree: Mapping[str, Any], key: str) -> Tuple[str, ...]:
+    value = tree.get(key, [])
+    if not isinstance(value, list):
+        raise ParameterError("hardware fault '%s' must be a list of joint names, got %r" % (key, value))
+    return tuple(_joint(v, "%s[%d]" % (key, i)) for i, v in enumerate(value))
+
+
 def hardware_faults_from_dict(tree: Optional[Mapping[str, Any]]) -> HardwareFaults:
     """Checked faults from a parsed mapping (None or empty: none); ParameterError naming the key."""
     tree = check_keys({} if tree is None else tree, "", KINDS, what="hardware fault")
-    reversed_ = tree.get("reversed", [])
-    if not isinstance(reversed_, list):
-        raise ParameterError("hardware fault 'reversed' must be a list of joint names, got %r" % (reversed_,))
     rpy = tuple(vector(tree.get("imu_mount_rpy_deg", [0.0, 0.0, 0.0]), "imu_mount_rpy_deg", 3, -180.0, 180.0,
                        what="hardware fault"))
     return HardwareFaults(
-        reversed=tuple(_joint(v, "reversed[%d]" % i) for i, v in enumerate(reversed_)),
+        reversed=_joints(tree, "reversed"),
         horn_offset_deg=_per_joint(tree.get("horn_offset_deg", {}), "horn_offset_deg", -90.0, 90.0),
         swapped_pwm=_pairs(tree.get("swapped_pwm", []), "swapped_pwm"),
         swapped_feedback=_pairs(tree.get("swapped_feedback", []), "swapped_feedback"),
         stuck_feedback_v=_per_joint(tree.get("stuck_feedback_v", {}), "stuck_feedback_v", -0.3, 5.3),
         imu_mount_rpy_deg=(rpy[0], rpy[1], rpy[2]),
+        servo_reversed=_joints(tree, "servo_reversed"),
+        servo_stuck=_joints(tree, "servo_stuck"),
+        servo_speed_scale=_per_joint(tree.get("servo_speed_scale", {}), "servo_speed_scale", 0.05, 1.0),
     )
 
 
@@ -141,6 +160,11 @@ class BuiltRobot:
         self._neutral_us = np.array([j.neutral_us for j in joints])
         self._gain = np.array([j.direction * j.us_per_rad for j in joints])  # us per rad of shaft, signed
         self._mount = np.array([-1.0 if name in faults.reversed else 1.0 for name in JOINT_NAMES])
+        self._turn = np.array([-1.0 if name in faults.servo_reversed else 1.0 for name in JOINT_NAMES])
+        self._stuck_servo = np.array([name in faults.servo_stuck for name in JOINT_NAMES])
+        scales = dict(faults.servo_speed_scale)
+        #: each servo's fraction of its speed (1: as bought)
+        self.speed_scale = np.array([scales.get(name, 1.0) for name in JOINT_NAMES])
         offsets = dict(faults.horn_offset_deg)
         self._horn = np.radians([offsets.get(name, 0.0) for name in JOINT_NAMES])
         self._pwm = _permutation(faults.swapped_pwm)
@@ -151,11 +175,12 @@ class BuiltRobot:
 
     def joint_targets(self, joint_pulses: Sequence[float]) -> np.ndarray:
         """The angle each joint's servo turns to (rad) when the chip sends ``joint_pulses`` (us) on the channels
-        the configuration gives the joints (JOINT_NAMES order); NaN where its servo gets no pulse (limp)."""
+        the configuration gives the joints (JOINT_NAMES order); NaN where its servo gets no pulse (limp) or is
+        stuck (either way it stays where it is)."""
         pulses = np.asarray(joint_pulses, dtype=float)[self._pwm]
-        shaft = self._neutral_angle + (pulses - self._neutral_us) / self._gain
+        shaft = self._neutral_angle + self._turn * (pulses - self._neutral_us) / self._gain
         angles = self._neutral_angle + self._mount * (shaft - self._neutral_angle) + self._horn
-        return np.where(pulses > 0.0, angles, math.nan)
+        return np.where((pulses > 0.0) & ~self._stuck_servo, angles, math.nan)
 
     def feedback_volts(self, joint_angles: Sequence[float]) -> np.ndarray:
         """What each joint's configured ADC input reads (V) with the joints at ``joint_angles`` (rad)."""

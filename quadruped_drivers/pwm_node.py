@@ -10,6 +10,9 @@ Services
                                     ~enable true)
 Publishes
   estop_state     std_msgs/Bool (latched)  true while the e-stop is latched
+  outputs_state   diagnostic_msgs/DiagnosticStatus  5 Hz and on a change: OK when the outputs take commands,
+                                    else ERROR with why (e-stop, disabled, chip not answering); the
+                                    controller's arming check
   diagnostics     watchdog state, clamp, write-error and retry counters, chip resets, command latency
 Parameters
   ~backend (real | sim)  ~bus_socket (sim: the simulated robot's bus bridge)  ~hardware_yaml
@@ -79,6 +82,10 @@ class PwmNode:
         self.estop_pub.publish(Bool(False))
         rospy.Subscriber("estop", Empty, lambda _msg: self._trip("estop topic"), queue_size=10, tcp_nodelay=True)
         rospy.Service("estop", SetBool, self._on_estop)
+        self.state_pub = rospy.Publisher("outputs_state", DiagnosticStatus, queue_size=1)
+        self.state_period = 0.2
+        self.last_state: Optional[str] = None
+        self.last_state_time = -1e9
         rospy.Subscriber("servo_command", ServoCommand, self._on_command, queue_size=1, tcp_nodelay=True)
         self.timer = rospy.Timer(rospy.Duration(period), self._on_timer)
         rospy.loginfo("pwm_node: PCA9685 at 0x%02x on %s bus, %.0f Hz PWM, watchdog %.0f ms",
@@ -136,7 +143,20 @@ class PwmNode:
         if tripped and not was_tripped:
             rospy.logwarn("pwm_node: no servo_command for %.0f ms, outputs in failsafe",
                           self.hardware.watchdog_timeout * 1e3)
+        self._publish_state()
         self.diagnostics.update()
+
+    def _publish_state(self) -> None:
+        """outputs_state at 5 Hz, and at once when it changes."""
+        problem = self.output.not_ready
+        now = time.monotonic()
+        if problem == self.last_state and now - self.last_state_time < self.state_period:
+            return
+        self.last_state, self.last_state_time = problem, now
+        self.state_pub.publish(DiagnosticStatus(
+            level=DiagnosticStatus.ERROR if problem else DiagnosticStatus.OK, name="pwm_node: outputs",
+            message=problem or "outputs enabled, the PCA9685 answering",
+            hardware_id="pca9685@0x%02x" % self.hardware.pca_address))
 
     def _trip(self, source: str) -> None:
         with self.lock:

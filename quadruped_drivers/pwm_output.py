@@ -143,6 +143,7 @@ class ServoPwmOutput:
         self.watchdog_trips = 0
         self._estop = ""
         self._estop_off_pending = False
+        self._io_fault = ""  # the last bus transaction's failure; cleared by the next that succeeds
 
     # --- properties -------------------------------------------------------------------------
     @property
@@ -180,6 +181,20 @@ class ServoPwmOutput:
     def reset_estop(self) -> None:
         """Release the e-stop; the outputs stay off until :meth:`enable`."""
         self._estop = ""
+
+    @property
+    def not_ready(self) -> str:
+        """Why the outputs cannot take the controller's commands now (empty when they can): the e-stop, outputs
+        disabled, or the chip not answering on its last transaction."""
+        if self._estop:
+            return "e-stop latched (%s)" % self._estop
+        if not self._started:
+            return "the PCA9685 is not set up yet"
+        if not self._enabled:
+            return "outputs disabled (pwm_node/enable true)"
+        if self._io_fault:
+            return "the PCA9685 does not answer: %s" % self._io_fault
+        return ""
 
     @property
     def watchdog_tripped(self) -> bool:
@@ -253,11 +268,12 @@ class ServoPwmOutput:
                     self._write(block)
             except OSError as exc:
                 self.write_errors += 1
-                self.last_fault = "LED write failed: %s" % (exc,)
+                self.last_fault = self._io_fault = "LED write failed: %s" % (exc,)
                 self._in_flight = block
                 continue
             self._chip = [tuple(block[1 + 4 * c:5 + 4 * c]) for c in range(self._span)]
             self._in_flight = None
+            self._io_fault = ""
             return True
         return False
 
@@ -410,8 +426,9 @@ class ServoPwmOutput:
                 self._bus.writeto_then_readfrom(self._config.pca_address, bytes([MODE1]), buffer)
         except OSError as exc:
             self.mode_read_errors += 1
-            self.last_fault = "MODE1 read failed: %s" % (exc,)
+            self.last_fault = self._io_fault = "MODE1 read failed: %s" % (exc,)
             return
+        self._io_fault = ""
         mode1, mode2 = buffer
         if mode1 & (MODE1_SLEEP | MODE1_AI | 0x0F) == MODE1_AI and mode2 == MODE2_OUTDRV:
             return
@@ -423,6 +440,7 @@ class ServoPwmOutput:
             self._initialise()
         except PwmOutputError as exc:
             self.last_fault += "; failed: %s" % (exc,)
+            self._io_fault = self.last_fault
             self._next_mode_check = -np.inf  # try again on the next update
             return
         self._applied = np.zeros(self._count)
@@ -456,7 +474,7 @@ class ServoPwmOutput:
                 self._write(bytes([ALL_LED_OFF_H, FULL]))
         except OSError as exc:
             self.write_errors += 1
-            self.last_fault = "all-off write failed: %s" % (exc,)
+            self.last_fault = self._io_fault = "all-off write failed: %s" % (exc,)
             return False
         if self._in_flight is not None:  # a prefix of it may sit in the chip; OFF_H is now full-off anyway
             self._chip = [tuple(self._in_flight[1 + 4 * c:5 + 4 * c]) for c in range(self._span)]

@@ -24,6 +24,7 @@ SCHEMAS = {
     "vn100.yaml": "quadruped_drivers.vn100.settings:VN100_SCHEMA",
     "controller.yaml": "quadruped_control.control.controller_config:CONTROLLER_SCHEMA",
     "simulation.yaml": "quadruped_control.sim.simulation:SIMULATION_SCHEMA",
+    "safety.yaml": "quadruped_control.control.safety_config:SAFETY_SCHEMA",
 }
 _BLOCK = re.compile(r"(<!-- schema: (\S+) -->\n)(.*?)(<!-- end schema -->)", re.S)
 

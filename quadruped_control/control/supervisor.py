@@ -8,6 +8,16 @@ with pytest:
 * Unarmed: the controller is not stepped and no servo command is produced; the PWM driver's command
   watchdog then keeps the outputs in their failsafe. Arming resets the integral and the stroke cycle,
   so an old integral never kicks the legs.
+* Arming is checked (:meth:`ControlSupervisor.arming_checks`): with a :class:`SafetyConfig`, IMU and every
+  joint fresh and plausible, pwm_node's outputs enabled with the chip answering, besides the e-stop, the tether
+  heartbeat and the pre-dive check. An arm asked for while a check fails is refused with every reason, or,
+  asked for at start-up (``armed=True``), waits for the checks to pass.
+* Soft start (with a :class:`SafetyConfig`): once armed, the legs travel from their measured angles to the
+  nominal pose at no more than ``max_joint_speed`` (:class:`~quadruped_control.control.soft_start.JointSpeedLimiter`)
+  before the first stroke, and the integral starts then; a hold's retrace to the nominal pose keeps the same bound.
+* Servo tracking (with a :class:`SafetyConfig`): armed, each joint's feedback is judged against the servo's model
+  run on the commands (:class:`~quadruped_control.control.servo_watch.ServoTrackingWatch`); a joint in ERROR
+  makes the controller hold when ``tracking.hold_on_error`` says so.
 * Armed with a usable IMU sample: one controller step (eq. error .. foot_integration), joint targets
   mapped to pulse widths and clamped to the per-channel limits.
 * Armed with an unusable IMU sample (NaN, non-unit quaternion, stale; see
@@ -29,16 +39,22 @@ from the latest usable joint feedback for telemetry.
 """
 from __future__ import annotations
 
+import dataclasses
 import math
 from dataclasses import dataclass
-from typing import Callable, Dict, Optional, Sequence
+from typing import Callable, Dict, List, Optional, Sequence, Set, Tuple
 
 import numpy as np
 
 from quadruped_common.imu_plausibility import ImplausibleSample, RateChangeCheck, SensorLimits, check_sample
 from quadruped_common.monitoring import time_problem
+from quadruped_common.robot import JOINT_NAMES, LEGS
 from quadruped_common.so3 import quat_to_rot
 from quadruped_control.control.controller import AttitudeController, ControllerOutput, estimate_body_torque
+from quadruped_control.control.safety_config import SafetyConfig
+from quadruped_control.control.servo_watch import ERROR, ServoTrackingWatch
+from quadruped_control.control.soft_start import JointSpeedLimiter
+from quadruped_control.model.kinematics import joint_angles
 
 #: What the tether failsafe does when the heartbeat is lost: stop stroking (the servos hold where they are), or
 #: that and every output off (limp).
@@ -84,14 +100,18 @@ class ControlSupervisor:
     reading is still plausible; ``max_joint_age`` (s): older joint feedback is not used;
     ``require_preflight``: arming is refused until :meth:`set_preflight` reports a passed pre-dive check;
     ``heartbeat_timeout`` (None: not watched): arming needs a tether heartbeat no older than this, and armed, its
-    loss for this long disarms (:meth:`check_tether`, ``tether_action``: disarm, or limp as well).
+    loss for this long disarms (:meth:`check_tether`, ``tether_action``: disarm, or limp as well);
+    ``safety``: the checked arming and the soft start (None: neither, a bare supervisor for tests and fuzzing);
+    ``health_sources``: the fitted hazard watchers (``health/<name>``, :meth:`set_health`): each fresh and not in
+    error to arm, and armed, :meth:`check_health` takes its action (``safety.health_action``) on an error.
     """
 
     def __init__(self, controller: AttitudeController, pulse_map: PulseMap, max_imu_age: float = 0.05,
                  armed: bool = False, imu_limits: Optional[SensorLimits] = None, max_implausible_run: int = 3,
                  joint_margin: float = math.radians(15.0), max_joint_age: float = 0.1,
                  require_preflight: bool = False, heartbeat_timeout: Optional[float] = None,
-                 tether_action: str = "disarm") -> None:
+                 tether_action: str = "disarm", safety: Optional[SafetyConfig] = None,
+                 health_sources: Sequence[str] = ()) -> None:
         if not (math.isfinite(max_imu_age) and max_imu_age > 0):
             raise ValueError("max_imu_age must be a positive number of seconds, got %r" % (max_imu_age,))
         if not (isinstance(max_implausible_run, int) and max_implausible_run >= 1):
@@ -122,11 +142,36 @@ class ControlSupervisor:
         self.last_heartbeat: Optional[float] = None
         self.tether_losses = 0
         self.clock_now = 0.0  # the node's clock at the last tick (the arming gate's heartbeat age)
-        self._armed = bool(armed) and self.arming_refusal() is None
+        self.safety = safety
+        self._limiter = JointSpeedLimiter(safety.max_joint_speed) if safety is not None else None
+        self.tracking: Optional[ServoTrackingWatch] = None
+        if safety is not None:
+            speed = controller.robot.servo_no_load_speed * safety.tracking_speed_scale
+            self.tracking = ServoTrackingWatch(dataclasses.replace(safety.tracking, max_speed=speed), JOINT_NAMES)
+        self.tracking_levels: List[Tuple[str, int, float]] = []
+        self._soft_start_due = False  # armed, the first tick starts the soft start
+        self.soft_starting = False
+        self.last_arm_failure = ""
+        self._was_holding = False
+        robot = controller.robot  # the nominal pose: where every stroke cycle starts and every hold ends
+        self._nominal = np.array([joint_angles(robot.nominal_foot_body(leg), leg, robot) for leg in LEGS]).reshape(12)
+        if health_sources and safety is None:
+            raise ValueError("health_sources need a SafetyConfig (their actions and max age)")
+        self.health_sources = tuple(health_sources)
+        self._health: Dict[str, Tuple[bool, str, float]] = {}  # source -> (in error, message, stamp)
+        self._health_episodes: Set[str] = set()  # sources check_health has reported and that are not well again
+        self.health_actions_taken = 0
+        self._outputs_problem: Optional[str] = None  # pwm_node's outputs_state (None: never received)
+        self._outputs_stamp = -math.inf
         self._imu: Optional[ImuInput] = None
         self._joint_positions: Optional[np.ndarray] = None
         self._joint_velocities: Optional[np.ndarray] = None
         self._joint_stamp: Optional[float] = None
+        self._armed = False
+        #: an arm asked for at start-up waits for the checks (with ``safety``); any disarm cancels it
+        self.arm_pending = bool(armed) and safety is not None
+        if armed and safety is None and self.arming_refusal() is None:
+            self._arm()
         self.ticks = 0
         self.holds = 0
         self.controller_errors = 0
@@ -161,6 +206,7 @@ class ControlSupervisor:
         if not (self._armed and self.watch_heartbeat and self.heartbeat_lost(now)):
             return None
         self._armed = False
+        self.arm_pending = False
         self.tether_losses += 1
         return self.tether_action
 
@@ -169,33 +215,123 @@ class ControlSupervisor:
         self.estop_latched = bool(latched)
         if latched:
             self._armed = False
+            self.arm_pending = False
+
+    def set_outputs_state(self, problem: str, now: float) -> None:
+        """pwm_node's outputs_state at ``now``: empty when the outputs are enabled and the chip answers."""
+        self._outputs_problem = str(problem)
+        self._outputs_stamp = float(now)
+
+    def set_health(self, source: str, error: bool, message: str, now: float) -> None:
+        """``health/<source>``'s status at ``now``: ``error`` (level ERROR) and its message."""
+        self._health[source] = (bool(error), str(message), float(now))
+
+    def health_problem(self, source: str, now: float) -> Optional[str]:
+        """Why ``source`` stops arming: no status yet, its status old, or in error (its message)."""
+        status = self._health.get(source)
+        if status is None:
+            return "no health/%s status yet (is its node running?)" % source
+        error, message, stamp = status
+        assert self.safety is not None
+        age = now - stamp
+        if not age <= self.safety.health_max_age:
+            return "health/%s is %.1f s old (is its node running?)" % (source, age)
+        return (message or "error") if error else None
+
+    def check_health(self, now: float) -> List[Tuple[str, str, str]]:
+        """Armed, each health source newly lost or in error: (source, action, why), once until it is well again.
+        An action ``disarm`` or ``limp`` disarms here (the caller switches the outputs off for limp); ``warn`` only
+        reports."""
+        taken = []
+        for source in self.health_sources:
+            problem = self.health_problem(source, now)
+            if problem is None:
+                self._health_episodes.discard(source)
+                continue
+            if source in self._health_episodes or not self._armed:
+                continue
+            self._health_episodes.add(source)
+            assert self.safety is not None
+            action = self.safety.health_action(source)
+            taken.append((source, action, problem))
+            if action != "warn":
+                self._armed = False
+                self.arm_pending = False
+                self.health_actions_taken += 1
+        return taken
+
+    def arming_checks(self) -> List[Tuple[str, str]]:
+        """Each arming precondition as (name, problem; empty when it holds), at the last tick's clock."""
+        now = self.clock_now
+        checks = [("e-stop", "the e-stop is latched: reset it (rosservice call /estop false) and enable the outputs"
+                   if self.estop_latched else "")]
+        if self.safety is not None:
+            checks.append(("imu", self.imu_problem(now) or ""))
+            checks.append(("joints", self.joint_problem(now) or ""))
+            if self.safety.require_outputs:
+                checks.append(("outputs", self.outputs_problem(now) or ""))
+            checks += [(source, self.health_problem(source, now) or "") for source in self.health_sources]
+        if self.watch_heartbeat:
+            checks.append(("tether", "no tether heartbeat for %.1f s (tether/heartbeat: the monitor launch, or rosrun "
+                           "underwater_quadruped heartbeat_node on the laptop)" % self.heartbeat_timeout
+                           if self.heartbeat_lost(now) else ""))
+        if self.require_preflight:
+            checks.append(("pre-dive check", "" if self.preflight_passed else
+                           "no pre-dive check has passed since the stack started (%s): run the check "
+                           "(docs/on_the_robot.md), or start with require_preflight false"
+                           % (self.preflight_summary or "none has run")))
+        return checks
 
     def arming_refusal(self) -> Optional[str]:
         """Why arming is refused now (every reason, joined), or None."""
-        reasons = []
-        if self.estop_latched:
-            reasons.append("the e-stop is latched: reset it (rosservice call /estop false) and enable the outputs")
-        if self.watch_heartbeat and self.heartbeat_lost(self.clock_now):
-            reasons.append("no tether heartbeat for %.1f s (tether/heartbeat: the monitor launch, or rosrun "
-                           "underwater_quadruped heartbeat_node on the laptop)" % self.heartbeat_timeout)
-        if self.require_preflight and not self.preflight_passed:
-            reasons.append("no pre-dive check has passed since the stack started (%s): run the check "
-                           "(docs/on_the_robot.md), or start with require_preflight false"
-                           % (self.preflight_summary or "none has run"))
-        return "; ".join(reasons) or None
+        return "; ".join("%s: %s" % (name, problem) for name, problem in self.arming_checks() if problem) or None
+
+    def joint_problem(self, now: float) -> Optional[str]:
+        """Why the joint feedback cannot start the legs: missing, stale, or a joint unusable (by name)."""
+        if self._joint_positions is None:
+            return "no joint feedback received yet"
+        if self._joint_stamp is not None:
+            stale = time_problem(self._joint_stamp, now, self.max_joint_age, "joint feedback")
+            if stale:
+                return stale
+        bad = [JOINT_NAMES[i] for i in np.flatnonzero(~np.isfinite(self._joint_positions))]
+        if bad:
+            return "no usable reading (missing or outside the servo range) from %s" % ", ".join(bad)
+        return None
+
+    def outputs_problem(self, now: float) -> Optional[str]:
+        """Why pwm_node's outputs cannot take commands: its state missing, old, or not ready."""
+        if self._outputs_problem is None:
+            return "no outputs_state from pwm_node yet (is it running?)"
+        assert self.safety is not None
+        age = now - self._outputs_stamp
+        if not age <= self.safety.max_outputs_state_age:
+            return "pwm_node's outputs_state is %.1f s old (is it running?)" % age
+        return self._outputs_problem or None
+
+    def _arm(self) -> None:
+        self.controller.reset()
+        self._armed = True
+        self.arm_pending = False
+        self._soft_start_due = self._limiter is not None
+        self.soft_starting = False
+        self._was_holding = False
 
     def arm(self, armed: bool) -> str:
-        """Arm or disarm; returns a message for the caller. Arming starts a fresh stroke cycle; it is refused
-        (the message says why, :meth:`arming_refusal`) while a gate is closed."""
+        """Arm or disarm; returns a message for the caller. Arming starts the soft start, then a fresh stroke
+        cycle; it is refused (the message says why, :meth:`arming_refusal`) while a check fails."""
+        if not armed:
+            self.arm_pending = False
         refusal = self.arming_refusal() if armed and not self._armed else None
         if refusal:
             return "arming refused: " + refusal
         if armed and not self._armed:
-            self.controller.reset()
-            self._armed = True
-            return "armed: legs will stroke"
+            self._arm()
+            return "armed: legs to the nominal pose, then strokes" if self._limiter else "armed: legs will stroke"
         if not armed and self._armed:
             self._armed = False
+            if self.safety is not None and self.safety.disarm_action == "limp":
+                return "disarmed: no servo commands, every output off (limp)"
             return "disarmed: no servo commands, PWM watchdog takes the outputs to failsafe"
         return "already %s" % ("armed" if armed else "disarmed")
 
@@ -250,6 +386,8 @@ class ControlSupervisor:
             v[implausible] = np.nan
         self._joint_positions, self._joint_velocities = p, v
         self._joint_stamp = None if stamp is None else float(stamp)
+        if self.tracking is not None and stamp is not None:
+            self.tracking.feedback(float(stamp), p)
 
     def imu_problem(self, now: float) -> Optional[str]:
         if self.implausible_run >= self.max_implausible_run:
@@ -262,12 +400,27 @@ class ControlSupervisor:
         """One control tick at controller time ``t``; ``now`` is the clock the IMU stamps use."""
         self.ticks += 1
         self.clock_now = now
+        if self.arm_pending and self.arming_refusal() is None:
+            self._arm()
         problem = self.imu_problem(now)
         imu = self._imu
         R = omega = None
+        if self._armed and self._soft_start_due:
+            problem = self._start_soft_start(t) or problem
+        if self.tracking is not None:
+            if not self._armed and self.tracking.active:
+                self.tracking.stop()
+            self.tracking_levels = self.tracking.levels(now)
+            failing = [(name, rms) for name, level, rms in self.tracking_levels if level == ERROR]
+            if failing and self.safety is not None and self.safety.tracking_hold and problem is None:
+                problem = "servo tracking: %s off the servo model by RMS %s" % (
+                    ", ".join(name for name, _ in failing), ", ".join("%.0f deg" % math.degrees(r) for _, r in failing))
         if not self._armed:
             output = self.controller.hold(t, "disarmed")
             problem = "disarmed"
+        elif self.soft_starting:
+            output = self.controller.hold(t, "soft start")
+            problem = "soft start: legs to the nominal pose at <= %.2f rad/s" % self._limiter.max_speed
         elif problem is not None:
             output = self.controller.hold(t, problem)
         else:
@@ -285,11 +438,47 @@ class ControlSupervisor:
         pulses = targets = None
         if self._armed:
             targets = np.asarray(output.joint_targets, dtype=float).reshape(12)
+            if self._limiter is not None:
+                targets = self._limit(t, targets, holding=bool(problem))
+            if self.tracking is not None:
+                self.tracking.command(t, targets)
             pulses = np.asarray(self.pulse_map(targets), dtype=float)
         return SupervisorOutput(output=output, armed=self._armed, problem=problem or "",
                                 pulse_widths_us=pulses, joint_targets=targets,
                                 torque_estimated=self._estimated_torque(R, omega, now),
                                 imu_stamp=None if imu is None else imu.stamp)
+
+    def _start_soft_start(self, t: float) -> Optional[str]:
+        """The first armed tick: the limiter starts at the measured angles, unless every joint is already within
+        the tolerance of the nominal pose. Returns why it cannot start (the arm is then withdrawn), or None."""
+        assert self._limiter is not None and self.safety is not None
+        self._soft_start_due = False
+        start = self._joint_positions
+        if start is None or not np.all(np.isfinite(start)):
+            self._armed = False
+            self.last_arm_failure = "the joint feedback the soft start starts from was lost"
+            return self.last_arm_failure
+        if self.tracking is not None:
+            self.tracking.start(t, start)
+        if np.max(np.abs(start - self._nominal)) <= self.safety.soft_start_tolerance:
+            self._limiter.engaged = False  # close enough: the strokes start at once
+            return None
+        self._limiter.engage(t, start)
+        self.soft_starting = True
+        return None
+
+    def _limit(self, t: float, targets: np.ndarray, holding: bool) -> np.ndarray:
+        """Apply the joint speed bound: engaged through the soft start and from the start of each hold until the
+        targets are caught up. The soft start's end resets the controller: the integral starts then."""
+        assert self._limiter is not None
+        if holding and not self._was_holding and not self.soft_starting:
+            self._limiter.engage(t)  # a hold begins: its retrace from the last targets keeps the bound
+        self._was_holding = holding and not self.soft_starting
+        limited = self._limiter.step(t, targets)
+        if self.soft_starting and not self._limiter.engaged:
+            self.soft_starting = False
+            self.controller.reset()
+        return limited
 
     def _estimated_torque(self, R: Optional[np.ndarray], omega: Optional[np.ndarray], now: float) -> np.ndarray:
         """eq. (torque_leg) from measured joint motion; NaN when an input is missing, stale or invalid."""

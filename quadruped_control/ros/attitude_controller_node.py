@@ -13,21 +13,28 @@ Subscribes
   preflight/result       diagnostic_msgs/DiagnosticStatus  the pre-dive check's verdict (latched; OK: passed)
   estop_state            std_msgs/Bool      pwm_node's e-stop: true disarms at once and refuses arming until reset
   tether/heartbeat       std_msgs/Header    the laptop's heartbeat (heartbeat_node); watched with ~heartbeat_timeout
+  outputs_state          diagnostic_msgs/DiagnosticStatus  pwm_node's outputs (OK: they take commands); an arming check
+  health/<source>        diagnostic_msgs/DiagnosticStatus  each of ~health_sources (depth, battery, leak): fresh and
+                                                         not ERROR to arm; armed, its ERROR takes safety.yaml's action
 Publishes
   servo_command          underwater_quadruped/ServoCommand   12 pulse widths (us) + joint targets,
                                                              header.stamp = the IMU sample's stamp
   controller_state       underwater_quadruped/ControllerState  telemetry of every step (stamp: step time)
   diagnostics            diagnostic_msgs/DiagnosticArray
 Services
-  ~arm                   std_srvs/SetBool   legs move only when armed; refused (success false, the reason in
-                                            the message) while ~require_preflight and no check has passed
+  ~arm                   std_srvs/SetBool   legs move only when armed; refused (success false, every reason in
+                                            the message and in the "arming" diagnostic) while a check fails
+                                            (ControlSupervisor.arming_checks); armed, the soft start first
 Parameters
-  ~gain_set (experiment) ~controller_yaml ~robot_yaml ~hardware_yaml ~calibration_yaml ~vn100_yaml
-                         (package config/; vn100.yaml gives the IMU's plausible ranges)
+  ~gain_set (experiment) ~controller_yaml ~robot_yaml ~hardware_yaml ~calibration_yaml ~vn100_yaml ~safety_yaml
+                         (package config/; vn100.yaml gives the IMU's plausible ranges, safety.yaml the soft
+                         start, the outputs check and the disarm action)
   ~loop_rate (100 Hz)    ~imu_rate (200 Hz: the loop steps on every imu_rate/loop_rate-th sample, so
                           the command leaves right after the sample that caused it)
-  ~imu_max_age (0.05 s)  ~arm_on_start (false: applies to the first start only)   ~setpoint_rpy_deg ([0, 0, 0])
+  ~imu_max_age (0.05 s)  ~arm_on_start (false: arms once the checks pass; the first start only)
+  ~setpoint_rpy_deg ([0, 0, 0])
   ~require_preflight (false; robot.launch: true): arming waits for a passed pre-dive check
+  ~health_sources ([]: the fitted hazard watchers, e.g. [depth, battery])
   ~heartbeat_timeout (0: not watched; robot.launch: 2 s): arming needs the tether heartbeat, and armed, none for
                          this long disarms; ~tether_action (disarm | limp: the outputs off too)
   ~starts                the node's starts since the launch file set it to 0: a respawned node (start > 1)
@@ -62,6 +69,7 @@ from quadruped_common.so3 import quat_to_rot, rot_to_quat, rpy_to_rot
 from quadruped_common.ros.diagnostics import Updater
 from quadruped_control.control.controller import AttitudeController
 from quadruped_control.control.controller_config import TUNABLE_BOUNDS, apply_tunables, load_controller_config
+from quadruped_control.control.safety_config import load_safety_config
 from quadruped_control.control.supervisor import ControlSupervisor
 from quadruped_control.model.params import load_robot_params
 from quadruped_drivers.calibration import load_servo_calibration
@@ -128,14 +136,20 @@ class AttitudeControllerNode:
                           self.starts - 1, rospy.resolve_name("~arm"))
         require_preflight = bool(rospy.get_param("~require_preflight", False))
         heartbeat_timeout = float(rospy.get_param("~heartbeat_timeout", 0.0))  # 0: not watched
+        self.safety = load_safety_config(_optional_path("~safety_yaml"))
         self.supervisor = ControlSupervisor(controller, make_pulse_map(calibration, hardware),
                                             max_imu_age=float(rospy.get_param("~imu_max_age", 0.05)),
                                             armed=arm_on_start, imu_limits=imu_limits,
                                             require_preflight=require_preflight,
                                             heartbeat_timeout=heartbeat_timeout or None,
-                                            tether_action=str(rospy.get_param("~tether_action", "disarm")))
-        if arm_on_start and not self.supervisor.armed:
-            rospy.logwarn("attitude controller: ~arm_on_start refused: %s", self.supervisor.arming_refusal())
+                                            tether_action=str(rospy.get_param("~tether_action", "disarm")),
+                                            safety=self.safety,
+                                            health_sources=list(rospy.get_param("~health_sources", [])))
+        if arm_on_start:
+            rospy.loginfo("attitude controller: ~arm_on_start: arming once every check passes")
+        self.was_armed = False
+        self.reported_arm_failure = ""
+        self.reported_tracking: dict = {}
         self.reported_imu_drops = 0
         self.lock = threading.Lock()
         self.imu_count = 0
@@ -162,6 +176,8 @@ class AttitudeControllerNode:
         self.diagnostics.setHardwareID("none")  # no hardware of its own (diagnostic_updater convention)
         self.diagnostics.add("control loop", self._diagnose_loop)
         self.diagnostics.add("inputs", self._diagnose_inputs)
+        self.diagnostics.add("arming", self._diagnose_arming)
+        self.diagnostics.add("servo tracking", self._diagnose_tracking)
 
         # Seed the reconfigure parameters from the chosen gain set: the server reads them at start-up
         # instead of the .cfg defaults, so gain_set:=experiment is not overwritten by the defaults.
@@ -177,6 +193,9 @@ class AttitudeControllerNode:
         rospy.Subscriber("preflight/result", DiagnosticStatus, self._on_preflight, queue_size=1)
         rospy.Subscriber("estop_state", Bool, self._on_estop, queue_size=1, tcp_nodelay=True)
         rospy.Subscriber("tether/heartbeat", Header, self._on_heartbeat, queue_size=1, tcp_nodelay=True)
+        rospy.Subscriber("outputs_state", DiagnosticStatus, self._on_outputs_state, queue_size=1)
+        for source in self.supervisor.health_sources:
+            rospy.Subscriber("health/" + source, DiagnosticStatus, self._on_health, callback_args=source, queue_size=1)
         rospy.Subscriber("joint_states", JointState, self._on_joint_states, queue_size=5)
         rospy.Subscriber("attitude_setpoint", QuaternionStamped, self._on_setpoint, queue_size=1)
         rospy.Subscriber("attitude_setpoint_rpy_deg", Vector3Stamped, self._on_setpoint_rpy, queue_size=1)
@@ -261,10 +280,22 @@ class AttitudeControllerNode:
 
     def _on_arm(self, request) -> SetBoolResponse:
         with self.lock:
+            was_armed = self.supervisor.armed
             message = self.supervisor.arm(bool(request.data))
             success = self.supervisor.armed == bool(request.data)
         rospy.logwarn("attitude controller %s", message)
+        if was_armed and not request.data and self.safety.disarm_action == "limp":
+            threading.Thread(target=self._outputs_off, args=("disarm",), name="disarm-limp", daemon=True).start()
         return SetBoolResponse(success=success, message=message)
+
+    def _on_health(self, msg: DiagnosticStatus, source: str) -> None:
+        with self.lock:
+            self.supervisor.set_health(source, msg.level >= DiagnosticStatus.ERROR, msg.message, rospy.get_time())
+
+    def _on_outputs_state(self, msg: DiagnosticStatus) -> None:
+        with self.lock:
+            self.supervisor.set_outputs_state("" if msg.level == DiagnosticStatus.OK else msg.message,
+                                              rospy.get_time())
 
     def _on_heartbeat(self, _msg: Header) -> None:
         with self.lock:
@@ -274,14 +305,15 @@ class AttitudeControllerNode:
         rospy.logerr("attitude controller: TETHER LOST: no heartbeat for %.1f s: disarmed%s; arm again once it "
                      "is back", self.supervisor.heartbeat_timeout, ", outputs off (limp)" if action == "limp" else "")
         if action == "limp":  # off the control thread: a service call can wait
-            threading.Thread(target=self._outputs_off, name="tether-limp", daemon=True).start()
+            threading.Thread(target=self._outputs_off, args=("tether failsafe",), name="tether-limp",
+                             daemon=True).start()
 
-    def _outputs_off(self) -> None:
+    def _outputs_off(self, why: str) -> None:
         try:
             rospy.wait_for_service("pwm_node/enable", timeout=1.0)
             rospy.ServiceProxy("pwm_node/enable", SetBool)(False)
         except (rospy.ROSException, rospy.ServiceException) as exc:
-            rospy.logerr("attitude controller: tether failsafe could not switch the outputs off: %s", exc)
+            rospy.logerr("attitude controller: %s could not switch the outputs off: %s", why, exc)
 
     def _on_estop(self, msg: Bool) -> None:
         with self.lock:
@@ -349,14 +381,44 @@ class AttitudeControllerNode:
             now = step_stamp.to_sec()
             self.last_step_time = now
             tether = self.supervisor.check_tether(now)
+            health = self.supervisor.check_health(now)
+            pending = self.supervisor.arm_pending
             result = self.supervisor.tick(now, now)
-            held = bool(result.problem) and result.armed
+            soft_start = result.problem.startswith("soft start")  # a start, not a hold
+            held = bool(result.problem) and result.armed and not soft_start
             self.hold_episodes.update(now, held, hold_kind(result.problem) if held else "")
+            armed_now, was_armed, self.was_armed = result.armed, self.was_armed, result.armed
+            failure = self.supervisor.last_arm_failure
+            tracking = {name: level for name, level, _ in self.supervisor.tracking_levels if level}
         if tether is not None:
             self._on_tether_lost(tether)
+        for source, action, why in health:
+            if action == "warn":
+                rospy.logwarn("attitude controller: health/%s: %s (safety.yaml: warn only)", source, why)
+                continue
+            rospy.logerr("attitude controller: health/%s: %s: disarmed%s; arm again once it is well", source, why,
+                         ", outputs off (limp)" if action == "limp" else "")
+            if action == "limp":
+                threading.Thread(target=self._outputs_off, args=("health/" + source,), daemon=True).start()
+        if armed_now and not was_armed and pending:  # an arm asked for at start-up, now that the checks pass
+            rospy.logwarn("attitude controller armed (~arm_on_start): %s", result.problem or "strokes start")
+        if tracking != self.reported_tracking:
+            for name, level in sorted(tracking.items()):
+                if level > self.reported_tracking.get(name, 0):
+                    (rospy.logerr if level >= DiagnosticStatus.ERROR else rospy.logwarn)(
+                        "attitude controller: servo tracking: %s %s: its feedback is off the servo model", name,
+                        "ERROR" if level >= DiagnosticStatus.ERROR else "WARN")
+            self.reported_tracking = tracking
+            self.diagnostics.force_update()  # at once, not at the next period
+        if failure != self.reported_arm_failure:
+            self.reported_arm_failure = failure
+            if failure:
+                rospy.logerr("attitude controller: arm withdrawn: %s", failure)
         # Log on a change of the kind of problem (numbers such as the sample age change every step).
         if _problem_kind(result.problem) != _problem_kind(self.last_problem):
-            if result.problem:
+            if soft_start:
+                rospy.loginfo("attitude controller: %s", result.problem)
+            elif result.problem:
                 rospy.logwarn("attitude controller holding the safe pose: %s", result.problem)
             elif self.last_problem:
                 rospy.loginfo("attitude controller stroking again (was: %s)", self.last_problem)
@@ -407,7 +469,9 @@ class AttitudeControllerNode:
         rate = self.loop_monitor.rate(now)
         jitter = self.jitter.summary(1e3)
         compute = self.step_time.summary(1e3)
-        if self.last_problem and self.supervisor.armed:
+        if self.last_problem.startswith("soft start") and self.supervisor.armed:
+            stat.summary(DiagnosticStatus.OK, "armed, %s" % self.last_problem)
+        elif self.last_problem and self.supervisor.armed:
             stat.summary(DiagnosticStatus.WARN, "holding safe pose: %s" % self.last_problem)
         elif rate < 0.9 * self.loop_rate:
             stat.summary(DiagnosticStatus.WARN, "loop at %.1f Hz, below %.0f Hz" % (rate, self.loop_rate))
@@ -427,6 +491,45 @@ class AttitudeControllerNode:
         stat.add("stale-IMU hold episodes", str(self.hold_episodes.episodes_of(STALE_IMU)))
         stat.add("time held [s]", "%.3f" % self.hold_episodes.time_held)
         stat.add("controller errors", str(self.supervisor.controller_errors))
+        return stat
+
+    def _diagnose_arming(self, stat: DiagnosticStatusWrapper) -> DiagnosticStatusWrapper:
+        with self.lock:
+            checks = self.supervisor.arming_checks()
+            armed, pending, soft = self.supervisor.armed, self.supervisor.arm_pending, self.supervisor.soft_starting
+        failing = ["%s: %s" % (name, problem) for name, problem in checks if problem]
+        if armed:
+            stat.summary(DiagnosticStatus.OK, "armed, soft start" if soft else "armed")
+        elif failing:
+            stat.summary(DiagnosticStatus.WARN, "arming refused: " + "; ".join(failing))
+        else:
+            stat.summary(DiagnosticStatus.OK, "ready to arm")
+        stat.add("arm pending (asked at start)", str(pending))
+        for name, problem in checks:
+            stat.add(name, problem or "ok")
+        return stat
+
+    def _diagnose_tracking(self, stat: DiagnosticStatusWrapper) -> DiagnosticStatusWrapper:
+        with self.lock:
+            watch = self.supervisor.tracking
+            levels = list(self.supervisor.tracking_levels)
+            largest = watch.largest_rms.copy() if watch is not None else None
+            active = watch is not None and watch.active
+        bound = self.safety.tracking.bound
+        failing = [(name, level, rms) for name, level, rms in levels if level > DiagnosticStatus.OK]
+        if not active:
+            stat.summary(DiagnosticStatus.OK, "not armed: not judged")
+        elif failing:
+            worst = max(level for _, level, _ in failing)
+            stat.summary(worst, "%s off the servo model (RMS %s; bound %.1f deg)" % (
+                ", ".join(name for name, _, _ in failing),
+                ", ".join("%.1f deg" % math.degrees(rms) for _, _, rms in failing), math.degrees(bound)))
+        else:
+            stat.summary(DiagnosticStatus.OK, "every joint follows its command")
+        for i, (name, level, rms) in enumerate(levels):
+            stat.add(name, "%s, RMS %.2f deg, largest since arming %.2f deg" % (
+                ("OK", "WARN", "ERROR")[level], math.degrees(rms) if math.isfinite(rms) else float("nan"),
+                math.degrees(largest[i]) if largest is not None else float("nan")))
         return stat
 
     def _diagnose_inputs(self, stat: DiagnosticStatusWrapper) -> DiagnosticStatusWrapper:

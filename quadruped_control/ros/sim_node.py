@@ -105,6 +105,8 @@ class SimNode:
         self.calibration = load_servo_calibration(optional("~calibration_yaml"))
         faults = load_hardware_faults(optional("~hardware_faults"))
         self.built = BuiltRobot(self.calibration, faults)  # the robot as built: its wires and mounts
+        self.slowed_targets: Optional[np.ndarray] = None
+        self.servo_speed = self.robot.servo_no_load_speed
         for line in faults.describe():
             rospy.logwarn("sim_node: hardware fault (unknown to the stack's configuration): %s", line)
         rate = float(rospy.get_param("~physics_rate", 100.0))
@@ -317,6 +319,19 @@ class SimNode:
 
     # ---- physics step ----------------------------------------------------------------------------
 
+    def _slowed(self, commanded: np.ndarray) -> np.ndarray:
+        """A servo slowed by a hardware fault: its target moves at no more than its fraction of the servo speed,
+        which the servo model then follows; the others' targets pass unchanged."""
+        scale = self.built.speed_scale
+        if np.all(scale >= 1.0):
+            return commanded
+        if self.slowed_targets is None:
+            self.slowed_targets = self.plant.joint_positions.reshape(12).copy()
+        step = scale * self.servo_speed * self.dt
+        self.slowed_targets = np.where(scale < 1.0, self.slowed_targets
+                                       + np.clip(commanded - self.slowed_targets, -step, step), commanded)
+        return self.slowed_targets.copy()
+
     def step(self, stamp: Optional[float] = None) -> None:
         """One plant step from the chip's pulse widths; ``stamp``: simulated time of the new state
         (lock-step), else the ROS clock now."""
@@ -324,6 +339,7 @@ class SimNode:
             widths = np.asarray(self.fake.pulse_widths_us(), dtype=float)
         targets = self.built.joint_targets(widths)  # NaN: that servo gets no pulse and holds where it is
         self.commanded = np.where(np.isnan(targets), self.plant.joint_positions.reshape(12), targets)
+        self.commanded = self._slowed(self.commanded)
         try:
             state = self.plant.step(self.commanded.reshape(4, 3), self.dt)
         except (SimulationError, ValueError) as exc:

@@ -30,6 +30,7 @@ import numpy as np
 from quadruped_common.config import ParameterError, load_config, lookup
 from quadruped_common.jit import jitable, kernel
 from quadruped_common.schema import Param, Schema
+from quadruped_control.model.servo import rate_limited_lag_step
 from quadruped_control.sim.plants.rigid_body import check_dt
 
 ArrayLike = Union[Sequence[float], Sequence[Sequence[float]], np.ndarray]
@@ -222,40 +223,6 @@ def loaded_speed(max_speed: float, error: float, load: float, stall_torque: floa
         return max_speed
     fraction = 1.0 - opposing / stall_torque
     return max_speed * (fraction if fraction > 1e-6 else 1e-6)
-
-
-@jitable
-def rate_limited_lag_step(q: float, command: float, max_speed: float, time_constant: float, dt: float) -> float:
-    """One joint of :class:`RateLimitedServo` after ``dt`` s with ``command`` held: the exact solution of
-    dq/dt = clip((q_cmd - q) / T, -w_max, w_max).
-
-    With e = q_cmd - q the joint runs at w_max for t_sat = max(0, (|e| - w_max T) / w_max), then the
-    error decays as exp(-t / T) from |e| <= w_max T; T <= 1e-9 dt is a pure rate limiter (no overflow
-    in dt / T). On floats: twelve joints per step are faster than a dozen small numpy operations. A NaN
-    command or angle gives NaN.
-    """
-    error = command - q
-    if error != error:
-        return error
-    if time_constant <= 1e-9 * dt:
-        step = max_speed * dt
-        if error > 0.0:
-            return q + (error if error < step else step)
-        if error < 0.0:
-            return q - (-error if -error < step else step)
-        return q
-    magnitude = error if error >= 0.0 else -error
-    knee = max_speed * time_constant  # |e| below which the lag is linear
-    t_saturated = (magnitude - knee) / max_speed if magnitude > knee else 0.0
-    if t_saturated >= dt:
-        new_magnitude = magnitude - max_speed * dt
-    else:
-        new_magnitude = (magnitude if magnitude < knee else knee) * math.exp(-(dt - t_saturated) / time_constant)
-    if error > 0.0:
-        return command - new_magnitude
-    if error < 0.0:
-        return command + new_magnitude
-    return command
 
 
 @kernel

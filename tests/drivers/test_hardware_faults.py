@@ -74,7 +74,26 @@ def test_rotated_imu_reports_gravity_in_its_own_axes():
     assert np.allclose(quat_to_rot(q), rpy_to_rot(0.0, 0.0, math.pi / 2))
 
 
+def test_servo_faults_show_in_the_feedback():
+    faults = load_hardware_faults("{servo_reversed: [leg3_motor2], servo_stuck: [leg1_hip], "
+                                  "servo_speed_scale: {leg2_motor1: 0.5}}")
+    robot = BuiltRobot(CAL, faults)
+    angles = NEUTRAL + math.radians(10.0)
+    true = robot.joint_targets(CAL.angles_to_pulses(angles))
+    assert math.degrees(true[J("leg3_motor2")] - NEUTRAL[J("leg3_motor2")]) == pytest.approx(-10.0)
+    assert math.isnan(true[J("leg1_hip")])  # stuck: it stays where it is
+    # the potentiometer is on the shaft: the feedback reads where the reversed servo went, not the command
+    held = np.where(np.isnan(true), NEUTRAL, true)  # the stuck joint where it was
+    assert math.degrees(CAL.volts_to_angles(robot.feedback_volts(held))[J("leg3_motor2")]
+                        - NEUTRAL[J("leg3_motor2")]) == pytest.approx(-10.0)
+    assert robot.speed_scale[J("leg2_motor1")] == 0.5 and np.sum(robot.speed_scale < 1.0) == 1
+    assert faults.describe() == ["servo leg3_motor2 turns the other way", "servo leg1_hip stuck",
+                                 "servo leg2_motor1 at 50 % of its speed"]
+
+
 @pytest.mark.parametrize("tree, message", [
+    ({"servo_speed_scale": {"leg1_hip": 0.0}}, "servo_speed_scale.leg1_hip"),
+    ({"servo_stuck": "leg1_hip"}, "servo_stuck"),
     ({"reversed": ["leg9_hip"]}, "reversed\\[0\\]"),
     ({"swapped_pwm": [["leg1_hip", "leg1_hip"]]}, "two joints"),
     ({"swapped_pwm": [["leg1_hip", "leg2_hip"], ["leg2_hip", "leg3_hip"]]}, "no other pair"),

@@ -342,3 +342,29 @@ def test_estop_whose_write_fails_is_repeated_until_the_outputs_are_off():
     clock.t += 0.01
     pwm.update()
     assert np.all(fake.pulse_widths_us() == 0.0) and pwm.estop_reason == "bus glitch"
+
+
+def test_not_ready_names_why_the_outputs_cannot_take_commands():
+    fake, clock, pwm = make(start=False)
+    assert pwm.not_ready == "the PCA9685 is not set up yet"
+    pwm.start()
+    assert pwm.not_ready == ""
+    pwm.disable()
+    assert pwm.not_ready.startswith("outputs disabled")
+    pwm.enable()
+    pwm.command(np.full(12, 1500.0))
+    fake.bus.inject_fault(HW.pca_address, "oserror", count=pwm.write_attempts)
+    pwm.command(np.full(12, 1600.0))  # every attempt fails: the chip does not answer
+    assert pwm.not_ready.startswith("the PCA9685 does not answer: LED write failed")
+    clock.t += 0.01
+    pwm.update()  # the pending write goes through: answering again
+    assert pwm.not_ready == ""
+    fake.bus.inject_fault(HW.pca_address, "oserror", count=1 + pwm.write_attempts)
+    clock.t += 0.2
+    pwm.update()  # the MODE1 check and the watchdog's failsafe write fail
+    assert pwm.not_ready.startswith("the PCA9685 does not answer: ")
+    clock.t += 0.2
+    pwm.update()
+    assert pwm.not_ready == ""
+    pwm.estop("test")
+    assert pwm.not_ready == "e-stop latched (test)"

@@ -1,7 +1,8 @@
 #!/usr/bin/env python3
 """rostest: the attitude controller killed with SIGKILL while armed comes back (its supervisor restarts it) disarmed.
 
-Sequence: armed at start-up (arm:=true) and stroking; SIGKILL; the respawned process publishes
+The drivers' joint_states and outputs_state come from stand-ins (driver_stand_ins.py), so that the arming checks
+pass. Sequence: armed at start-up (arm:=true) once the checks pass, and stroking; SIGKILL; the respawned process publishes
 controller_state with armed false and no servo_command for 3 s, counts the restart in its diagnostics;
 an arm command makes it stroke again; a second kill brings it back disarmed again.
 """
@@ -20,6 +21,7 @@ from diagnostic_msgs.msg import DiagnosticArray
 from sensor_msgs.msg import Imu
 from std_srvs.srv import SetBool
 
+from driver_stand_ins import DriverStandIns
 from underwater_quadruped.msg import ControllerState, ServoCommand
 
 NODE = "/attitude_controller"
@@ -39,9 +41,12 @@ class ControllerRestartTest(unittest.TestCase):
         rospy.Subscriber("diagnostics", DiagnosticArray, self.on_diagnostics, queue_size=50)
         self.stop = threading.Event()
         threading.Thread(target=self.publish_imu, daemon=True).start()
+        self.stand_ins = DriverStandIns()
+        self.stand_ins.start()
 
     def tearDown(self):
         self.stop.set()
+        self.stand_ins.stop()
 
     def publish_imu(self):
         rate = rospy.Rate(200)

@@ -1,7 +1,9 @@
 #!/usr/bin/env python3
 """rostest: safety behaviour of the attitude controller node, with IMU samples from this test.
 
-Sequence: unarmed -> no servo_command at all; armed with a good IMU -> stroking; NaN quaternion ->
+Sequence: unarmed -> no servo_command at all; arming refused, with the reasons in the answer and in the
+"arming" diagnostic, while the joints and pwm_node's outputs_state are missing; with them (published by this
+test: the legs at the nominal pose, the outputs ready) armed with a good IMU -> stroking; NaN quaternion ->
 safe pose (targets frozen), hold reason and an ERROR diagnostic; good again -> stroking resumes;
 non-unit quaternion -> hold; IMU silent -> stale hold from the fallback timer, node still alive;
 disarmed -> servo commands stop.
@@ -19,6 +21,7 @@ from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus
 from sensor_msgs.msg import Imu
 from std_srvs.srv import SetBool
 
+from driver_stand_ins import DriverStandIns
 from underwater_quadruped.msg import ControllerState, ServoCommand
 
 
@@ -34,6 +37,7 @@ class ControllerSafetyTest(unittest.TestCase):
         self.states = []
         self.diagnostics = []
         self.imu_pub = rospy.Publisher("imu/data", Imu, queue_size=10)
+        self.stand_ins = DriverStandIns()  # started once the refusal without them is seen
         rospy.Subscriber("servo_command", ServoCommand, self.on_command, queue_size=200)
         rospy.Subscriber("controller_state", ControllerState, self.on_state, queue_size=200)
         rospy.Subscriber("diagnostics", DiagnosticArray, self.on_diagnostics, queue_size=50)
@@ -45,6 +49,7 @@ class ControllerSafetyTest(unittest.TestCase):
 
     def tearDown(self):
         self.stop.set()
+        self.stand_ins.stop()
 
     def publish_imu(self):
         rate = rospy.Rate(200)
@@ -98,7 +103,21 @@ class ControllerSafetyTest(unittest.TestCase):
         self.assertEqual(commands, [], "servo commands while unarmed")
         self.assertTrue(states and all(not s.armed for _, s in states))
 
-        # 2. Armed with a good IMU (level body, 30 deg roll setpoint): the legs stroke.
+        # 2. Without joint feedback and pwm_node's outputs_state, arming is refused with both reasons.
+        answer = self.arm(True)
+        self.assertFalse(answer.success)
+        self.assertIn("joints: no joint feedback received yet", answer.message)
+        self.assertIn("outputs: no outputs_state from pwm_node yet", answer.message)
+        self.assertNotIn("imu:", answer.message)
+        _, _, diagnostics = self.window(2.5)
+        arming = [d for _, d in diagnostics if d.name.endswith("arming")]
+        self.assertTrue(arming and arming[-1].level == DiagnosticStatus.WARN
+                        and "joints: " in arming[-1].message and "outputs: " in arming[-1].message,
+                        "no arming diagnostic naming the reasons: %r" % (arming[-1:],))
+        self.stand_ins.start()
+        rospy.sleep(0.5)
+
+        # 3. Armed with a good IMU (level body, 30 deg roll setpoint): the legs stroke.
         self.assertTrue(self.arm(True).success)
         commands, states, _ = self.window(3.0)
         self.assertGreater(len(commands), 200, "expected ~100 Hz servo commands when armed")
@@ -107,24 +126,24 @@ class ControllerSafetyTest(unittest.TestCase):
         self.assertGreater(np.max(np.ptp(targets, axis=0)), math.radians(5.0), "no stroking when armed")
         self.assertTrue(any(1 in s.pair_phase for _, s in states), "no power stroke seen")
 
-        # 3. NaN quaternion: safe pose, reason, ERROR diagnostic, node alive.
+        # 4. NaN quaternion: safe pose, reason, ERROR diagnostic, node alive.
         self.mode = "nan"
         commands, states, diagnostics = self.window(3.5)
         self.assert_holding(states, commands, "non-finite")
         self.assertTrue(any(d.level == DiagnosticStatus.ERROR and "non-finite" in d.message
                             for _, d in diagnostics), "no ERROR diagnostic for the NaN IMU")
 
-        # 4. Good again: stroking resumes.
+        # 5. Good again: stroking resumes.
         self.mode = "good"
         commands, states, _ = self.window(2.5)
         self.assertTrue(all(not s.holding for _, s in states[len(states) // 2:]), "did not resume")
 
-        # 5. Non-unit quaternion: hold.
+        # 6. Non-unit quaternion: hold.
         self.mode = "nonunit"
         commands, states, _ = self.window(3.5)
         self.assert_holding(states, commands, "quaternion norm")
 
-        # 6. IMU silent (after good samples): the fallback timer keeps the node ticking and holding.
+        # 7. IMU silent (after good samples): the fallback timer keeps the node ticking and holding.
         self.mode = "good"
         rospy.sleep(1.0)
         self.mode = "silent"
@@ -132,7 +151,7 @@ class ControllerSafetyTest(unittest.TestCase):
         self.assert_holding(states, commands, "stale")
         self.assertGreater(len(states), 100, "controller stopped ticking without IMU samples")
 
-        # 7. Disarm: no more servo commands.
+        # 8. Disarm: no more servo commands.
         self.mode = "good"
         self.assertTrue(self.arm(False).success)
         rospy.sleep(0.2)

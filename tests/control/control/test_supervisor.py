@@ -6,10 +6,13 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
+from quadruped_common.robot import JOINT_NAMES
 from quadruped_common.so3 import rot_to_quat, rpy_to_rot
 from quadruped_control.control.controller import AttitudeController
 from quadruped_control.control.controller_config import load_controller_config
+from quadruped_control.control.safety_config import SafetyConfig
 from quadruped_control.control.supervisor import ControlSupervisor
+from quadruped_control.model.kinematics import joint_angles
 from quadruped_control.model.params import load_robot_params
 
 LOW, HIGH = 500.0, 2500.0
@@ -169,7 +172,7 @@ def test_an_imu_rate_spike_inside_the_range_is_dropped_and_counted(supervisor):
 def test_arming_waits_for_a_passed_preflight_when_required(supervisor):
     gated = ControlSupervisor(supervisor.controller, supervisor.pulse_map, require_preflight=True)
     message = gated.arm(True)
-    assert not gated.armed and message.startswith("arming refused: no pre-dive check has passed")
+    assert not gated.armed and message.startswith("arming refused: pre-dive check: no pre-dive check has passed")
     assert "none has run" in message
     gated.set_preflight(False, "FAILED: channels")
     assert not gated.armed and "FAILED: channels" in gated.arm(True)
@@ -224,3 +227,218 @@ def test_the_tether_failsafe_can_go_limp_and_refuses_bad_settings(supervisor):
     unwatched = ControlSupervisor(supervisor.controller, supervisor.pulse_map)
     unwatched.arm(True)
     assert unwatched.check_tether(1e6) is None and unwatched.armed
+
+
+# ---- checked arming and the soft start (a SafetyConfig given, as the node does) --------------------------------
+
+SAFETY = SafetyConfig(max_joint_speed=1.0, soft_start_tolerance=0.05)
+
+
+def nominal(robot):
+    return np.array([joint_angles(robot.nominal_foot_body(leg), leg, robot) for leg in (1, 2, 3, 4)]).reshape(12)
+
+
+@pytest.fixture
+def checked(supervisor):
+    return ControlSupervisor(supervisor.controller, pulse_map, safety=SAFETY, heartbeat_timeout=2.0,
+                             require_preflight=True)
+
+
+def feed(supervisor, t, joints=None, outputs="", skip=()):
+    """Every input fresh at ``t`` (the legs at ``joints``, default the nominal pose) but those in ``skip``."""
+    if "imu" not in skip:
+        supervisor.set_imu(LEVEL, (0.0, 0.0, 0.0), t)
+    if "joints" not in skip:
+        q = nominal(supervisor.controller.robot) if joints is None else joints
+        supervisor.set_joint_feedback(q, np.zeros(12), t)
+    if "outputs" not in skip:
+        supervisor.set_outputs_state(outputs, t)
+    if "tether" not in skip:
+        supervisor.set_heartbeat(t)
+    if "pre-dive check" not in skip:
+        supervisor.set_preflight(True, "passed")
+
+
+def run_fed(supervisor, seconds, start, joints=None):
+    """Tick at 100 Hz with every input fresh; the joint feedback follows the targets (ideal servos) unless given."""
+    outputs = []
+    for k in range(int(round(seconds * 100))):
+        t = start + 0.01 * k
+        previous = outputs[-1].joint_targets if outputs and outputs[-1].joint_targets is not None else None
+        feed(supervisor, t, joints if joints is not None else previous)
+        outputs.append(supervisor.tick(t, t))
+    return outputs
+
+
+def test_with_every_input_fresh_the_checked_supervisor_arms(checked):
+    feed(checked, 1.0)
+    checked.tick(1.0, 1.0)
+    assert checked.arming_refusal() is None and checked.arm(True).startswith("armed") and checked.armed
+
+
+@pytest.mark.parametrize("missing, reason", [
+    ("imu", "imu: no IMU sample received yet"),
+    ("joints", "joints: no joint feedback received yet"),
+    ("outputs", "outputs: no outputs_state from pwm_node yet"),
+    ("tether", "tether: no tether heartbeat for 2.0 s"),
+    ("pre-dive check", "pre-dive check: no pre-dive check has passed"),
+])
+def test_each_input_missing_refuses_arming_on_its_own_with_its_reason(checked, missing, reason):
+    feed(checked, 1.0, skip=(missing,))
+    checked.tick(1.0, 1.0)
+    refusal = checked.arming_refusal()
+    assert refusal.startswith(reason) and ";" not in refusal, refusal
+    assert checked.arm(True) == "arming refused: " + refusal and not checked.armed
+    assert [name for name, problem in checked.arming_checks() if problem] == [missing]
+
+
+def test_stale_or_bad_inputs_refuse_arming_each_named(checked):
+    feed(checked, 1.0)
+    checked.set_imu(LEVEL, (0.0, 0.0, 0.0), 0.5)  # 0.5 s old
+    checked.tick(1.0, 1.0)
+    assert checked.arming_refusal().startswith("imu: ") and "old" in checked.arming_refusal()
+    feed(checked, 2.0)
+    checked.set_joint_feedback(nominal(checked.controller.robot), np.zeros(12), 1.5)
+    checked.tick(2.0, 2.0)
+    assert checked.arming_refusal().startswith("joints: joint feedback")
+    q = nominal(checked.controller.robot)
+    q[4] = 10.0  # leg 2's knee reads far outside its servo range
+    feed(checked, 3.0, joints=q)
+    checked.tick(3.0, 3.0)
+    assert checked.arming_refusal() == ("joints: no usable reading (missing or outside the servo range) from "
+                                        + JOINT_NAMES[4])
+    feed(checked, 4.0, outputs="outputs disabled")
+    checked.tick(4.0, 4.0)
+    assert checked.arming_refusal() == "outputs: outputs disabled"
+    feed(checked, 5.0)
+    checked.tick(6.5, 6.5)  # pwm_node silent for 1.5 s (and everything else old too)
+    assert "pwm_node's outputs_state is 1.5 s old" in checked.arming_refusal()
+    checked.set_estop(True)
+    assert checked.arming_refusal().startswith("e-stop: the e-stop is latched")
+
+
+def test_the_soft_start_travels_at_the_bound_then_strokes_with_a_fresh_integral(checked):
+    robot = checked.controller.robot
+    start = nominal(robot)
+    start[[0, 5, 10]] += np.array([0.5, -0.3, 0.2])  # three joints off the nominal pose
+    feed(checked, 1.0, joints=start)
+    checked.tick(1.0, 1.0)
+    assert checked.arm(True).startswith("armed: legs to the nominal pose")
+    travel = run_fed(checked, 0.7, 1.01, joints=start)  # the legs still read where they started
+    targets = np.array([o.joint_targets for o in travel])
+    np.testing.assert_allclose(targets[0], start)  # the first command: where the legs are
+    end = next(k for k, o in enumerate(travel) if not o.problem.startswith("soft start"))
+    assert 50 <= end <= 52  # 0.5 rad at 1 rad/s: 50 ticks (and float rounding)
+    assert np.max(np.abs(np.diff(targets[:end], axis=0))) <= 1.0 * 0.01 + 1e-12  # 1 rad/s at 100 Hz
+    np.testing.assert_allclose(targets[end - 1], nominal(robot), atol=1e-12)
+    assert np.linalg.norm(travel[end].output.state.integral) < 0.02  # the integral starts after the travel
+    strokes = run_fed(checked, 3.0, 1.71)
+    assert all(o.problem == "" for o in strokes) and stroke_amplitude(strokes) > math.radians(5.0)
+
+
+def test_legs_within_the_tolerance_start_stroking_at_once(checked):
+    start = nominal(checked.controller.robot) + 0.04
+    feed(checked, 1.0, joints=start)
+    checked.tick(1.0, 1.0)
+    checked.arm(True)
+    first = run_fed(checked, 1.0, 1.01)
+    assert first[0].problem == "" and not checked.soft_starting
+
+
+def test_arming_again_after_a_disarm_mid_stroke_starts_softly_from_where_the_legs_are(checked):
+    feed(checked, 1.0)
+    checked.tick(1.0, 1.0)
+    checked.arm(True)
+    strokes = run_fed(checked, 2.3, 1.01)
+    held = strokes[-1].joint_targets  # mid-stroke
+    assert np.max(np.abs(held - nominal(checked.controller.robot))) > 0.1
+    assert checked.arm(False).startswith("disarmed")
+    feed(checked, 3.5, joints=held)
+    checked.tick(3.5, 3.5)
+    checked.arm(True)
+    again = run_fed(checked, 1.0, 3.51, joints=held)
+    travel = [o.joint_targets for o in again if o.problem.startswith("soft start")]
+    assert len(travel) > 10 and again[0].problem.startswith("soft start")
+    assert np.max(np.abs(np.diff(np.array([held] + travel), axis=0))) <= 0.01 + 1e-12
+
+
+def test_a_holds_retrace_keeps_the_bound(checked):
+    feed(checked, 1.0)
+    checked.tick(1.0, 1.0)
+    checked.arm(True)
+    strokes = run_fed(checked, 2.3, 1.01)
+    last = strokes[-1].joint_targets
+    stale = []
+    for k in range(300):  # the IMU stops; joints and outputs stay fresh
+        t = 3.31 + 0.01 * k
+        checked.set_joint_feedback(stale[-1].joint_targets if stale else last, np.zeros(12), t)
+        checked.set_outputs_state("", t)
+        checked.set_heartbeat(t)
+        stale.append(checked.tick(t, t))
+    assert all("stale" in o.problem for o in stale[10:])
+    targets = np.array([last] + [o.joint_targets for o in stale])
+    assert np.max(np.abs(np.diff(targets, axis=0))) <= 0.01 + 1e-12
+    np.testing.assert_allclose(targets[-1], nominal(checked.controller.robot), atol=1e-9)
+
+
+def test_an_arm_asked_at_start_waits_for_the_checks_and_a_disarm_cancels_it(supervisor):
+    pending = ControlSupervisor(supervisor.controller, pulse_map, armed=True, safety=SAFETY)
+    assert not pending.armed and pending.arm_pending
+    pending.tick(0.5, 0.5)
+    assert not pending.armed
+    feed(pending, 1.0)
+    pending.tick(1.0, 1.0)
+    assert pending.armed and not pending.arm_pending
+    cancelled = ControlSupervisor(supervisor.controller, pulse_map, armed=True, safety=SAFETY)
+    cancelled.arm(False)
+    feed(cancelled, 1.0)
+    cancelled.tick(1.0, 1.0)
+    assert not cancelled.armed
+
+
+def test_a_limp_disarm_says_so(supervisor):
+    limp = ControlSupervisor(supervisor.controller, pulse_map, safety=SafetyConfig(disarm_action="limp"))
+    feed(limp, 1.0)
+    limp.tick(1.0, 1.0)
+    limp.arm(True)
+    assert limp.arm(False) == "disarmed: no servo commands, every output off (limp)"
+
+
+def test_health_sources_gate_arming_and_their_errors_take_their_actions(supervisor):
+    safety = SafetyConfig(health_actions=(("depth", "warn"), ("battery", "disarm"), ("leak", "limp")))
+    watched = ControlSupervisor(supervisor.controller, pulse_map, safety=safety,
+                                health_sources=("depth", "battery", "leak"))
+    feed(watched, 1.0)
+    watched.tick(1.0, 1.0)
+    assert [name for name, problem in watched.arming_checks() if problem] == ["depth", "battery", "leak"]
+    assert "depth: no health/depth status yet" in watched.arm(True)
+    for source in ("depth", "battery", "leak"):
+        watched.set_health(source, False, "ok", 1.0)
+    watched.set_health("battery", True, "motors pack 6.1 V: below its critical 6.4 V", 1.0)
+    assert watched.arming_refusal() == "battery: motors pack 6.1 V: below its critical 6.4 V"
+    watched.set_health("battery", False, "ok", 1.0)
+    assert watched.arm(True).startswith("armed")
+    # depth lost: reported once, the robot keeps stroking (warn)
+    watched.set_health("depth", True, "no reading for 1.2 s", 1.5)
+    assert watched.check_health(1.5) == [("depth", "warn", "no reading for 1.2 s")]
+    assert watched.check_health(1.6) == [] and watched.armed
+    # a leak status that stops coming counts as lost after health.max_age: its action (limp) disarms
+    for source in ("depth", "battery"):
+        watched.set_health(source, False, "ok", 3.0)
+    assert watched.check_health(3.0) == []  # 2.0 s: not yet
+    assert watched.check_health(3.1) == [("leak", "limp", "health/leak is 2.1 s old (is its node running?)")]
+    assert not watched.armed and watched.health_actions_taken == 1
+    assert watched.check_health(3.2) == []  # once
+    with pytest.raises(ValueError, match="health_sources need a SafetyConfig"):
+        ControlSupervisor(supervisor.controller, pulse_map, health_sources=("depth",))
+
+
+def test_a_battery_error_while_armed_disarms(supervisor):
+    watched = ControlSupervisor(supervisor.controller, pulse_map, safety=SAFETY, health_sources=("battery",))
+    feed(watched, 1.0)
+    watched.set_health("battery", False, "ok", 1.0)
+    watched.tick(1.0, 1.0)
+    assert watched.arm(True).startswith("armed")
+    watched.set_health("battery", True, "electronics pack 3.3 V/cell: critical", 1.2)
+    assert watched.check_health(1.2) == [("battery", "disarm", "electronics pack 3.3 V/cell: critical")]
+    assert not watched.armed
