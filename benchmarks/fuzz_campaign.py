@@ -4,12 +4,14 @@
     .venv/bin/python benchmarks/fuzz_campaign.py --part i2c     # 36,000 faulty I2C cycles + failsafe trials
     .venv/bin/python benchmarks/fuzz_campaign.py --part controller  # 100,000 random controller inputs
     .venv/bin/python benchmarks/fuzz_campaign.py --part config  # 600 mutated config files
+    .venv/bin/python benchmarks/fuzz_campaign.py --part depth   # 2 x 100,000 faulty MS5837 cycles (Bar30, Bar02)
     .venv/bin/python benchmarks/fuzz_campaign.py                # every part
 
 Each part is a function in :data:`PARTS` returning (figures, failures); the script exits 1 if any part
 reports a failure. The code under test is the drivers' own (pure core, register-level fakes);
-the campaign logic lives in ``quadruped_drivers/vn100/fuzz.py`` and ``quadruped_drivers/fault_scenarios.py``
-so the tests (``tests/drivers/test_fault_scenarios.py``) run the same code at a CI-sized count.
+the campaign logic lives in ``quadruped_drivers/vn100/fuzz.py``, ``quadruped_drivers/fault_scenarios.py`` and
+``quadruped_drivers/ms5837_fuzz.py`` so the tests (``tests/drivers/test_fault_scenarios.py``,
+``tests/drivers/test_ms5837.py``) run the same code at a CI-sized count.
 """
 from __future__ import annotations
 
@@ -39,7 +41,9 @@ from quadruped_control.model.params import load_robot_params  # noqa: E402
 from quadruped_control.sim.config_files import LOADERS  # noqa: E402
 from quadruped_drivers.calibration import load_servo_calibration  # noqa: E402
 from quadruped_drivers.fault_scenarios import PERIOD, failsafe_latency, faulty_cycles  # noqa: E402
+from quadruped_drivers import ms5837_fuzz  # noqa: E402
 from quadruped_drivers.hardware_config import load_hardware_config  # noqa: E402
+from quadruped_drivers.ms5837 import Model  # noqa: E402
 from quadruped_drivers.vn100 import fuzz  # noqa: E402
 
 Result = Tuple[Dict[str, object], List[str]]
@@ -364,8 +368,20 @@ def part_config(args: argparse.Namespace) -> Result:
                                 "rejected_without_key"))
 
 
+def part_depth(args: argparse.Namespace) -> Result:
+    """Faulty 10 ms cycles of the MS5837 driver against its register-level fake, both models."""
+    stats: Dict[str, object] = {}
+    failures: List[str] = []
+    for model in (Model.BA30, Model.BA02):
+        result = ms5837_fuzz.run(args.depth_cycles, seed=args.seed, model=model)
+        stats.update({"%s %s" % (model.value, key): value for key, value in result.items()})
+        failures += ["%s %s = %s" % (model.value, key, result[key]) for key in ms5837_fuzz.MUST_BE_ZERO if result[key]]
+    return stats, failures
+
+
 PARTS: Dict[str, Callable[[argparse.Namespace], Result]] = {"vn100": part_vn100, "i2c": part_i2c,
-                                                          "controller": part_controller, "config": part_config}
+                                                          "controller": part_controller, "config": part_config,
+                                                          "depth": part_depth}
 
 
 def main(argv: List[str] = None) -> int:  # type: ignore[assignment]
@@ -379,6 +395,7 @@ def main(argv: List[str] = None) -> int:  # type: ignore[assignment]
     parser.add_argument("--trials", type=int, default=500, help="i2c: failsafe trials per failsafe and failure rate")
     parser.add_argument("--inputs", type=int, default=100_000, help="controller: random inputs")
     parser.add_argument("--files", type=int, default=600, help="config: mutated config files")
+    parser.add_argument("--depth-cycles", type=int, default=100_000, help="depth: faulty cycles per MS5837 model")
     args = parser.parse_args(argv)
     failed = False
     for name in args.part or sorted(PARTS):

@@ -1,4 +1,6 @@
-"""Typed loader for ``config/hardware.yaml``: I2C bus, addresses, mux channels, servo channel order.
+"""Typed loader for ``config/hardware.yaml``: I2C bus, addresses, mux channels, servo channel order, and the
+safety sensors: the MS5837 depth sensor (``depth``) and the LiPo packs read on spare ADS1115 inputs
+(``batteries``).
 
 The paper (section "Electronics") reads twelve ADS1115 ADCs for the servo feedback and drives the
 twelve servos through PWM at 100 Hz control rate; this file fixes how those parts sit on the Jetson's
@@ -11,15 +13,18 @@ clash or a value out of range raises :class:`~quadruped_common.config.ParameterE
 """
 from __future__ import annotations
 
+import dataclasses
+
 import math
 from dataclasses import dataclass
-from typing import Any, Dict, Mapping, Optional, Tuple
+from typing import Any, Dict, Mapping, Optional, Sequence, Tuple
 
 import numpy as np
 
 from quadruped_common.config import ParameterError, load_config
 from quadruped_common.robot import JOINT_NAMES
 from quadruped_common.schema import Param, Schema
+from quadruped_drivers.ms5837_datasheet import ADDRESS as MS5837_ADDRESS, CONVERSION_TIME_MAX, OSR_OFFSET, Model
 
 #: Failsafe actions of a PWM channel when the command watchdog trips.
 FAILSAFE_ACTIONS: Tuple[str, ...] = ("hold", "neutral", "off")
@@ -44,6 +49,21 @@ def _ads1115_range(value: float) -> Optional[str]:
 def _ads1115_rate(value: int) -> Optional[str]:
     return None if value in ADS1115_RATES else "not an ADS1115 rate %s" % sorted(ADS1115_RATES)
 
+
+def _ms5837_osr(value: int) -> Optional[str]:
+    return None if value in OSR_OFFSET else "not an MS5837 oversampling ratio %s" % sorted(OSR_OFFSET)
+
+
+#: ``depth.model`` -> the MS5837 variant (Blue Robotics Bar30 = MS5837-30BA, Bar02 = MS5837-02BA).
+DEPTH_MODELS: Dict[str, Model] = {"bar30": Model.BA30, "bar02": Model.BA02}
+#: Highest OSR each variant has a conversion command for: the 30BA's command table ("COMMANDS", Figure 1 of
+#: REV C2 12/2019) ends at OSR 4096; the 02BA's lists 8192.
+DEPTH_MAX_OSR: Dict[str, int] = {"bar30": 4096, "bar02": 8192}
+#: The two LiPo packs (``batteries.packs.<pack>``): servos (2S) and electronics (4S).
+BATTERY_PACKS: Tuple[str, ...] = ("motors", "electronics")
+#: A LiPo cell's highest voltage (fully charged 4.20 V, with margin): the divider must keep a full pack inside
+#: the ADC's range, and a reading above it is implausible (wrong cell count or divider).
+LIPO_MAX_CELL_V = 4.35
 
 #: One joint's entry in ``joints``, in the order of :class:`JointHardware`.
 _JOINT_FIELDS = ("pwm_channel", "mux_channel", "adc_address", "adc_input", "min_us", "max_us", "neutral_us",
@@ -99,7 +119,67 @@ HARDWARE_SCHEMA = Schema("hardware.yaml", (
           **_PULSE),
     Param("joints.<joint>.failsafe", "", "on a command timeout: hold the last pulse, go to neutral_us, or off "
           "(servo limp)", kind="string", choices=FAILSAFE_ACTIONS),
-), names={"joint": JOINT_NAMES}, what="hardware parameter")
+    Param("depth.fitted", "", "an MS5837 depth sensor (Blue Robotics Bar30 / Bar02) is wired to the bus; false: "
+          "ms5837_node reports it not fitted and sim_node puts no fake sensor on its bus", kind="boolean"),
+    Param("depth.model", "", "bar30 (MS5837-30BA, 0..30 bar) or bar02 (MS5837-02BA, 0.3..1.2 bar: 10 m of water)",
+          kind="string", choices=tuple(DEPTH_MODELS), default="bar30", source="estimate"),
+    Param("depth.address", "", "7-bit I2C address (the data sheets' 1110110x = 0x76, the only one the chip has; "
+          "not the mux's, the PCA9685's or 0x70)", 0x08, 0x77, kind="integer", default=MS5837_ADDRESS),
+    Param("depth.mux_channel", "", "-1: on the Jetson's I2C bus directly; 0..7: behind the TCA9548A on that channel "
+          "(refused while servo_feedback_node owns the mux: two processes switching one mux read each other's "
+          "channels)", -1, 7, kind="integer", default=-1),
+    Param("depth.rate_hz", "Hz", "readings per second (each is a D1 and a D2 conversion: 2 x the OSR's conversion "
+          "time must fit in 0.9 / (2 rate))", 0.0, 50.0, low_open=True, default=10.0, source="choice"),
+    Param("depth.osr", "", "oversampling ratio of both conversions, one of 256, 512, 1024, 2048, 4096, 8192 "
+          "(bar02 only)", 256, 8192, kind="integer", default=4096, check=_ms5837_osr, source="choice"),
+    Param("depth.fluid_density_kg_m3", "kg/m^3", "density of the water above the sensor: depth = (p - surface) / "
+          "(rho g); fresh water 997 (the tank), sea water about 1025", 900.0, 1100.0, default=997.0,
+          source="estimate"),
+    Param("depth.surface_pa", "Pa", "absolute pressure at the water surface (standard atmosphere 101325; "
+          "weather moves it by +-3 kPa = +-0.3 m)", 80000.0, 110000.0, default=101325.0, source="estimate"),
+    Param("depth.zero_at_start", "", "true: the mean of the first fresh readings is the surface pressure (power "
+          "the robot at the surface), kept on the parameter server for a restarted node; false: surface_pa",
+          kind="boolean", default=False, source="choice"),
+    Param("depth.zero_max_offset_pa", "Pa", "zero_at_start refuses a start pressure further than this from "
+          "surface_pa (the robot already under water) and keeps surface_pa", 0.0, 20000.0, default=3000.0,
+          source="choice"),
+    Param("depth.pressure_stddev_pa", "Pa", "standard deviation of a pressure reading (the published variances; "
+          "the 30BA data sheet's front page: 0.2 mbar = 20 Pa resolution at its best OSR)", 0.0, 10000.0,
+          low_open=True, default=30.0, source="estimate"),
+    Param("depth.timeout_s", "s", "no fresh reading for this long: health/depth ERROR (at least 2 / rate_hz)",
+          0.0, 60.0, low_open=True, default=1.0, source="choice"),
+    Param("depth.warn_window_s", "s", "a reading dropped (not fresh) this recently: health/depth WARN", 0.0, 600.0,
+          default=2.0, source="choice"),
+    Param("depth.max_rate_m_s", "m/s", "a depth change faster than this (+ 5 cm) since the last good reading is "
+          "not fresh until 3 readings agree (the driver's rate check)", 0.0, 20.0, low_open=True, default=2.0,
+          source="choice"),
+    Param("batteries.rate_hz", "Hz", "each fitted pack is read this often; each read lends one feedback cycle of "
+          "its ADS1115 (that joint then repeats its previous angle once)", 0.0, 10.0, low_open=True, default=2.0,
+          source="choice"),
+    Param("batteries.stale_after_s", "s", "a fitted pack without a reading for this long: health/battery ERROR "
+          "(at least 2 / rate_hz)", 0.0, 60.0, low_open=True, default=2.0, source="choice"),
+    Param("batteries.confirm_readings", "", "readings in a row below a threshold before the level gets worse (a "
+          "single sag under a load peak is not a flat pack)", 1, 20, kind="integer", default=2, source="choice"),
+    Param("batteries.packs.<pack>.fitted", "", "the pack's voltage divider is wired to the ADS1115 input below",
+          kind="boolean"),
+    Param("batteries.packs.<pack>.mux_channel", "", "TCA9548A channel of the ADS1115 (one of the joints' ADCs)",
+          0, 7, kind="integer", source="estimate"),
+    Param("batteries.packs.<pack>.adc_address", "", "address of that ADS1115, 0x48..0x4B", 0x48, 0x4B,
+          kind="integer", source="estimate"),
+    Param("batteries.packs.<pack>.adc_input", "", "its spare input (not the joint's, not the other pack's)", 0, 3,
+          kind="integer", source="estimate"),
+    Param("batteries.packs.<pack>.divider_ratio", "", "pack voltage / ADC input voltage; a full pack (cells x "
+          "4.35 V) must stay inside adc.full_scale_v and below the ADS1115's supply", 1.0, 100.0,
+          source="estimate"),
+    Param("batteries.packs.<pack>.cells", "", "LiPo cells in series (2S motors, 4S electronics)", 1, 12,
+          kind="integer"),
+    Param("batteries.packs.<pack>.warn_cell_v", "V", "mean cell voltage below which the pack is WARN", 3.0, 4.2,
+          default=3.6, source="choice"),
+    Param("batteries.packs.<pack>.critical_cell_v", "V", "mean cell voltage below which the pack is ERROR (below "
+          "warn_cell_v)", 2.8, 4.2, default=3.4, source="choice"),
+    Param("batteries.packs.<pack>.hysteresis_v", "V", "a level is left only once the cell voltage is this far above "
+          "its threshold", 0.0, 0.5, default=0.1, source="choice"),
+), names={"joint": JOINT_NAMES, "pack": BATTERY_PACKS}, what="hardware parameter")
 
 
 @dataclass(frozen=True)
@@ -116,6 +196,62 @@ class JointHardware:
     max_us: float
     neutral_us: float
     failsafe: str
+
+
+@dataclass(frozen=True)
+class DepthSensorHardware:
+    """The MS5837 depth sensor: where it sits, how it is read, how pressure becomes depth (``depth.*``)."""
+
+    fitted: bool = False
+    model: str = "bar30"
+    address: int = MS5837_ADDRESS
+    mux_channel: int = -1
+    rate_hz: float = 10.0
+    osr: int = 4096
+    fluid_density: float = 997.0
+    surface_pa: float = 101325.0
+    zero_at_start: bool = False
+    zero_max_offset_pa: float = 3000.0
+    pressure_stddev_pa: float = 30.0
+    timeout_s: float = 1.0
+    warn_window_s: float = 2.0
+    max_rate_m_s: float = 2.0
+
+    @property
+    def ms5837_model(self) -> Model:
+        """The MS5837 variant of :attr:`model`."""
+        return DEPTH_MODELS[self.model]
+
+
+@dataclass(frozen=True)
+class BatteryPackHardware:
+    """One LiPo pack read through a divider on a spare ADS1115 input (``batteries.packs.<pack>``)."""
+
+    name: str
+    fitted: bool
+    mux_channel: int
+    adc_address: int
+    adc_input: int
+    divider_ratio: float
+    cells: int
+    warn_cell_v: float = 3.6
+    critical_cell_v: float = 3.4
+    hysteresis_v: float = 0.1
+
+
+@dataclass(frozen=True)
+class BatteryHardware:
+    """The packs (fitted or not, in :data:`BATTERY_PACKS` order) and how often they are read (``batteries.*``)."""
+
+    packs: Tuple[BatteryPackHardware, ...] = ()
+    rate_hz: float = 2.0
+    stale_after_s: float = 2.0
+    confirm_readings: int = 2
+
+    @property
+    def fitted(self) -> Tuple[BatteryPackHardware, ...]:
+        """The packs that are wired."""
+        return tuple(pack for pack in self.packs if pack.fitted)
 
 
 @dataclass(frozen=True)
@@ -142,6 +278,8 @@ class HardwareConfig:
     #: is not plausible (a servo cannot move faster), unless ``adc_jump_confirm_readings`` readings agree.
     adc_jump_margin_deg: float = 3.0
     adc_jump_confirm_readings: int = 3
+    depth: DepthSensorHardware = DepthSensorHardware()
+    batteries: BatteryHardware = BatteryHardware()
 
     @property
     def pwm_channels(self) -> np.ndarray:
@@ -247,6 +385,8 @@ def hardware_config_from_dict(tree: Mapping[str, Any]) -> HardwareConfig:
         joints.append(JointHardware(name=name, index=index, pwm_channel=pwm_channel, mux_channel=mux_channel,
                                     adc_address=adc_address, adc_input=adc_input, min_us=min_us, max_us=max_us,
                                     neutral_us=neutral_us, failsafe=failsafe))
+    depth = _depth_sensor(v, mux_address, pca_address)
+    batteries = _batteries(v, joints, v["adc.full_scale_v"])
     return HardwareConfig(
         i2c_bus=v["i2c.bus"],
         bus_lock_timeout=v["i2c.lock_timeout_s"],
@@ -265,7 +405,91 @@ def hardware_config_from_dict(tree: Mapping[str, Any]) -> HardwareConfig:
         adc_plausible_margin_deg=v["adc.plausible_margin_deg"],
         adc_jump_margin_deg=v["adc.jump_margin_deg"],
         adc_jump_confirm_readings=v["adc.jump_confirm_readings"],
+        depth=depth,
+        batteries=batteries,
     )
+
+
+def _depth_sensor(v: Mapping[str, Any], mux_address: int, pca_address: int) -> DepthSensorHardware:
+    """``depth.*`` checked against each other and the bus (ParameterError naming the key)."""
+    depth = DepthSensorHardware(
+        fitted=v["depth.fitted"], model=v["depth.model"], address=v["depth.address"],
+        mux_channel=v["depth.mux_channel"], rate_hz=v["depth.rate_hz"], osr=v["depth.osr"],
+        fluid_density=v["depth.fluid_density_kg_m3"], surface_pa=v["depth.surface_pa"],
+        zero_at_start=v["depth.zero_at_start"], zero_max_offset_pa=v["depth.zero_max_offset_pa"],
+        pressure_stddev_pa=v["depth.pressure_stddev_pa"], timeout_s=v["depth.timeout_s"],
+        warn_window_s=v["depth.warn_window_s"], max_rate_m_s=v["depth.max_rate_m_s"])
+    if depth.osr > DEPTH_MAX_OSR[depth.model]:
+        raise ParameterError("hardware parameter 'depth.osr' = %d: the %s has no conversion command above OSR %d"
+                             % (depth.osr, depth.model, DEPTH_MAX_OSR[depth.model]))
+    busy = 2.0 * depth.rate_hz * CONVERSION_TIME_MAX[depth.osr]
+    if busy > 0.9:
+        raise ParameterError("hardware parameter 'depth.rate_hz' = %g: two conversions at OSR %d take %.1f ms, "
+                             "more than 0.9 / (2 rate) = %.1f ms; lower the rate or the OSR"
+                             % (depth.rate_hz, depth.osr, 2e3 * CONVERSION_TIME_MAX[depth.osr],
+                                450.0 / depth.rate_hz))
+    if depth.timeout_s < 2.0 / depth.rate_hz:
+        raise ParameterError("hardware parameter 'depth.timeout_s' = %g must be at least 2 / depth.rate_hz = %g s"
+                             % (depth.timeout_s, 2.0 / depth.rate_hz))
+    if depth.mux_channel >= 0:
+        raise ParameterError("hardware parameter 'depth.mux_channel' = %d: behind the TCA9548A is not supported: "
+                             "ms5837_node and servo_feedback_node would both switch the mux, each reading between "
+                             "the other's select and read; wire the sensor to the Jetson's bus (-1)"
+                             % depth.mux_channel)
+    if depth.address in (mux_address, pca_address, PCA9685_ALLCALL_ADDRESS):
+        raise ParameterError("hardware parameter 'depth.address' = 0x%02x clashes with the mux, the PCA9685 or its "
+                             "all-call address 0x70 on the Jetson's bus" % depth.address)
+    return depth
+
+
+def _batteries(v: Mapping[str, Any], joints: Sequence[JointHardware], full_scale_v: float) -> BatteryHardware:
+    """``batteries.*``: each pack on a spare input of one of the joints' ADS1115s, inside its range."""
+    host = {(joint.mux_channel, joint.adc_address): joint for joint in joints}
+    used: Dict[Tuple[int, int, int], str] = {}
+    packs = []
+    for name in BATTERY_PACKS:
+        key = "batteries.packs.%s" % name
+        pack = BatteryPackHardware(name=name, **{field: v["%s.%s" % (key, field)] for field in (
+            "fitted", "mux_channel", "adc_address", "adc_input", "divider_ratio", "cells", "warn_cell_v",
+            "critical_cell_v", "hysteresis_v")})
+        if pack.critical_cell_v >= pack.warn_cell_v:
+            raise ParameterError("hardware parameter '%s.critical_cell_v' (%g) must be below warn_cell_v (%g)"
+                                 % (key, pack.critical_cell_v, pack.warn_cell_v))
+        # checked fitted or not: the simulated robot fits every declared pack (with_batteries_fitted)
+        joint = host.get((pack.mux_channel, pack.adc_address))
+        if joint is None:
+            raise ParameterError("hardware parameter '%s.adc_address': no joint's ADS1115 at 0x%02x on mux channel "
+                                 "%d (a pack is read on a spare input of one)" % (key, pack.adc_address,
+                                                                                 pack.mux_channel))
+        if pack.adc_input == joint.adc_input:
+            raise ParameterError("hardware parameter '%s.adc_input' = %d is %s's feedback input"
+                                 % (key, pack.adc_input, joint.name))
+        place = (pack.mux_channel, pack.adc_address, pack.adc_input)
+        if place in used:
+            raise ParameterError("hardware parameter '%s.adc_input': input %d of the ADS1115 at 0x%02x on mux "
+                                 "channel %d is already the %s pack's" % (key, pack.adc_input, pack.adc_address,
+                                                                          pack.mux_channel, used[place]))
+        used[place] = name
+        full = pack.cells * LIPO_MAX_CELL_V / pack.divider_ratio
+        if full >= full_scale_v:
+            raise ParameterError("hardware parameter '%s.divider_ratio' = %g: a full %dS pack (%.2f V) gives "
+                                 "%.2f V at the ADC, beyond adc.full_scale_v %g V"
+                                 % (key, pack.divider_ratio, pack.cells, pack.cells * LIPO_MAX_CELL_V, full,
+                                    full_scale_v))
+        packs.append(pack)
+    batteries = BatteryHardware(packs=tuple(packs), rate_hz=v["batteries.rate_hz"],
+                                stale_after_s=v["batteries.stale_after_s"],
+                                confirm_readings=v["batteries.confirm_readings"])
+    if batteries.stale_after_s < 2.0 / batteries.rate_hz:
+        raise ParameterError("hardware parameter 'batteries.stale_after_s' = %g must be at least 2 / "
+                             "batteries.rate_hz = %g s" % (batteries.stale_after_s, 2.0 / batteries.rate_hz))
+    return batteries
+
+
+def with_batteries_fitted(config: HardwareConfig) -> HardwareConfig:
+    """``config`` with every declared pack fitted: the simulated robot's packs, whatever the robot's file says."""
+    packs = tuple(dataclasses.replace(pack, fitted=True) for pack in config.batteries.packs)
+    return dataclasses.replace(config, batteries=dataclasses.replace(config.batteries, packs=packs))
 
 
 def load_hardware_config(path: Optional[str] = None) -> HardwareConfig:
@@ -274,5 +498,6 @@ def load_hardware_config(path: Optional[str] = None) -> HardwareConfig:
 
 
 __all__ = ["HARDWARE_SCHEMA", "FAILSAFE_ACTIONS", "ADS1115_FSR_PGA", "ADS1115_RATES", "ADS1115_ADDRESSES",
-           "PCA9685_ALLCALL_ADDRESS", "JointHardware", "HardwareConfig", "pca9685_prescale", "hardware_config_from_dict",
-           "load_hardware_config"]
+           "PCA9685_ALLCALL_ADDRESS", "BATTERY_PACKS", "DEPTH_MODELS", "DEPTH_MAX_OSR", "LIPO_MAX_CELL_V",
+           "BatteryHardware", "BatteryPackHardware", "DepthSensorHardware", "JointHardware", "HardwareConfig",
+           "pca9685_prescale", "hardware_config_from_dict", "load_hardware_config", "with_batteries_fitted"]

@@ -10,7 +10,8 @@ early by another master, a true depth step beyond the rate bound, or a corrupted
 ``PromCrcError`` from a restart on a corrupted PROM is the expected refusal, counted in ``crc_refusals``), a
 poll slower than ``hang_s`` (``hangs``), a fresh reading with a non-finite value (``nonfinite_fresh``) or a
 pressure / temperature outside the plausible limits (``implausible_fresh``), a corrupted PROM accepted
-(``bad_prom_accepted``). ``fresh_off_truth`` (informational) counts fresh readings further than 0.5 m from the
+(``bad_prom_accepted``), and a reading the node would publish (:func:`~quadruped_drivers.depth_sensor.publishable`)
+that is not fresh, not finite or not plausible (``implausible_published``). ``fresh_off_truth`` (informational) counts fresh readings further than 0.5 m from the
 true depth: garbage that happens to be plausible and within the rate bound cannot be told from data.
 
     python -m quadruped_drivers.ms5837_fuzz --cycles 100000 --seed 1
@@ -24,12 +25,14 @@ import sys
 import time
 from typing import Dict, List, Optional
 
+from quadruped_drivers.depth_sensor import publishable
 from quadruped_drivers.i2c.fake_bus import FakeI2CBus
 from quadruped_drivers.i2c.fake_ms5837 import FakeMs5837
 from quadruped_drivers.ms5837 import REASONS, Model, Ms5837, PromCrcError
 
 FAULTS = ("none", "nack", "oserror", "abort", "garbage", "stuck", "slow", "early_read", "step", "prom")
-MUST_BE_ZERO = ("crashes", "hangs", "nonfinite_fresh", "implausible_fresh", "bad_prom_accepted")
+MUST_BE_ZERO = ("crashes", "hangs", "nonfinite_fresh", "implausible_fresh", "bad_prom_accepted",
+                "implausible_published")
 PERIOD = 0.01
 SURFACE_PA = 101325.0
 DENSITY = 1025.0
@@ -61,7 +64,8 @@ def run(cycles: int, seed: int = 0, model: Model = Model.BA30, hang_s: float = 0
     driver.start()
     stats: Dict[str, int] = {"cycles": 0, "readings": 0, "fresh": 0, "crashes": 0, "hangs": 0,
                              "nonfinite_fresh": 0, "implausible_fresh": 0, "bad_prom_accepted": 0,
-                             "crc_refusals": 0, "fresh_off_truth": 0, "restarts": 0}
+                             "crc_refusals": 0, "fresh_off_truth": 0, "restarts": 0, "published": 0,
+                             "implausible_published": 0}
     for fault in FAULTS:
         stats["fault " + fault] = 0
     stuck_until = -1
@@ -123,10 +127,16 @@ def run(cycles: int, seed: int = 0, model: Model = Model.BA30, hang_s: float = 0
         if reading is None:
             continue
         stats["readings"] += 1
+        values = (reading.pressure_pa, reading.temperature_c, reading.depth_m)
+        if publishable(reading, driver):
+            stats["published"] += 1
+            if not (reading.fresh and all(math.isfinite(value) for value in values)
+                    and low_pa <= reading.pressure_pa <= high_pa
+                    and driver.plausible_c[0] <= reading.temperature_c <= driver.plausible_c[1]):
+                stats["implausible_published"] += 1
         if not reading.fresh:
             continue
         stats["fresh"] += 1
-        values = (reading.pressure_pa, reading.temperature_c, reading.depth_m)
         if not all(math.isfinite(value) for value in values):
             stats["nonfinite_fresh"] += 1
         elif not (low_pa <= reading.pressure_pa <= high_pa

@@ -36,6 +36,17 @@ Wrong data is never reported fresh:
   whose code is implausible is checked first, on the next cycle);
 * a code whose angle lies outside the joint's calibrated range (its pulse limits mapped through the
   servo calibration) by more than ``adc.plausible_margin_deg`` is stale (``implausible_counts``).
+
+Spare inputs (``spare_inputs``: the battery dividers of ``config/hardware.yaml``) are read on a joint's ADC
+between its joint reads, one every ``spare_period / len(spare_inputs)`` seconds, in turn. The ADC is *lent*:
+in the cycle that reads its joint, its config is switched to the spare input (continuous mode, same range and
+rate); at least two conversion periods later (the conversion under way when the config was written finishes
+on the old input first; 2.3 ms at 860 SPS, so the next 10 ms cycle) the conversion register holds the spare
+input, is read after its config register is read back (a switch that did not take is a failed read, never
+the joint's voltage taken for the spare input's; :meth:`ServoFeedbackArray.take_spare_samples`) and the joint's
+config is written back. That
+cycle the joint has no sample of its own: it is listed in ``FeedbackReading.lent`` (not stale) and its
+``held_angles`` entry is its previous angle, one cycle old. A rotating config check never runs on a lent ADC.
 """
 from __future__ import annotations
 
@@ -43,7 +54,7 @@ import errno
 import math
 import time
 from dataclasses import dataclass, field
-from typing import Any, Callable, Dict, List, Optional, Set, Tuple
+from typing import Any, Callable, Dict, List, NamedTuple, Optional, Sequence, Set, Tuple
 
 import numpy as np
 
@@ -71,6 +82,24 @@ def ads1115_continuous_config(adc_input: int, full_scale_v: float, data_rate: in
     return ((0x4 | adc_input) << 12) | (ADS1115_FSR_PGA[full_scale_v] << 9) | (ADS1115_RATES[data_rate] << 5) | 0x0003
 
 
+@dataclass(frozen=True)
+class SpareInput:
+    """An extra single-ended input read on one of the joints' ADS1115s (a battery divider): ``name`` and where."""
+
+    name: str
+    mux_channel: int
+    adc_address: int
+    adc_input: int
+
+
+class SpareSample(NamedTuple):
+    """One spare-input reading: ``volts`` at the ADC input (NaN: the read failed) at ``stamp``."""
+
+    name: str
+    stamp: float
+    volts: float
+
+
 @dataclass
 class FeedbackReading:
     """One cycle's feedback (arrays in JOINT_NAMES order).
@@ -84,7 +113,9 @@ class FeedbackReading:
     joint's last good sample (inf if none). ``error_counts``: cumulative failed ADC transactions per
     joint; ``mux_errors``: cumulative failed or unverified mux switches. ``implausible``: joints whose
     code was read this cycle but lies outside their plausible range, or further from their last good
-    angle than the servo can move (``volts`` holds it, ``angles`` is NaN, ``valid`` False).
+    angle than the servo can move (``volts`` holds it, ``angles`` is NaN, ``valid`` False). ``lent``: joints
+    whose ADC read a spare input this cycle (module docstring): no sample of their own, not stale, their
+    ``held_angles`` entry one cycle old.
     """
 
     stamp: float
@@ -98,6 +129,7 @@ class FeedbackReading:
     implausible: List[int] = field(default_factory=list)
     held_angles: np.ndarray = field(default_factory=lambda: np.full(12, np.nan))
     age: np.ndarray = field(default_factory=lambda: np.full(12, np.inf))
+    lent: List[int] = field(default_factory=list)
 
 
 class ServoFeedbackArray:
@@ -113,12 +145,17 @@ class ServoFeedbackArray:
     ``jump_counts``, its ADC config checked next) until ``adc.jump_confirm_readings`` consecutive readings
     agree with each other within the same bound; then the new angle is taken (``jumps_accepted``). None:
     no rate check (a calibration sweep, tests that set voltages freely).
+
+    ``spare_inputs`` are read on the joints' ADCs in turn, each every ``spare_period`` seconds (module docstring).
     """
 
     def __init__(self, bus: Any, hardware_config: HardwareConfig, calibration: Any,
-                 clock: Callable[[], float] = time.monotonic, max_joint_speed: Optional[float] = None) -> None:
+                 clock: Callable[[], float] = time.monotonic, max_joint_speed: Optional[float] = None,
+                 spare_inputs: Sequence[SpareInput] = (), spare_period: float = 0.5) -> None:
         if max_joint_speed is not None and not (math.isfinite(max_joint_speed) and max_joint_speed > 0.0):
             raise ValueError("max_joint_speed must be a positive number of rad/s, got %r" % (max_joint_speed,))
+        if not (math.isfinite(spare_period) and spare_period > 0.0):
+            raise ValueError("spare_period must be a positive number of seconds, got %r" % (spare_period,))
         self._bus = bus
         self._config = hardware_config
         self._calibration = calibration
@@ -156,6 +193,26 @@ class ServoFeedbackArray:
         self._started_at: Optional[float] = None
         self._buffer = bytearray(2)
         self._mux_buffer = bytearray(1)
+        # Spare inputs: (input, index of the joint whose ADC reads it, its config word).
+        hosts = {(joint.mux_channel, joint.adc_address): joint for joint in hardware_config.joints}
+        self._spares: List[Tuple[SpareInput, int, int]] = []
+        for spare in spare_inputs:
+            joint = hosts.get((spare.mux_channel, spare.adc_address))
+            if joint is None or joint.adc_input == spare.adc_input:
+                raise ValueError("spare input %s: no joint's ADS1115 at 0x%02x on mux channel %d with input %d free"
+                                 % (spare.name, spare.adc_address, spare.mux_channel, spare.adc_input))
+            self._spares.append((spare, joint.index, ads1115_continuous_config(
+                spare.adc_input, hardware_config.adc_full_scale_v, hardware_config.adc_data_rate)))
+        self._spare_interval = spare_period / max(1, len(self._spares))
+        # Two conversion periods and a margin between switching an ADC to a spare input and reading it.
+        self._spare_settle = 2.0 / hardware_config.adc_data_rate + 0.0005
+        self._spare_turn = 0  # the spare read next
+        self._spare_due = -math.inf
+        self._spare_active: Optional[int] = None  # the spare whose conversion is under way
+        self._spare_switched = -math.inf
+        self._spare_samples: List[SpareSample] = []
+        self._spare_errors: Dict[str, int] = {spare.name: 0 for spare, _, _ in self._spares}
+        self._lent = np.zeros(self._count, dtype=bool)
 
     # --- properties -------------------------------------------------------------------------
     @property
@@ -207,6 +264,16 @@ class ServoFeedbackArray:
     def configured(self) -> np.ndarray:
         """Which joints' ADCs are currently known to be configured (copy)."""
         return self._configured.copy()
+
+    @property
+    def spare_errors(self) -> Dict[str, int]:
+        """Failed spare-input reads per spare input, cumulative (copy)."""
+        return dict(self._spare_errors)
+
+    def take_spare_samples(self) -> List[SpareSample]:
+        """The spare-input readings made since the last call (oldest first), failed ones with NaN volts."""
+        samples, self._spare_samples = self._spare_samples, []
+        return samples
 
     # --- bus helpers ------------------------------------------------------------------------
     def _select(self, channel: int) -> bool:
@@ -279,6 +346,7 @@ class ServoFeedbackArray:
         """Configure every ADC (continuous, its input, 860 SPS). Returns joints that failed (retried by read)."""
         self._started_at = self._clock()
         self._selected = None
+        self._abort_spare(self._started_at)  # every ADC is configured for its joint again below
         failed: List[int] = []
         with bus_locked(self._bus, self._config.bus_lock_timeout):
             try:
@@ -303,6 +371,7 @@ class ServoFeedbackArray:
         if self._started_at is None:
             raise RuntimeError("ServoFeedbackArray.read() before start()")
         codes = np.full(self._count, np.nan)
+        self._lent[:] = False
         try:
             with bus_locked(self._bus, self._config.bus_lock_timeout):
                 try:
@@ -316,7 +385,56 @@ class ServoFeedbackArray:
             self._lock_timeouts += 1
         return self._assemble(codes)
 
+    def _abort_spare(self, now: float) -> None:
+        """Give up the spare read under way (its ADC is re-configured for its joint by the caller's path)."""
+        if self._spare_active is not None:
+            spare = self._spares[self._spare_active][0]
+            self._spare_errors[spare.name] += 1
+            self._spare_samples.append(SpareSample(spare.name, now, math.nan))
+            self._spare_active = None
+
+    def _spare_step(self, index: int, now: float) -> bool:
+        """The spare-input work on joint ``index``'s ADC before its joint read. True: the ADC is lent this
+        cycle (its conversion register is the spare input's), so the joint is not read."""
+        active = self._spare_active
+        if active is None or self._spares[active][1] != index:
+            return False
+        self._lent[index] = True
+        if now - self._spare_switched < self._spare_settle:
+            return True  # the spare input's conversion is not done yet (a data rate far below 860 SPS)
+        spare, _host, word = self._spares[active]
+        address = self._config.joints[index].adc_address
+        self._bus.writeto_then_readfrom(address, bytes([ADS_REG_CONFIG]), self._buffer)
+        if (((self._buffer[0] << 8) | self._buffer[1]) & 0x7FFF) != (word & 0x7FFF):
+            self._config_losses[index] += 1  # the switch did not take (or a brown-out): not the spare input
+            self._abort_spare(now)
+        else:
+            volts = self._read_code(index, set_pointer=True) * (self._config.adc_full_scale_v / 32768.0)
+            self._spare_active = None
+            self._spare_samples.append(SpareSample(spare.name, now, volts))
+        self._configure(index)  # the joint's input again; its first result is ready 1/DR later
+        return True
+
+    def _maybe_lend(self, index: int, now: float) -> None:
+        """After joint ``index``'s read: switch its ADC to the spare input whose turn it is, if it is due."""
+        if self._spare_active is not None or not self._spares or now < self._spare_due:
+            return
+        turn = self._spare_turn
+        _spare, host, word = self._spares[turn]
+        if host != index:
+            return
+        self._spare_turn = (turn + 1) % len(self._spares)
+        # on a grid (each pack at 1 / spare_period on average), unless far behind (a stuck bus, a start)
+        late = now - self._spare_due
+        self._spare_due = self._spare_due + self._spare_interval if late < self._spare_interval else (
+            now + self._spare_interval)
+        self._spare_active, self._spare_switched = turn, now
+        address = self._config.joints[index].adc_address
+        self._bus.writeto(address, bytes([ADS_REG_CONFIG, word >> 8, word & 0xFF]))
+        self._bus.writeto(address, bytes([ADS_REG_CONVERSION]))
+
     def _read_cycle(self, codes: np.ndarray) -> None:
+        now = self._clock()
         check = self._due_for_check()
         order = sorted(self._channels)
         if self._selected in self._channels:  # start where the mux already points: one switch saved
@@ -335,12 +453,17 @@ class ServoFeedbackArray:
                         self._configure(index)
                         self._configured[index] = True
                         continue
+                    if self._spare_step(index, now):
+                        continue
                     if index == check and not self._config_intact(index):
                         self._config_losses[index] += 1
                         self._configure(index)  # same path as after a NACK: stale one more cycle
                         continue
                     codes[index] = self._read_code(index, set_pointer=index == check)
+                    self._maybe_lend(index, now)
                 except OSError:
+                    if self._spare_active is not None and self._spares[self._spare_active][1] == index:
+                        self._abort_spare(now)
                     self._mark_error(index)
 
     def _within_reach(self, angle: Any, reference: Any, since: Any) -> Any:
@@ -394,13 +517,18 @@ class ServoFeedbackArray:
         since_start = now - (self._started_at if self._started_at is not None else now)
         stale: List[int] = []
         failed: List[int] = []
+        lent: List[int] = []
         for index in np.flatnonzero(~valid):
+            if self._lent[index] and np.isfinite(held[index]):
+                lent.append(int(index))
+                continue
             reference = age[index] if math.isfinite(age[index]) else since_start
             (failed if reference > self._config.failed_after else stale).append(int(index))
         return FeedbackReading(stamp=now, volts=volts, angles=angles, valid=valid, stale=stale, failed=failed,
                                error_counts=self._error_counts.copy(), mux_errors=self._mux_errors,
                                implausible=[int(i) for i in np.flatnonzero(np.isfinite(volts) & ~valid)],
-                               held_angles=held, age=age)
+                               held_angles=held, age=age, lent=lent)
 
 
-__all__ = ["FeedbackReading", "ServoFeedbackArray", "ads1115_continuous_config", "plausible_angle_range"]
+__all__ = ["FeedbackReading", "ServoFeedbackArray", "SpareInput", "SpareSample", "ads1115_continuous_config",
+           "plausible_angle_range"]

@@ -57,7 +57,8 @@ SAFETY_SCHEMA = Schema("safety.yaml", (
     Param("tracking.hold_on_error", "", "a joint in ERROR makes the controller hold the safe pose", kind="boolean",
           default=False, source="choice"),
     Param("health.max_age", "s", "a health source's last status older than this counts as lost (they publish at "
-          "2 Hz)", 0.0, 60.0, low_open=True, default=2.0, source="choice"),
+          "2 Hz; a driver its supervisor restarts is back within about 3 s)", 0.0, 60.0, low_open=True, default=5.0,
+          source="choice"),
     Param("health.depth_action", "", "armed, the depth sensor lost or implausible (health/depth ERROR): warn, "
           "disarm or limp", kind="string", choices=HEALTH_ACTIONS, default="warn", source="choice"),
     Param("health.battery_action", "", "armed, a pack below its critical voltage (health/battery ERROR): warn, "

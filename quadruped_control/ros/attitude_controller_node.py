@@ -34,7 +34,8 @@ Parameters
   ~imu_max_age (0.05 s)  ~arm_on_start (false: arms once the checks pass; the first start only)
   ~setpoint_rpy_deg ([0, 0, 0])
   ~require_preflight (false; robot.launch: true): arming waits for a passed pre-dive check
-  ~health_sources ([]: the fitted hazard watchers, e.g. [depth, battery])
+  ~health_sources (default: what hardware_yaml fits: depth if depth.fitted, battery if a pack is; leak: none yet)
+  ~batteries_fitted (false: hardware_yaml decides; true: the simulated robot's packs)
   ~heartbeat_timeout (0: not watched; robot.launch: 2 s): arming needs the tether heartbeat, and armed, none for
                          this long disarms; ~tether_action (disarm | limp: the outputs off too)
   ~starts                the node's starts since the launch file set it to 0: a respawned node (start > 1)
@@ -73,7 +74,7 @@ from quadruped_control.control.safety_config import load_safety_config
 from quadruped_control.control.supervisor import ControlSupervisor
 from quadruped_control.model.params import load_robot_params
 from quadruped_drivers.calibration import load_servo_calibration
-from quadruped_drivers.hardware_config import load_hardware_config
+from quadruped_drivers.hardware_config import load_hardware_config, with_batteries_fitted
 from quadruped_drivers.vn100.settings import load_vn100_settings, sensor_limits
 from underwater_quadruped.cfg import AttitudeControllerConfig
 from underwater_quadruped.msg import ControllerState, ServoCommand
@@ -109,6 +110,9 @@ class AttitudeControllerNode:
         scheme = rospy.get_param("~stroke_scheme", "") or self.config.stroke_scheme
         self.config = self.config.replace(stroke_scheme=scheme)
         hardware = load_hardware_config(_optional_path("~hardware_yaml"))
+        if rospy.get_param("~batteries_fitted", False):
+            hardware = with_batteries_fitted(hardware)
+        fitted = ["depth"] * hardware.depth.fitted + ["battery"] * bool(hardware.batteries.fitted)
         calibration = load_servo_calibration(_optional_path("~calibration_yaml"))
         self.loop_rate = float(rospy.get_param("~loop_rate", 100.0))
         imu_rate = float(rospy.get_param("~imu_rate", 200.0))
@@ -144,7 +148,7 @@ class AttitudeControllerNode:
                                             heartbeat_timeout=heartbeat_timeout or None,
                                             tether_action=str(rospy.get_param("~tether_action", "disarm")),
                                             safety=self.safety,
-                                            health_sources=list(rospy.get_param("~health_sources", [])))
+                                            health_sources=list(rospy.get_param("~health_sources", fitted)))
         if arm_on_start:
             rospy.loginfo("attitude controller: ~arm_on_start: arming once every check passes")
         self.was_armed = False

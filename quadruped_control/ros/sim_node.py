@@ -1,7 +1,8 @@
 """The simulated robot behind fake buses: the paper's floating-base model closing the loop at byte level.
 
-Owns the register-level fake devices (PCA9685, 12 ADS1115 behind a TCA9548A on one fake I2C bus) and a
-fake VN-100 byte stream, and serves them to the unchanged driver nodes:
+Owns the register-level fake devices (PCA9685, 12 ADS1115 behind a TCA9548A and the MS5837 depth sensor on
+one fake I2C bus, as config/hardware.yaml wires them) and a fake VN-100 byte stream, and serves them to the
+unchanged driver nodes:
 
 * the fake I2C bus on a Unix socket (:class:`quadruped_drivers.bus_bridge.BusBridgeServer`); the
   pwm and servo feedback nodes use ``backend: sim`` with ``bus_socket`` pointing at it;
@@ -12,7 +13,11 @@ Every ``1 / ~physics_rate`` s it reads the pulse width each PCA9685 channel curr
 produces, maps it back to a commanded joint angle through the servo calibration (a channel that is off
 leaves its servo limp where it is), advances the plant (servo model + eq. trans, rot with RK4), writes
 the servo feedback volts of the simulated joint angles into the fake ADCs and the simulated attitude,
-body rate and specific force into the fake VN-100.
+body rate and specific force into the fake VN-100. The safety sensors (:mod:`quadruped_control.sim.safety_sensors`,
+config/simulation.yaml ``simulated_robot``): the fake MS5837 measures the water pressure at the body's depth
+(a mean depth minus its world z; updated every 50 ms) and the water temperature, with a few counts of noise;
+the two LiPo packs discharge with time and with the joints' speed, and their voltages reach the spare inputs
+of the fake ADS1115s through the dividers hardware.yaml declares.
 
 Two clocks (``~lockstep``):
 
@@ -27,7 +32,9 @@ Subscribes
   sim/stand_rpy_deg geometry_msgs/Vector3Stamped  the body held at rest at this roll, pitch, yaw (deg): the robot
                                                   on its stand (the pre-dive check's guided poses); NaN: floating
 Publishes (ground truth, for tests and reports; nothing in the control path subscribes to these)
-  sim/pose          geometry_msgs/PoseStamped  odom (ENU, REP-105) <- base_link, true attitude
+  sim/pose          geometry_msgs/PoseStamped  odom (ENU, REP-105) <- base_link, true attitude and position
+                                               (the body's start at the origin, simulated_robot.depth_sensor.
+                                               mean_depth_m under water)
   sim/servo_output  underwater_quadruped/ServoCommand  pulse widths the fake PCA9685 really produces and
                                                        the joint angles they command
 Parameters
@@ -46,12 +53,16 @@ Parameters
   ~lockstep_graph (["imu/data attitude_controller", "servo_command pwm_node"]: "topic node" pairs that
   must be connected, at the publishers' end too, before simulated time starts)
   ~i2c_stuck_timeout (0.025 s: how long each transaction on a stuck bus takes before ETIMEDOUT)
+  ~battery_capacity_ah (0: simulation.yaml's) ~battery_start_charge (-1: simulation.yaml's): both packs' capacity
+  and start charge, for a test that drains them in seconds
 Services (fault injection: tests and benchmarks/fault_campaign.py)
   ~imu_streaming    std_srvs/SetBool  stop / resume the fake VN-100's output: the serial link lost and
                                       back (the sensor keeps its configuration)
   ~i2c_bus_stuck    std_srvs/SetBool  true: the I2C bus is held (every transaction times out), false: free
   ~pca9685_power    std_srvs/SetBool  false: the PCA9685 loses its supply (off the bus, no pulses), true:
                                       powered again from its power-on reset state
+  ~depth_sensor_fault std_srvs/SetBool  true: the MS5837 stops answering (off the bus: "depth sensor lost"),
+                                      false: back from its power-on state
 """
 from __future__ import annotations
 
@@ -78,11 +89,12 @@ from quadruped_common.so3 import rot_to_quat, rpy_to_rot
 from quadruped_common.ros.diagnostics import Updater
 from quadruped_control.model.params import load_robot_params
 from quadruped_control.sim.plants import VALIDITY_NOTE, load_tank_params, make_plant
+from quadruped_control.sim.safety_sensors import DepthModel, SimulatedPack, with_overrides
 from quadruped_control.sim.servo_model import make_servo_model, tank_servo_params
 from quadruped_control.sim.simulation import PlantSimulator, SimulationError, load_simulation_settings
 from quadruped_drivers.bus_bridge import BusBridgeServer
 from quadruped_drivers.calibration import load_servo_calibration
-from quadruped_drivers.hardware_config import load_hardware_config
+from quadruped_drivers.hardware_config import load_hardware_config, with_batteries_fitted
 from quadruped_drivers.hardware_faults import BuiltRobot, load_hardware_faults
 from quadruped_drivers.i2c.fake_devices import build_fake_hardware
 from quadruped_drivers.vn100.fake import FakeVn100, PtyFakeVn100
@@ -102,6 +114,8 @@ class SimNode:
         optional = lambda name: rospy.get_param(name, "") or None  # noqa: E731
         self.robot = load_robot_params(optional("~robot_yaml"))
         self.hardware = load_hardware_config(optional("~hardware_yaml"))
+        if rospy.get_param("~batteries_fitted", False):  # packs on the simulated robot, whatever the robot's file says
+            self.hardware = with_batteries_fitted(self.hardware)
         self.calibration = load_servo_calibration(optional("~calibration_yaml"))
         faults = load_hardware_faults(optional("~hardware_faults"))
         self.built = BuiltRobot(self.calibration, faults)  # the robot as built: its wires and mounts
@@ -146,7 +160,10 @@ class SimNode:
             raise ParameterError("~lockstep_graph entries are 'topic node', got %r" % (self.lockstep_graph,))
         self.lockstep_timeouts = 0
 
-        self.fake = build_fake_hardware(self.hardware, log_transactions=False)  # runs for hours: no log
+        # The fake MS5837 times its conversions on the clock its driver reads: simulated time in lock-step.
+        self.fake = build_fake_hardware(self.hardware, log_transactions=False,  # runs for hours: no log
+                                        clock=(lambda: self.sim_time) if self.lockstep else time.monotonic)
+        self._setup_safety_sensors(settings)
         # The bus's own lock: bridged transactions and the physics updates of the fake registers
         # never interleave mid-transaction.
         self.lock = self.fake.lock
@@ -159,6 +176,7 @@ class SimNode:
             self.vn100 = FakeVn100()
             imu_clock, realtime = time.monotonic, True
         self._write_sensors(np.zeros(3))
+        self._write_safety_sensors(0.0)
         self.imu_pty = PtyFakeVn100(self.vn100, clock=imu_clock, realtime=realtime,
                                     symlink_path=rospy.get_param("~imu_port", "/tmp/uq_sim_vn100"),
                                     period=float(rospy.get_param("~imu_pump_period", 0.05)))
@@ -181,6 +199,7 @@ class SimNode:
         rospy.Service("~imu_streaming", SetBool, self._on_imu_streaming)
         rospy.Service("~i2c_bus_stuck", SetBool, self._on_bus_stuck)
         rospy.Service("~pca9685_power", SetBool, self._on_pca_power)
+        rospy.Service("~depth_sensor_fault", SetBool, self._on_depth_fault)
         rospy.on_shutdown(self._shutdown)
         self.steps = 0
         self.overruns = 0
@@ -193,6 +212,38 @@ class SimNode:
                       self.bridge.path, self.imu_pty.path, rate,
                       rospy.get_param("~servo_model", "rate-limited"), plant,
                       "" if plant == "paper" else " (%s)" % (tank_yaml or "config/tank.yaml"))
+
+    def _setup_safety_sensors(self, settings) -> None:
+        """The depth model and the simulated packs (module docstring), with ~battery_* overrides."""
+        sensors = settings.sensors
+        depth = self.hardware.depth
+        self.depth_model = DepthModel(depth.surface_pa, depth.fluid_density, sensors.mean_depth_m)
+        self.water_temperature = sensors.temperature_c
+        if self.fake.depth is not None:
+            self.fake.depth.noise_counts = sensors.noise_counts
+        capacity = float(rospy.get_param("~battery_capacity_ah", 0.0))
+        charge = float(rospy.get_param("~battery_start_charge", -1.0))
+        if capacity < 0.0 or charge > 1.0:
+            raise ParameterError("~battery_capacity_ah must be >= 0 (0: simulation.yaml's) and ~battery_start_charge "
+                                 "<= 1 (< 0: simulation.yaml's), got %r and %r" % (capacity, charge))
+        self.packs = {pack.name: (pack, SimulatedPack(pack.cells, with_overrides(
+            sensors.packs[pack.name], capacity if capacity > 0.0 else None, charge if charge >= 0.0 else None)))
+            for pack in self.hardware.batteries.fitted}
+        self._depth_due = 0
+
+    def _write_safety_sensors(self, dt: float) -> None:
+        """Advance the packs by ``dt`` and write them and (every 50 ms) the depth into the fake chips."""
+        speed = float(np.abs(self.plant.joint_velocities).sum()) if dt > 0.0 else 0.0
+        with self.lock:
+            for pack, simulated in self.packs.values():
+                simulated.step(dt, speed)
+                self.fake.set_spare_voltage(pack.mux_channel, pack.adc_address, pack.adc_input,
+                                            simulated.adc_volts(pack.divider_ratio))
+            if self.fake.depth is not None and self._depth_due <= 0:
+                z = float(self.plant.state.position[2])
+                self.fake.depth.set_state(self.depth_model.pressure(z), self.water_temperature)
+                self._depth_due = max(1, int(round(0.05 / self.dt)))
+        self._depth_due -= 1
 
     def run(self) -> None:
         if self.lockstep:
@@ -354,6 +405,7 @@ class SimNode:
         acceleration_world = (state.velocity - self.previous_velocity) / self.dt
         self.previous_velocity = state.velocity.copy()
         self._write_sensors(acceleration_world)
+        self._write_safety_sensors(self.dt)
         self.steps += 1
         stamp = rospy.Time.now() if stamp is None else _ros_time(stamp)
         pose = PoseStamped()
@@ -361,6 +413,7 @@ class SimNode:
         pose.header.frame_id = "odom"  # REP-105 fixed frame, as the visualization node's
         (pose.pose.orientation.x, pose.pose.orientation.y, pose.pose.orientation.z,
          pose.pose.orientation.w) = [float(v) for v in rot_to_quat(state.rotation)]
+        pose.pose.position.x, pose.pose.position.y, pose.pose.position.z = [float(v) for v in state.position]
         self.pose_pub.publish(pose)
         output = ServoCommand()
         output.header.stamp = stamp
@@ -403,6 +456,12 @@ class SimNode:
         stat.add("I2C bus stuck", str(self.bridge.stuck))
         stat.add("I2C transactions timed out", str(self.bridge.stuck_transactions))
         stat.add("PCA9685 powered", str(self.fake.pca_powered))
+        stat.add("depth sensor powered", str(self.fake.depth_powered))
+        stat.add("true depth [m]", "%.3f" % self.depth_model.depth(float(self.plant.state.position[2])))
+        for name, (_pack, simulated) in sorted(self.packs.items()):
+            stat.add("battery %s [V]" % name, "%.3f" % simulated.voltage)
+            stat.add("battery %s charge" % name, "%.3f" % simulated.charge)
+            stat.add("battery %s current [A]" % name, "%.2f" % simulated.current_a)
         stat.add("fake VN-100 packets", str(self.vn100.packets_sent))
         return stat
 
@@ -435,6 +494,14 @@ class SimNode:
     def _on_pca_power(self, request) -> SetBoolResponse:
         self.fake.set_pca_power(bool(request.data))
         message = "PCA9685 %s" % ("powered (power-on reset state)" if request.data else "unpowered: no pulses")
+        rospy.logwarn("sim_node: %s", message)
+        return SetBoolResponse(success=True, message=message)
+
+    def _on_depth_fault(self, request) -> SetBoolResponse:
+        if self.fake.depth is None:
+            return SetBoolResponse(success=False, message="no depth sensor fitted (hardware.yaml depth.fitted false)")
+        self.fake.set_depth_power(not request.data)
+        message = "MS5837 %s" % ("off the bus: every transaction NACKs" if request.data else "answering again")
         rospy.logwarn("sim_node: %s", message)
         return SetBoolResponse(success=True, message=message)
 

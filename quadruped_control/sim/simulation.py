@@ -41,6 +41,7 @@ from quadruped_control.control.controller_config import ControllerConfig
 from quadruped_control.model.kinematics import UnreachableError, joint_angles
 from quadruped_control.model.params import RobotParams
 from quadruped_control.sim.magnetic_heading import reported_rotation
+from quadruped_control.sim.safety_sensors import SAFETY_SENSOR_PARAMS, SafetySensorSettings, safety_sensor_settings
 from quadruped_control.sim.plants.paper import FloatingBaseModel, RigidBodyState
 from quadruped_control.sim.servo_model import (SERVO_MODELS, SERVO_SCHEMA, IdealServo, RateLimitedServo, ServoModel,
                                               ServoParams, make_servo_model, servo_params_from_dict)
@@ -102,6 +103,7 @@ SIMULATION_SCHEMA = Schema("simulation.yaml", (
           "Euler angle", 0.0, 90.0, default=0.5, source="choice"),
     Param("robustness.seeds", "", "robustness study: one perturbed trial per seed (integers in [0, 2^32 - 1]) and "
           "setpoint", kind="list", default=[1, 2, 3], source="choice", check=_seeds_problem),
+    *SAFETY_SENSOR_PARAMS,
 ))
 
 
@@ -111,7 +113,8 @@ class SimulationSettings:
 
     ``dt``: step (s); ``servo_model``: default servo model name; ``servo``: rate-limited servo
     parameters; ``attitude_noise``: std of the IMU attitude error (rad, rotation vector);
-    ``gyro_noise``: std per gyro axis (rad/s).
+    ``gyro_noise``: std per gyro axis (rad/s); ``sensors``: the simulated robot's depth sensor and LiPo packs
+    (the ``simulated_robot`` section, :mod:`quadruped_control.sim.safety_sensors`).
     """
 
     dt: float = SIMULATION_SCHEMA["simulation.dt"].default
@@ -119,6 +122,7 @@ class SimulationSettings:
     servo: ServoParams = field(default_factory=lambda: ServoParams(95.0 * math.pi / 30.0, 0.03))
     attitude_noise: float = math.radians(SIMULATION_SCHEMA["simulation.sensor_noise.attitude_deg"].default)
     gyro_noise: float = SIMULATION_SCHEMA["simulation.sensor_noise.gyro"].default
+    sensors: SafetySensorSettings = field(default_factory=SafetySensorSettings)
 
 
 def simulation_settings_from_dict(tree: Mapping[str, Any]) -> SimulationSettings:
@@ -131,6 +135,7 @@ def simulation_settings_from_dict(tree: Mapping[str, Any]) -> SimulationSettings
         servo=servo_params_from_dict(tree),
         attitude_noise=math.radians(v["simulation.sensor_noise.attitude_deg"]),
         gyro_noise=v["simulation.sensor_noise.gyro"],
+        sensors=safety_sensor_settings(v),
     )
 
 

@@ -2,8 +2,8 @@
 
 Every process that opens a bus (the real ``/dev/i2c-N`` or the simulated robot's) takes its lock first:
 
-* a driver node takes a *role* (``pwm``, ``feedback``): the bus shared with the other roles (the kernel keeps
-  each transaction whole, the chips do not overlap), but one process per role;
+* a driver node takes a *role* (``pwm``, ``feedback``, ``depth``): the bus shared with the other roles (the kernel
+  keeps each transaction whole, the chips do not overlap), but one process per role;
 * a tool (calibration, jog, pre-dive check) takes the bus alone.
 
 A second taker is refused with :class:`BusBusyError` naming the process that holds it (pid and command
@@ -25,7 +25,7 @@ from quadruped_common.startup_errors import FIX_BUSY
 __all__ = ["BusBusyError", "BusLock", "lock_bus", "lock_dir"]
 
 #: The roles the driver nodes take; any other name is refused.
-ROLES = ("pwm", "feedback")
+ROLES = ("pwm", "feedback", "depth")
 _held: Dict[Tuple[str, Optional[str]], "BusLock"] = {}
 
 

@@ -1,4 +1,5 @@
-"""Register-level fakes of the servo electronics: TCA9548A mux, ADS1115 ADC, PCA9685 PWM driver.
+"""Register-level fakes of the servo electronics: TCA9548A mux, ADS1115 ADC, PCA9685 PWM driver (and, wired as
+``config/hardware.yaml`` says, the MS5837 depth sensor of :mod:`quadruped_drivers.i2c.fake_ms5837`).
 
 They implement the chips' register maps closely enough that both our drivers and the unchanged
 adafruit CircuitPython drivers work against them (tested), and that the simulator (``sim_node``) can
@@ -25,12 +26,14 @@ from __future__ import annotations
 
 import errno
 import threading
+import time
 from dataclasses import dataclass, field
-from typing import Any, Dict, List, Optional, Sequence, Tuple
+from typing import Any, Callable, Dict, List, Optional, Sequence, Tuple
 
 import numpy as np
 
 from quadruped_drivers.i2c.fake_bus import FakeI2CBus
+from quadruped_drivers.i2c.fake_ms5837 import FakeMs5837
 
 # ------------------------------------------------------------------------------------------------
 # TCA9548A
@@ -415,6 +418,40 @@ class FakeHardware:
     config: Any
     #: The bus's own lock: hold it to change several device states atomically w.r.t. bus traffic.
     lock: Any = field(default_factory=threading.RLock)
+    #: The MS5837 depth sensor on the main bus (None when hardware.yaml says none is fitted).
+    depth: Optional[FakeMs5837] = None
+
+    def adc(self, mux_channel: int, address: int) -> FakeAds1115:
+        """The ADS1115 at ``address`` on mux channel ``mux_channel`` (ValueError if there is none)."""
+        device = self.mux.channel_bus(mux_channel).device_at(address)
+        if not isinstance(device, FakeAds1115):
+            raise ValueError("no ADS1115 at 0x%02x on mux channel %d" % (address, mux_channel))
+        return device
+
+    def set_spare_voltage(self, mux_channel: int, address: int, ain: int, volts: float) -> None:
+        """Put ``volts`` on input AIN``ain`` of the ADS1115 at ``address`` on ``mux_channel`` (a battery divider)."""
+        with self.bus.lock:
+            self.adc(mux_channel, address).set_input_voltage(ain, volts)
+
+    @property
+    def depth_powered(self) -> bool:
+        """False while the depth sensor is off the bus (:meth:`set_depth_power`) or not fitted."""
+        with self.bus.lock:
+            return self.depth is not None and self.bus.device_at(self.config.depth.address) is self.depth
+
+    def set_depth_power(self, powered: bool) -> None:
+        """Cut or restore the depth sensor's supply: unpowered it leaves the bus (every transaction NACKs);
+        powered again it answers from its power-on state (no conversion under way)."""
+        if self.depth is None:
+            raise ValueError("no depth sensor fitted (hardware.yaml depth.fitted false)")
+        with self.bus.lock:
+            if powered == self.depth_powered:
+                return
+            self.depth.power_cycle()
+            if powered:
+                self.bus.attach(self.config.depth.address, self.depth)
+            else:
+                self.bus.detach(self.config.depth.address)
 
     def set_joint_voltages(self, volts: Sequence[float]) -> None:
         """Put ``volts[j]`` on joint j's ADC input (12 finite values, JOINT_NAMES order)."""
@@ -452,9 +489,11 @@ class FakeHardware:
                 self.bus.detach(self.config.pca_address)
 
 
-def build_fake_hardware(hardware_config: Any, require_lock: bool = False,
-                        log_transactions: bool = True) -> FakeHardware:
-    """Build the fake bus, TCA9548A, ADS1115s (one per distinct mux channel/address) and PCA9685.
+def build_fake_hardware(hardware_config: Any, require_lock: bool = False, log_transactions: bool = True,
+                        clock: Callable[[], float] = time.monotonic, seed: int = 0) -> FakeHardware:
+    """Build the fake bus, TCA9548A, ADS1115s (one per distinct mux channel/address), PCA9685 and, when
+    ``hardware_config.depth.fitted``, the MS5837 (its conversions timed on ``clock``, its noise from ``seed``,
+    at the surface pressure and 20 degC until told otherwise).
 
     Joints that share a mux channel and ADC address share one :class:`FakeAds1115` (different AINs).
     ``log_transactions``: keep every transaction in ``bus.log`` (tests read it). A long-running server
@@ -476,7 +515,12 @@ def build_fake_hardware(hardware_config: Any, require_lock: bool = False,
         if adc is None:
             adc = channel_bus.attach(joint.adc_address, FakeAds1115())
         adcs[joint.index] = adc
-    return FakeHardware(bus=bus, mux=mux, adcs=adcs, pca=pca, config=hardware_config, lock=bus.lock)
+    depth = None
+    if hardware_config.depth.fitted:
+        depth = bus.attach(hardware_config.depth.address,
+                           FakeMs5837(hardware_config.depth.ms5837_model, clock=clock, seed=seed,
+                                      pressure_pa=hardware_config.depth.surface_pa, temperature_c=20.0))
+    return FakeHardware(bus=bus, mux=mux, adcs=adcs, pca=pca, config=hardware_config, lock=bus.lock, depth=depth)
 
 
 __all__ = ["FakeTca9548a", "FakeAds1115", "FakePca9685", "FakeHardware", "build_fake_hardware", "ads1115_code",

@@ -76,6 +76,12 @@ class FakeMs5837:
             self.pressure_pa, self.temperature_c = float(pressure_pa), float(temperature_c)
             self._codes = {"D1": d1, "D2": d2}
 
+    def power_cycle(self) -> None:
+        """Lose the supply and get it back: no conversion under way, no result, nothing selected."""
+        with self.lock:
+            self._converting, self._result, self._spoiled = None, 0, False
+            self._adc_selected, self._pointer = False, None
+
     def corrupt_prom(self, index: int = 3, xor: int = 0x0100) -> None:
         """Flip bits of PROM word ``index`` (its CRC then no longer matches)."""
         with self.lock:

@@ -233,3 +233,5 @@ def test_fuzz_campaign_small(model):
     assert all(stats["fault " + fault] > 0 for fault in ms5837_fuzz.FAULTS)
     assert stats["crc_refusals"] == stats["fault prom"] and stats["fresh"] > 100
     assert stats["driver implausible_pressure"] > 0 and stats["driver rate"] > 0 and stats["driver bus_error"] > 0
+    # what ms5837_node would publish: every reading fresh, finite and plausible
+    assert stats["published"] == stats["fresh"] > 100 and stats["implausible_published"] == 0

@@ -3,10 +3,10 @@
 
 Runs ``roslaunch underwater_quadruped drivers.launch backend:=real`` (respawn on, as robot.launch) with a
 copy of config/hardware.yaml whose ``i2c.bus`` names a bus this machine does not have, and reads what the
-launch prints for ``~observe`` s after the first node gave up. Each of pwm_node and servo_feedback_node must:
-print exactly one line of its own, the FATAL "<node> cannot start: /dev/i2c-N does not exist. Fix: ...";
-be started once by roslaunch and never again by its supervisor; end with exit status 78 (EX_CONFIG). Nothing
-in the output may be a traceback. (vn100_node, its port missing too, keeps trying to connect: a USB
+launch prints for ``~observe`` s after the first node gave up. Each of pwm_node, servo_feedback_node and
+ms5837_node must: print exactly one line of its own, the FATAL "<node> cannot start: /dev/i2c-N does not
+exist. Fix: ..."; be started once by roslaunch and never again by its supervisor; end with exit status 78
+(EX_CONFIG). Nothing in the output may be a traceback. (vn100_node, its port missing too, keeps trying to connect: a USB
 adapter plugged in later is found without a restart.)
 """
 import os
@@ -28,7 +28,7 @@ from quadruped_common.config import config_dir
 from quadruped_common.startup_errors import EX_CONFIG
 
 ANSI = re.compile(r"\x1b\[[0-9;]*m|\x1b\][^\x07]*\x07")
-DRIVERS = ("pwm_node", "servo_feedback_node")
+DRIVERS = ("pwm_node", "servo_feedback_node", "ms5837_node")
 
 
 def missing_bus() -> int:

@@ -424,11 +424,11 @@ def test_health_sources_gate_arming_and_their_errors_take_their_actions(supervis
     assert watched.check_health(1.6) == [] and watched.armed
     # a leak status that stops coming counts as lost after health.max_age: its action (limp) disarms
     for source in ("depth", "battery"):
-        watched.set_health(source, False, "ok", 3.0)
-    assert watched.check_health(3.0) == []  # 2.0 s: not yet
-    assert watched.check_health(3.1) == [("leak", "limp", "health/leak is 2.1 s old (is its node running?)")]
+        watched.set_health(source, False, "ok", 6.0)
+    assert watched.check_health(6.0) == []  # 5.0 s (health.max_age): not yet
+    assert watched.check_health(6.1) == [("leak", "limp", "health/leak is 5.1 s old (is its node running?)")]
     assert not watched.armed and watched.health_actions_taken == 1
-    assert watched.check_health(3.2) == []  # once
+    assert watched.check_health(6.2) == []  # once
     with pytest.raises(ValueError, match="health_sources need a SafetyConfig"):
         ControlSupervisor(supervisor.controller, pulse_map, health_sources=("depth",))
 

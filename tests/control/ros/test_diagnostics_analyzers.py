@@ -11,6 +11,8 @@ from quadruped_control.ros.diagnostics_analyzers import load_analyzers, matching
 STATUSES = {
     "vn100_node: imu": "/Sensors/IMU (VN-100)",
     "servo_feedback_node: servo feedback": "/Sensors/Servo feedback (ADS1115 x12)",
+    "servo_feedback_node: battery": "/Sensors/Servo feedback (ADS1115 x12)",
+    "ms5837_node: depth sensor": "/Sensors/Depth (MS5837)",
     "pwm_node: servo output": "/Actuators (PCA9685)",
     "attitude_controller: control loop": "/Attitude controller",
     "attitude_controller: inputs": "/Attitude controller",
