@@ -411,9 +411,15 @@ def _lost_before(received_imu, received_state, bag, start: float, since: float, 
                if first is not None)
 
 
-def run_graph(kinds: Sequence[str], out: str, seed: int, log=print, ready_timeout: float = 120.0) -> List[dict]:
-    """One graph: start it, inject ``kinds`` in order at seeded random moments, stop it, judge every
-    injection. Returns one dict per injection (:class:`InjectionResult` fields plus the fault record)."""
+#: s: the seeded wait before each injection is drawn from this range (a random moment of the manoeuvre)
+PAUSE = (1.0, 4.0)
+
+
+def run_graph(kinds: Sequence[str], out: str, seed: int, log=print, ready_timeout: float = 120.0,
+              pause: Sequence[float] = PAUSE) -> List[dict]:
+    """One graph: start it, inject ``kinds`` in order at seeded random moments (``pause`` s apart, after the
+    recovery of the one before), stop it, judge every injection. Returns one dict per injection
+    (:class:`InjectionResult` fields plus the fault record)."""
     import rospy
 
     from quadruped_drivers.hardware_config import load_hardware_config
@@ -434,7 +440,7 @@ def run_graph(kinds: Sequence[str], out: str, seed: int, log=print, ready_timeou
             raise RuntimeError("the stack did not start tracking within %.0f s (see %s/launch.log)"
                                % (ready_timeout, out))
         for number, kind in enumerate(kinds):
-            time.sleep(rng.uniform(1.0, 4.0))  # a random moment of the manoeuvre
+            time.sleep(rng.uniform(pause[0], pause[1]))  # a random moment of the manoeuvre
             if not _wait(lambda: monitor.tracking_now(hardware), 20.0, 0.1):
                 errors.append("%s #%d: not tracking before the injection" % (kind, number))
             try:
@@ -495,21 +501,23 @@ def judge_graph(out: str) -> List[dict]:
     return results
 
 
-def run_campaign(kinds: Sequence[str], per_kind: int, out: str, seed: int = 0, log=print) -> Dict[str, dict]:
+def run_campaign(kinds: Sequence[str], per_kind: int, out: str, seed: int = 0, log=print,
+                 pause: Sequence[float] = PAUSE) -> Dict[str, dict]:
     """``per_kind`` injections of each of ``kinds`` in a seeded random order on one graph, then each master
     kill on a graph of its own (module docstring); returns the per-kind summaries and writes
-    ``out/fault_campaign.json``."""
+    ``out/fault_campaign.json``. ``pause``: :func:`run_graph`'s."""
     rng = random.Random(seed)
     plain = [k for k in kinds if k != "kill_rosmaster"] * per_kind
     rng.shuffle(plain)
     results: List[dict] = []
     if plain:
         log("graph 1: %d injections" % len(plain))
-        results += _isolated(plain, os.path.join(out, "graph_main"), seed)
+        results += _isolated(plain, os.path.join(out, "graph_main"), seed, pause)
     if "kill_rosmaster" in kinds:
         for number in range(per_kind):
             log("graph for master kill %d/%d" % (number + 1, per_kind))
-            results += _isolated(["kill_rosmaster"], os.path.join(out, "graph_master_%02d" % number), seed + 1 + number)
+            results += _isolated(["kill_rosmaster"], os.path.join(out, "graph_master_%02d" % number), seed + 1 + number,
+                                 pause)
     summary = summarise(results, kinds)
     with open(os.path.join(out, "fault_campaign.json"), "w") as handle:
         json.dump({"seed": seed, "per_kind": per_kind, "summary": summary, "injections": results}, handle,
@@ -517,13 +525,13 @@ def run_campaign(kinds: Sequence[str], per_kind: int, out: str, seed: int = 0, l
     return summary
 
 
-def _isolated(kinds: Sequence[str], out: str, seed: int) -> List[dict]:
+def _isolated(kinds: Sequence[str], out: str, seed: int, pause: Sequence[float] = PAUSE) -> List[dict]:
     """:func:`run_graph` in a child process: rospy can init one node per process, and a master kill
     leaves the campaign's node registered with a master that is gone."""
     result_file = os.path.join(out, "results.json")
     os.makedirs(out, exist_ok=True)
     subprocess.run([sys.executable, "-m", "quadruped_control.ros.fault_campaign", "graph", "--out", out,
-                    "--seed", str(seed), "--kinds"] + list(kinds), check=False)
+                    "--seed", str(seed), "--pause", str(pause[0]), str(pause[1]), "--kinds"] + list(kinds), check=False)
     if not os.path.exists(result_file):
         return [{"kind": "error", "error": "graph in %s left no results" % out}]
     with open(result_file) as handle:
@@ -650,6 +658,7 @@ def main(argv: Optional[Sequence[str]] = None) -> int:
     graph.add_argument("--out", required=True)
     graph.add_argument("--seed", type=int, default=0)
     graph.add_argument("--kinds", nargs="+", required=True, choices=sorted(KINDS))
+    graph.add_argument("--pause", nargs=2, type=float, default=list(PAUSE), metavar=("LOW", "HIGH"))
     judge = sub.add_parser("judge", help="judge a campaign's recorded graphs again (OUT of run_campaign)")
     judge.add_argument("out")
     args = parser.parse_args(argv)
@@ -661,7 +670,7 @@ def main(argv: Optional[Sequence[str]] = None) -> int:
         return 0
     # A terminated campaign still stops its graph (run_graph's finally): SIGTERM as SystemExit.
     signal.signal(signal.SIGTERM, lambda *_: sys.exit(143))
-    results = run_graph(args.kinds, args.out, args.seed)
+    results = run_graph(args.kinds, args.out, args.seed, pause=args.pause)
     with open(os.path.join(args.out, "results.json"), "w") as handle:
         json.dump(results, handle, default=float)
     return 0
