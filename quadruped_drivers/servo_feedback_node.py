@@ -3,8 +3,9 @@ read on their spare inputs -> battery/<pack>, health/battery.
 
 Publishes
   joint_states   sensor_msgs/JointState  names from the URDF (JOINT_NAMES), positions in rad (the paper's
-                 joint angles; NaN for a joint whose ADC did not answer this cycle or read a battery instead),
-                 velocities from a low-pass filtered finite difference
+                 joint angles; NaN for a joint whose ADC did not answer this cycle; for a joint whose ADC read
+                 a battery this cycle, its previous angle, 10 ms old), velocities from a low-pass filtered
+                 finite difference
   battery/motors, battery/electronics  sensor_msgs/BatteryState  each fitted pack at batteries.rate_hz (2 Hz):
                  voltage, cell_voltage (NaN per cell: only the pack is measured), percentage from a resting
                  LiPo curve (NaN when absent), power_supply_status, health, present
@@ -112,9 +113,9 @@ class ServoFeedbackNode:
         self.last_reading = reading
         stamp = rospy.Time.now()
         positions = reading.angles
-        if reading.lent:  # the ADC read a battery: no reading of the joint this cycle
-            positions = positions.copy()
-            positions[reading.lent] = float("nan")
+        if reading.lent:  # the ADC read a battery: the joint's previous angle stands in for one cycle (a NaN
+            positions = positions.copy()  # would make the controller's arming check and the pre-dive check's
+            positions[reading.lent] = reading.held_angles[reading.lent]  # strokes refuse a healthy joint)
         velocities = self.differentiator.update(stamp.to_sec(), positions)
         msg = JointState()
         msg.header.stamp = stamp

@@ -16,10 +16,11 @@ from quadruped_control.control.servo_watch import TrackingSettings
 
 #: What a disarm does to the servos: keep them powered at their last pulse (hold), or switch every output off.
 DISARM_ACTIONS = ("hold", "limp")
-#: What a health source's ERROR does while armed: report only, disarm (the servos hold), or disarm and go limp.
+#: What a health source's hazard does while armed: report only, disarm (the servos hold), or disarm and go limp.
 HEALTH_ACTIONS = ("warn", "disarm", "limp")
-#: The health sources (``health/<name>``, diagnostic_msgs/DiagnosticStatus) the supervisor knows an action for.
-HEALTH_SOURCES = ("depth", "battery", "leak")
+#: The health sources (``health/<name>``) with a hazard to act on; health/depth reports measurement faults only
+#: (every one is reported and refuses arming, none stops the robot).
+HEALTH_SOURCES = ("battery", "leak")
 
 #: The IB53BHU's no-load speed (config/robot.yaml servo.no_load_speed_rpm, 95 rpm), rad/s: the soft start's bound
 #: must stay below it (its range ends at 9.9).
@@ -59,11 +60,10 @@ SAFETY_SCHEMA = Schema("safety.yaml", (
     Param("health.max_age", "s", "a health source's last status older than this counts as lost (they publish at "
           "2 Hz; a driver its supervisor restarts is back within about 3 s)", 0.0, 60.0, low_open=True, default=5.0,
           source="choice"),
-    Param("health.depth_action", "", "armed, the depth sensor lost or implausible (health/depth ERROR): warn, "
-          "disarm or limp", kind="string", choices=HEALTH_ACTIONS, default="warn", source="choice"),
-    Param("health.battery_action", "", "armed, a pack below its critical voltage (health/battery ERROR): warn, "
-          "disarm or limp", kind="string", choices=HEALTH_ACTIONS, default="disarm", source="choice"),
-    Param("health.leak_action", "", "armed, water in the enclosure (health/leak ERROR): warn, disarm or limp",
+    Param("health.battery_action", "", "armed, a pack below its critical voltage (health/battery ERROR, reason "
+          "critical): warn, disarm or limp", kind="string", choices=HEALTH_ACTIONS, default="disarm", source="choice"),
+    Param("health.leak_action", "", "armed, water in the enclosure (health/leak ERROR; no leak node yet): warn, "
+          "disarm or limp",
           kind="string", choices=HEALTH_ACTIONS, default="disarm", source="choice"),
 ))
 

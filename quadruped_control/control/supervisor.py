@@ -56,9 +56,13 @@ from quadruped_control.control.servo_watch import ERROR, ServoTrackingWatch
 from quadruped_control.control.soft_start import JointSpeedLimiter
 from quadruped_control.model.kinematics import joint_angles
 
-#: What the tether failsafe does when the heartbeat is lost: stop stroking (the servos hold where they are), or
-#: that and every output off (limp).
-TETHER_ACTIONS = ("disarm", "limp")
+#: What the tether failsafe does when the heartbeat is lost: stop stroking (the servos hold where they are), that
+#: and every output off (limp), or stay armed holding the attitude the robot had (hold).
+TETHER_ACTIONS = ("disarm", "limp", "hold")
+
+#: health/<source> reason codes that say the measurement failed, not that the hazard it watches is there.
+MEASUREMENT_FAULTS = frozenset(("stale", "no_reading", "no_answer", "absent", "implausible", "prom_crc", "dropped",
+                                "not_fitted"))
 
 #: Maps 12 joint angles (rad, JOINT_NAMES order) to 12 pulse widths (us), clamped to the limits.
 PulseMap = Callable[[np.ndarray], np.ndarray]
@@ -141,6 +145,7 @@ class ControlSupervisor:
         self.tether_action = tether_action
         self.last_heartbeat: Optional[float] = None
         self.tether_losses = 0
+        self._tether_holding = False  # a hold taken for the current loss of the heartbeat
         self.clock_now = 0.0  # the node's clock at the last tick (the arming gate's heartbeat age)
         self.safety = safety
         self._limiter = JointSpeedLimiter(safety.max_joint_speed) if safety is not None else None
@@ -158,8 +163,9 @@ class ControlSupervisor:
         if health_sources and safety is None:
             raise ValueError("health_sources need a SafetyConfig (their actions and max age)")
         self.health_sources = tuple(health_sources)
-        self._health: Dict[str, Tuple[bool, str, float]] = {}  # source -> (in error, message, stamp)
-        self._health_episodes: Set[str] = set()  # sources check_health has reported and that are not well again
+        self._health: Dict[str, Tuple[bool, str, float, bool]] = {}  # source -> (in error, message, stamp, hazard)
+        #: (source, hazard) episodes check_health has reported whose source is not well again
+        self._health_episodes: Set[Tuple[str, bool]] = set()
         self.health_actions_taken = 0
         self._outputs_problem: Optional[str] = None  # pwm_node's outputs_state (None: never received)
         self._outputs_stamp = -math.inf
@@ -200,15 +206,25 @@ class ControlSupervisor:
         return self.last_heartbeat is None or now - self.last_heartbeat > self.heartbeat_timeout
 
     def check_tether(self, now: float) -> Optional[str]:
-        """The tether failsafe: armed, watching, and no heartbeat for ``heartbeat_timeout`` -> disarm and return
-        the configured action (``disarm`` or ``limp``: the caller switches the outputs off) once; else None.
-        When the heartbeat returns nothing moves until the next arm."""
-        if not (self._armed and self.watch_heartbeat and self.heartbeat_lost(now)):
+        """The tether failsafe: armed, watching, and no heartbeat for ``heartbeat_timeout`` -> the configured action,
+        returned once per loss: ``disarm`` or ``limp`` disarm (for limp the caller switches the outputs off), and
+        when the heartbeat returns nothing moves until the next arm; ``hold`` keeps the robot armed with the
+        attitude it has as its setpoint, until the operator sends another (``disarm`` when no IMU sample is
+        usable to hold)."""
+        lost = self.watch_heartbeat and self.heartbeat_lost(now)
+        if not lost:
+            self._tether_holding = False
+        if not (self._armed and lost) or self._tether_holding:
             return None
+        self.tether_losses += 1
+        if self.tether_action == "hold" and self._imu is not None and self.imu_problem(now) is None:
+            q = self._imu.orientation_xyzw
+            self.controller.set_setpoint(quat_to_rot(q / np.linalg.norm(q)))
+            self._tether_holding = True
+            return "hold"
         self._armed = False
         self.arm_pending = False
-        self.tether_losses += 1
-        return self.tether_action
+        return "limp" if self.tether_action == "limp" else "disarm"
 
     def set_estop(self, latched: bool) -> None:
         """The e-stop's state (pwm_node's ``estop_state``): latched disarms at once and refuses arming."""
@@ -222,16 +238,20 @@ class ControlSupervisor:
         self._outputs_problem = str(problem)
         self._outputs_stamp = float(now)
 
-    def set_health(self, source: str, error: bool, message: str, now: float) -> None:
-        """``health/<source>``'s status at ``now``: ``error`` (level ERROR) and its message."""
-        self._health[source] = (bool(error), str(message), float(now))
+    def set_health(self, source: str, error: bool, message: str, now: float, reason: str = "") -> None:
+        """``health/<source>``'s status at ``now``: ``error`` (level ERROR), its message and its ``reason`` code(s)
+        (comma-separated, each maybe ``<part>:<code>``). An error whose every code is a measurement fault
+        (:data:`MEASUREMENT_FAULTS`: the sensor lost, stale, implausible) is not a hazard."""
+        codes = [part.rsplit(":", 1)[-1] for part in str(reason).split(",") if part]
+        hazard = bool(error) and not (codes and all(code in MEASUREMENT_FAULTS for code in codes))
+        self._health[source] = (bool(error), str(message), float(now), hazard)
 
     def health_problem(self, source: str, now: float) -> Optional[str]:
         """Why ``source`` stops arming: no status yet, its status old, or in error (its message)."""
         status = self._health.get(source)
         if status is None:
             return "no health/%s status yet (is its node running?)" % source
-        error, message, stamp = status
+        error, message, stamp, _ = status
         assert self.safety is not None
         age = now - stamp
         if not age <= self.safety.health_max_age:
@@ -239,26 +259,37 @@ class ControlSupervisor:
         return (message or "error") if error else None
 
     def check_health(self, now: float) -> List[Tuple[str, str, str]]:
-        """Armed, each health source newly lost or in error: (source, action, why), once until it is well again.
-        An action ``disarm`` or ``limp`` disarms here (the caller switches the outputs off for limp); ``warn`` only
-        reports."""
+        """Armed, each health source newly in trouble: (source, action, why), once until it is well again. A
+        hazard (a critical pack, water inside) takes the source's action: ``disarm`` or ``limp`` disarm here (the
+        caller switches the outputs off for limp); a lost or faulty measurement, or action ``warn``, is reported
+        (``warn``) and the robot goes on: stopping it would not make the sensor come back. Arming stays refused
+        (:meth:`arming_checks`) either way."""
         taken = []
         for source in self.health_sources:
             problem = self.health_problem(source, now)
             if problem is None:
-                self._health_episodes.discard(source)
+                self._health_episodes.discard((source, True))
+                self._health_episodes.discard((source, False))
                 continue
-            if source in self._health_episodes or not self._armed:
+            status = self._health.get(source)
+            hazard = status is not None and now - status[2] <= self._health_max_age() and status[3]
+            key = (source, hazard)
+            if key in self._health_episodes or not self._armed:
                 continue
-            self._health_episodes.add(source)
+            self._health_episodes.discard((source, not hazard))
+            self._health_episodes.add(key)
             assert self.safety is not None
-            action = self.safety.health_action(source)
+            action = self.safety.health_action(source) if hazard else "warn"
             taken.append((source, action, problem))
             if action != "warn":
                 self._armed = False
                 self.arm_pending = False
                 self.health_actions_taken += 1
         return taken
+
+    def _health_max_age(self) -> float:
+        assert self.safety is not None
+        return self.safety.health_max_age
 
     def arming_checks(self) -> List[Tuple[str, str]]:
         """Each arming precondition as (name, problem; empty when it holds), at the last tick's clock."""

@@ -15,7 +15,8 @@ Subscribes
   tether/heartbeat       std_msgs/Header    the laptop's heartbeat (heartbeat_node); watched with ~heartbeat_timeout
   outputs_state          diagnostic_msgs/DiagnosticStatus  pwm_node's outputs (OK: they take commands); an arming check
   health/<source>        diagnostic_msgs/DiagnosticStatus  each of ~health_sources (depth, battery, leak): fresh and
-                                                         not ERROR to arm; armed, its ERROR takes safety.yaml's action
+                                                         not ERROR to arm; armed, a hazard (an ERROR whose "reason"
+                                                         is not a measurement fault) takes safety.yaml's action
 Publishes
   servo_command          underwater_quadruped/ServoCommand   12 pulse widths (us) + joint targets,
                                                              header.stamp = the IMU sample's stamp
@@ -37,7 +38,8 @@ Parameters
   ~health_sources (default: what hardware_yaml fits: depth if depth.fitted, battery if a pack is; leak: none yet)
   ~batteries_fitted (false: hardware_yaml decides; true: the simulated robot's packs)
   ~heartbeat_timeout (0: not watched; robot.launch: 2 s): arming needs the tether heartbeat, and armed, none for
-                         this long disarms; ~tether_action (disarm | limp: the outputs off too)
+                         this long acts: ~tether_action (disarm | limp: the outputs off too | hold: armed, the
+                         attitude it has as the setpoint)
   ~starts                the node's starts since the launch file set it to 0: a respawned node (start > 1)
                          comes back disarmed whatever ~arm_on_start says
   ~stroke_scheme (stroke.scheme of controller.yaml: paper | coordinated)
@@ -293,8 +295,10 @@ class AttitudeControllerNode:
         return SetBoolResponse(success=success, message=message)
 
     def _on_health(self, msg: DiagnosticStatus, source: str) -> None:
+        reason = next((item.value for item in msg.values if item.key == "reason"), "")
         with self.lock:
-            self.supervisor.set_health(source, msg.level >= DiagnosticStatus.ERROR, msg.message, rospy.get_time())
+            self.supervisor.set_health(source, msg.level >= DiagnosticStatus.ERROR, msg.message, rospy.get_time(),
+                                       reason)
 
     def _on_outputs_state(self, msg: DiagnosticStatus) -> None:
         with self.lock:
@@ -306,6 +310,10 @@ class AttitudeControllerNode:
             self.supervisor.set_heartbeat(rospy.get_time())
 
     def _on_tether_lost(self, action: str) -> None:
+        if action == "hold":
+            rospy.logerr("attitude controller: TETHER LOST: no heartbeat for %.1f s: holding the attitude the robot "
+                         "has (armed) until a new setpoint", self.supervisor.heartbeat_timeout)
+            return
         rospy.logerr("attitude controller: TETHER LOST: no heartbeat for %.1f s: disarmed%s; arm again once it "
                      "is back", self.supervisor.heartbeat_timeout, ", outputs off (limp)" if action == "limp" else "")
         if action == "limp":  # off the control thread: a service call can wait

@@ -151,6 +151,9 @@ NODE = textwrap.dedent("""\
         supervise_if_asked("demo_node", backoff=Backoff(first=0.05, longest=0.2, reset_after=60.0))
 
     mode, starts_file = sys.argv[1], sys.argv[2]
+    if mode == "serve":  # like rospy: SIGINT and SIGTERM end it cleanly (set before the start is recorded: the
+        signal.signal(signal.SIGINT, lambda *_: sys.exit(0))  # test signals as soon as it sees the start)
+        signal.signal(signal.SIGTERM, lambda *_: sys.exit(0))
     with open(starts_file, "a") as stream:
         stream.write("%d\\n" % os.getpid())
     starts = len(open(starts_file).read().split())
@@ -162,9 +165,6 @@ NODE = textwrap.dedent("""\
         if starts == 1:
             os.abort()
         sys.exit(78)
-    if mode == "serve":  # like rospy: SIGINT and SIGTERM end it cleanly
-        signal.signal(signal.SIGINT, lambda *_: sys.exit(0))
-        signal.signal(signal.SIGTERM, lambda *_: sys.exit(0))
     while True:  # "serve", or "wait": default signal handling
         time.sleep(0.02)
 """)

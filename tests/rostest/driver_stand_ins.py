@@ -1,7 +1,8 @@
 """For rostests that run the controller without the drivers: what its arming checks need from them.
 
-:class:`DriverStandIns` publishes, from a thread, what servo_feedback_node and pwm_node would: joint_states with
-the legs at the nominal pose (50 Hz) and an OK outputs_state (5 Hz).
+:class:`DriverStandIns` publishes, from a thread, what servo_feedback_node, pwm_node and ms5837_node would:
+joint_states with the legs at the nominal pose (50 Hz), an OK outputs_state (5 Hz) and an OK health/depth (5 Hz:
+config/hardware.yaml fits the depth sensor, so the controller watches it).
 """
 import threading
 
@@ -20,6 +21,7 @@ class DriverStandIns:
     def __init__(self):
         self.joint_pub = rospy.Publisher("joint_states", JointState, queue_size=10)
         self.outputs_pub = rospy.Publisher("outputs_state", DiagnosticStatus, queue_size=1)
+        self.depth_pub = rospy.Publisher("health/depth", DiagnosticStatus, queue_size=1)
         self.nominal = nominal_joint_angles(load_robot_params()).reshape(12).tolist()
         self._stop = threading.Event()
         self._thread = threading.Thread(target=self._run, daemon=True)
@@ -40,6 +42,8 @@ class DriverStandIns:
             if k % 10 == 0:
                 self.outputs_pub.publish(DiagnosticStatus(level=DiagnosticStatus.OK, name="test: outputs",
                                                           message="test stand-in: ready"))
+                self.depth_pub.publish(DiagnosticStatus(level=DiagnosticStatus.OK, name="test: depth",
+                                                        message="test stand-in: fresh"))
             k += 1
             try:
                 rate.sleep()

@@ -5,7 +5,7 @@
 1. every topic arrives at its rate over a 5 s window (depth/* 10 Hz, battery/<pack> 2 Hz, health/* 2 Hz), with
    plausible contents (the fake sensor 0.5 m under water at 20 degC; depth/pose z = -depth in odom);
 2. ``/sim_node/depth_sensor_fault true``: health/depth ERROR within depth.timeout_s (+ one poll and margin) and no
-   depth reading published meanwhile, and the controller stays armed (health.depth_action warn); ``false``: OK
+   depth reading published meanwhile, and the controller stays armed (a lost sensor is no hazard); ``false``: OK
    again;
 3. the small packs run flat: health/battery goes from OK to ERROR, the pack named critical, its BatteryState
    below the critical cell voltage; the controller disarmed within 0.2 s of the ERROR (health.battery_action
@@ -149,7 +149,7 @@ class SafetySensorsTest(unittest.TestCase):
         self.assertEqual(published, [], "depth readings published while the sensor did not answer")
         time.sleep(0.5)
         after = self.armed_between(error_at, time.monotonic())
-        self.assertTrue(after and all(after), "the controller disarmed on the depth sensor's loss (its action: warn)")
+        self.assertTrue(after and all(after), "the controller disarmed on the depth sensor's loss (no hazard)")
         back = time.monotonic()
         self.assertTrue(fault(False).success)
         ok_at, _ = self.wait_for(lambda: self.first_health("health/depth", DiagnosticStatus.OK, back), 10.0,

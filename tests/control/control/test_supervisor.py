@@ -422,13 +422,19 @@ def test_health_sources_gate_arming_and_their_errors_take_their_actions(supervis
     watched.set_health("depth", True, "no reading for 1.2 s", 1.5)
     assert watched.check_health(1.5) == [("depth", "warn", "no reading for 1.2 s")]
     assert watched.check_health(1.6) == [] and watched.armed
-    # a leak status that stops coming counts as lost after health.max_age: its action (limp) disarms
+    # a leak status that stops coming counts as lost after health.max_age: reported, the robot goes on
     for source in ("depth", "battery"):
         watched.set_health(source, False, "ok", 6.0)
     assert watched.check_health(6.0) == []  # 5.0 s (health.max_age): not yet
-    assert watched.check_health(6.1) == [("leak", "limp", "health/leak is 5.1 s old (is its node running?)")]
+    assert watched.check_health(6.1) == [("leak", "warn", "health/leak is 5.1 s old (is its node running?)")]
+    assert watched.armed and watched.check_health(6.2) == []  # once
+    # a measurement fault in error is not a hazard either; water inside is: its action (limp) disarms
+    watched.set_health("leak", True, "probe reads nothing", 6.3, reason="no_reading")
+    assert watched.check_health(6.3) == [] and watched.armed  # still the same lost-sensor episode
+    watched.set_health("leak", True, "water in the enclosure", 6.4, reason="wet")
+    assert watched.check_health(6.4) == [("leak", "limp", "water in the enclosure")]
     assert not watched.armed and watched.health_actions_taken == 1
-    assert watched.check_health(6.2) == []  # once
+    assert watched.check_health(6.5) == []  # once
     with pytest.raises(ValueError, match="health_sources need a SafetyConfig"):
         ControlSupervisor(supervisor.controller, pulse_map, health_sources=("depth",))
 
@@ -439,6 +445,29 @@ def test_a_battery_error_while_armed_disarms(supervisor):
     watched.set_health("battery", False, "ok", 1.0)
     watched.tick(1.0, 1.0)
     assert watched.arm(True).startswith("armed")
-    watched.set_health("battery", True, "electronics pack 3.3 V/cell: critical", 1.2)
-    assert watched.check_health(1.2) == [("battery", "disarm", "electronics pack 3.3 V/cell: critical")]
+    watched.set_health("battery", True, "electronics: 15.9 V, stale", 1.2, reason="electronics:stale")
+    assert watched.check_health(1.2) == [("battery", "warn", "electronics: 15.9 V, stale")] and watched.armed
+    watched.set_health("battery", True, "electronics pack 3.3 V/cell: critical", 1.3,
+                       reason="motors:stale,electronics:critical")
+    assert watched.check_health(1.3) == [("battery", "disarm", "electronics pack 3.3 V/cell: critical")]
     assert not watched.armed
+
+
+def test_the_tether_failsafe_can_hold_the_attitude_the_robot_has(supervisor):
+    held = ControlSupervisor(supervisor.controller, pulse_map, heartbeat_timeout=1.0, tether_action="hold")
+    held.set_heartbeat(0.0)
+    assert held.arm(True).startswith("armed")
+    tilted = rot_to_quat(rpy_to_rot(math.radians(12.0), math.radians(-5.0), 0.0))
+    run(held, 1.5, quaternion=tilted)  # heartbeat last at 0.0: lost after 1.0 s
+    assert held.check_tether(1.5) == "hold" and held.armed and held.tether_losses == 1
+    np.testing.assert_allclose(held.controller.setpoint, rpy_to_rot(math.radians(12.0), math.radians(-5.0), 0.0),
+                               atol=1e-9)
+    assert held.check_tether(1.6) is None  # once per loss
+    strokes = run(held, 1.0, quaternion=tilted, start=1.6)
+    assert all(o.problem == "" for o in strokes)  # armed and tracking the held attitude
+    held.set_heartbeat(2.7)
+    assert held.check_tether(2.7) is None
+    stale = ControlSupervisor(supervisor.controller, pulse_map, heartbeat_timeout=1.0, tether_action="hold")
+    stale.set_heartbeat(0.0)
+    stale.arm(True)
+    assert stale.check_tether(1.5) == "disarm" and not stale.armed  # no IMU sample to hold: disarm
