@@ -46,12 +46,13 @@ SAFETY_SCHEMA = Schema("safety.yaml", (
     Param("tracking.speed_scale", "", "fraction of robot.yaml's no-load speed the model's servos reach", 0.05, 1.0,
           default=1.0, source="estimate"),
     Param("tracking.latency", "s", "a reading is compared with where the model was over this span before its stamp "
-          "(command to chip, reading back)", 0.0, 0.5, low_open=True, default=0.01, source="choice"),
+          "(command to chip, reading back)", 0.0, 0.5, low_open=True, default=0.03, source="choice"),
     Param("tracking.window", "s", "span of the tracking error's RMS", 0.0, 10.0, low_open=True, default=0.5,
           source="choice"),
     Param("tracking.bound", "rad", "a joint whose error RMS is above this is reported (healthy simulated joints "
-          "reach 0.015 rad; docs/faults.md)", 0.0, 1.0, low_open=True, default=0.026, source="choice"),
-    Param("tracking.warn_after", "s", "above the bound this long: WARN", 0.0, 10.0, default=0.0, source="choice"),
+          "reach 0.015 rad on a quiet machine; docs/faults.md)", 0.0, 1.0, low_open=True, default=0.044,
+          source="choice"),
+    Param("tracking.warn_after", "s", "above the bound this long: WARN", 0.0, 10.0, default=0.1, source="choice"),
     Param("tracking.error_after", "s", "above the bound this long: ERROR", 0.0, 30.0, default=0.5, source="choice"),
     Param("tracking.report_hold", "s", "a joint stays WARN this long after its RMS falls under the bound", 0.0,
           60.0, default=2.0, source="choice"),

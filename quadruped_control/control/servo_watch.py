@@ -30,10 +30,10 @@ class TrackingSettings:
 
     max_speed: float = 95.0 * math.pi / 30.0  # rad/s, the servo's no-load speed (robot.yaml; the supervisor sets it)
     time_constant: float = 0.03
-    latency: float = 0.01
+    latency: float = 0.03
     window: float = 0.5
-    bound: float = 0.026
-    warn_after: float = 0.0
+    bound: float = 0.044
+    warn_after: float = 0.1
     error_after: float = 0.5
     report_hold: float = 2.0
 

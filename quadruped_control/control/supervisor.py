@@ -174,8 +174,10 @@ class ControlSupervisor:
         self._joint_velocities: Optional[np.ndarray] = None
         self._joint_stamp: Optional[float] = None
         self._armed = False
-        #: an arm asked for at start-up waits for the checks (with ``safety``); any disarm cancels it
+        #: an arm asked for at start-up waits for the checks (with ``safety``), and for the clock to reach
+        #: ``arm_not_before`` (a fixed moment: lock-step runs then arm on the same tick); any disarm cancels it
         self.arm_pending = bool(armed) and safety is not None
+        self.arm_not_before = -math.inf
         if armed and safety is None and self.arming_refusal() is None:
             self._arm()
         self.ticks = 0
@@ -431,7 +433,7 @@ class ControlSupervisor:
         """One control tick at controller time ``t``; ``now`` is the clock the IMU stamps use."""
         self.ticks += 1
         self.clock_now = now
-        if self.arm_pending and self.arming_refusal() is None:
+        if self.arm_pending and now >= self.arm_not_before and self.arming_refusal() is None:
             self._arm()
         problem = self.imu_problem(now)
         imu = self._imu

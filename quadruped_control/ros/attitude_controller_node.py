@@ -33,6 +33,7 @@ Parameters
   ~loop_rate (100 Hz)    ~imu_rate (200 Hz: the loop steps on every imu_rate/loop_rate-th sample, so
                           the command leaves right after the sample that caused it)
   ~imu_max_age (0.05 s)  ~arm_on_start (false: arms once the checks pass; the first start only)
+  ~arm_on_start_delay (0 s: that arm not before this long after the start; sim.launch lock-step: 1 s)
   ~setpoint_rpy_deg ([0, 0, 0])
   ~require_preflight (false; robot.launch: true): arming waits for a passed pre-dive check
   ~health_sources (default: what hardware_yaml fits: depth if depth.fitted, battery if a pack is; leak: none yet)
@@ -166,6 +167,9 @@ class AttitudeControllerNode:
         # ROS clock (simulated time under use_sim_time) of the last step; the start counts as one, so
         # the fallback timer's first step comes 1.5 periods after start-up (deterministic in lock-step).
         self.last_step_time: float = rospy.get_time()
+        # ~arm_on_start_delay: the start-up arm not before this long after the start, so that in lock-step it
+        # lands on the same tick in every run whenever the drivers' first messages come.
+        self.supervisor.arm_not_before = self.last_step_time + float(rospy.get_param("~arm_on_start_delay", 0.0))
         self.hold_episodes = HoldEpisodes()
         self.jitter = WindowStatistics(2000)
         self.step_time = WindowStatistics(2000)
