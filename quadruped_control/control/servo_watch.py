@@ -32,7 +32,7 @@ class TrackingSettings:
     time_constant: float = 0.03
     latency: float = 0.03
     window: float = 0.5
-    bound: float = 0.044
+    bound: float = 0.087
     warn_after: float = 0.1
     error_after: float = 0.5
     report_hold: float = 2.0
