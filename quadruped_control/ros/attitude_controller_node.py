@@ -295,7 +295,7 @@ class AttitudeControllerNode:
             success = self.supervisor.armed == bool(request.data)
         rospy.logwarn("attitude controller %s", message)
         if was_armed and not request.data and self.safety.disarm_action == "limp":
-            threading.Thread(target=self._outputs_off, args=("disarm",), name="disarm-limp", daemon=True).start()
+            self._go_limp("disarm")
         return SetBoolResponse(success=success, message=message)
 
     def _on_health(self, msg: DiagnosticStatus, source: str) -> None:
@@ -320,9 +320,12 @@ class AttitudeControllerNode:
             return
         rospy.logerr("attitude controller: TETHER LOST: no heartbeat for %.1f s: disarmed%s; arm again once it "
                      "is back", self.supervisor.heartbeat_timeout, ", outputs off (limp)" if action == "limp" else "")
-        if action == "limp":  # off the control thread: a service call can wait
-            threading.Thread(target=self._outputs_off, args=("tether failsafe",), name="tether-limp",
-                             daemon=True).start()
+        if action == "limp":
+            self._go_limp("tether failsafe")
+
+    def _go_limp(self, why: str) -> None:
+        """Every output off (pwm_node/enable false), off the calling thread: a service call can wait."""
+        threading.Thread(target=self._outputs_off, args=(why,), name="limp", daemon=True).start()
 
     def _outputs_off(self, why: str) -> None:
         try:
@@ -415,7 +418,7 @@ class AttitudeControllerNode:
             rospy.logerr("attitude controller: health/%s: %s: disarmed%s; arm again once it is well", source, why,
                          ", outputs off (limp)" if action == "limp" else "")
             if action == "limp":
-                threading.Thread(target=self._outputs_off, args=("health/" + source,), daemon=True).start()
+                self._go_limp("health/" + source)
         if armed_now and not was_armed and pending:  # an arm asked for at start-up, now that the checks pass
             rospy.logwarn("attitude controller armed (~arm_on_start): %s", result.problem or "strokes start")
         if tracking != self.reported_tracking:
