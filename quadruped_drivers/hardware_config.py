@@ -1,6 +1,6 @@
 """Typed loader for ``config/hardware.yaml``: I2C bus, addresses, mux channels, servo channel order, and the
-safety sensors: the MS5837 depth sensor (``depth``) and the LiPo packs read on spare ADS1115 inputs
-(``batteries``).
+safety sensors: the MS5837 depth sensor (``depth``), the LiPo packs read on spare ADS1115 inputs
+(``batteries``) and the leak probe on a Jetson GPIO pin (``leak``).
 
 The paper (section "Electronics") reads twelve ADS1115 ADCs for the servo feedback and drives the
 twelve servos through PWM at 100 Hz control rate; this file fixes how those parts sit on the Jetson's
@@ -179,6 +179,19 @@ HARDWARE_SCHEMA = Schema("hardware.yaml", (
           "warn_cell_v)", 2.8, 4.2, default=3.4, source="choice"),
     Param("batteries.packs.<pack>.hysteresis_v", "V", "a level is left only once the cell voltage is this far above "
           "its threshold", 0.0, 0.5, default=0.1, source="choice"),
+    Param("leak.fitted", "", "a leak probe (e.g. Blue Robotics' SOS Leak Sensor) is wired to a Jetson header pin; "
+          "false: leak_node publishes health/leak OK \"not fitted\"", kind="boolean", default=False),
+    Param("leak.pin", "", "the probe's signal on the 40-pin header, BOARD numbering (Jetson.GPIO)", 1, 40,
+          kind="integer", default=15, source="estimate"),
+    Param("leak.active_high", "", "true: the signal is high when water bridges the probe (the SOS sensor's); false: "
+          "low", kind="boolean", default=True, source="estimate"),
+    Param("leak.rate_hz", "Hz", "the pin is read this often", 0.0, 100.0, low_open=True, default=10.0,
+          source="choice"),
+    Param("leak.confirm_readings", "", "wet readings in a row before water is reported (a splash on the pins while "
+          "handling the robot); then the report is latched until leak_node's ~reset", 1, 50, kind="integer",
+          default=3, source="choice"),
+    Param("leak.timeout_s", "s", "no good reading of the pin for this long: health/leak ERROR no_reading (at least "
+          "2 / rate_hz)", 0.0, 60.0, low_open=True, default=1.0, source="choice"),
 ), names={"joint": JOINT_NAMES, "pack": BATTERY_PACKS}, what="hardware parameter")
 
 
@@ -255,6 +268,18 @@ class BatteryHardware:
 
 
 @dataclass(frozen=True)
+class LeakProbeHardware:
+    """The enclosure's leak probe on a Jetson GPIO pin (``leak.*``)."""
+
+    fitted: bool = False
+    pin: int = 15
+    active_high: bool = True
+    rate_hz: float = 10.0
+    confirm_readings: int = 3
+    timeout_s: float = 1.0
+
+
+@dataclass(frozen=True)
 class HardwareConfig:
     """Everything the servo drivers need to know about the wiring. Build with :func:`load_hardware_config`."""
 
@@ -280,6 +305,7 @@ class HardwareConfig:
     adc_jump_confirm_readings: int = 3
     depth: DepthSensorHardware = DepthSensorHardware()
     batteries: BatteryHardware = BatteryHardware()
+    leak: LeakProbeHardware = LeakProbeHardware()
 
     @property
     def pwm_channels(self) -> np.ndarray:
@@ -407,6 +433,7 @@ def hardware_config_from_dict(tree: Mapping[str, Any]) -> HardwareConfig:
         adc_jump_confirm_readings=v["adc.jump_confirm_readings"],
         depth=depth,
         batteries=batteries,
+        leak=_leak_probe(v),
     )
 
 
@@ -486,6 +513,22 @@ def _batteries(v: Mapping[str, Any], joints: Sequence[JointHardware], full_scale
     return batteries
 
 
+def _leak_probe(v: Mapping[str, Any]) -> LeakProbeHardware:
+    """``leak.*`` checked against each other (ParameterError naming the key)."""
+    leak = LeakProbeHardware(fitted=v["leak.fitted"], pin=v["leak.pin"], active_high=v["leak.active_high"],
+                             rate_hz=v["leak.rate_hz"], confirm_readings=v["leak.confirm_readings"],
+                             timeout_s=v["leak.timeout_s"])
+    if leak.timeout_s < 2.0 / leak.rate_hz:
+        raise ParameterError("hardware parameter 'leak.timeout_s' = %g must be at least 2 / leak.rate_hz = %g s"
+                             % (leak.timeout_s, 2.0 / leak.rate_hz))
+    return leak
+
+
+def with_leak_fitted(config: HardwareConfig) -> HardwareConfig:
+    """``config`` with its leak probe fitted: the simulated robot's, whatever the robot's file says."""
+    return dataclasses.replace(config, leak=dataclasses.replace(config.leak, fitted=True))
+
+
 def with_batteries_fitted(config: HardwareConfig) -> HardwareConfig:
     """``config`` with every declared pack fitted: the simulated robot's packs, whatever the robot's file says."""
     packs = tuple(dataclasses.replace(pack, fitted=True) for pack in config.batteries.packs)
@@ -500,4 +543,5 @@ def load_hardware_config(path: Optional[str] = None) -> HardwareConfig:
 __all__ = ["HARDWARE_SCHEMA", "FAILSAFE_ACTIONS", "ADS1115_FSR_PGA", "ADS1115_RATES", "ADS1115_ADDRESSES",
            "PCA9685_ALLCALL_ADDRESS", "BATTERY_PACKS", "DEPTH_MODELS", "DEPTH_MAX_OSR", "LIPO_MAX_CELL_V",
            "BatteryHardware", "BatteryPackHardware", "DepthSensorHardware", "JointHardware", "HardwareConfig",
-           "pca9685_prescale", "hardware_config_from_dict", "load_hardware_config", "with_batteries_fitted"]
+           "LeakProbeHardware", "pca9685_prescale", "hardware_config_from_dict", "load_hardware_config",
+           "with_batteries_fitted", "with_leak_fitted"]

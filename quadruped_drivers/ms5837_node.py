@@ -24,7 +24,7 @@ import time
 from typing import List, Optional
 
 import rospy
-from diagnostic_msgs.msg import DiagnosticStatus, KeyValue
+from diagnostic_msgs.msg import DiagnosticStatus
 from diagnostic_updater import DiagnosticStatusWrapper
 from geometry_msgs.msg import PoseWithCovarianceStamped
 from sensor_msgs.msg import FluidPressure, Temperature
@@ -35,11 +35,8 @@ from quadruped_common.ros.node_startup import stack_clock, start_node
 from quadruped_drivers.depth_sensor import (DepthSensorRunner, SurfaceReference, make_driver, poll_period,
                                             pose_covariance)
 from quadruped_drivers.hardware_config import load_hardware_config
-from quadruped_drivers.health import ERROR, HealthGate
+from quadruped_drivers.health_publisher import HEALTH_PERIOD, HealthPublisher
 from quadruped_drivers.node_support import open_bus
-
-#: Seconds between two health/depth messages when nothing changes (2 Hz).
-HEALTH_PERIOD = 0.5
 
 
 class Ms5837Node:
@@ -66,9 +63,9 @@ class Ms5837Node:
         self.pressure_pub = rospy.Publisher("depth/pressure", FluidPressure, queue_size=5)
         self.temperature_pub = rospy.Publisher("depth/temperature", Temperature, queue_size=5)
         self.pose_pub = rospy.Publisher("depth/pose", PoseWithCovarianceStamped, queue_size=5)
-        self.health_pub = rospy.Publisher("health/depth", DiagnosticStatus, queue_size=2)
-        self.gate = HealthGate(HEALTH_PERIOD)
         self.hardware_id = "ms5837-%s@0x%02x" % (self.depth.model, self.depth.address)
+        self.health_pub = HealthPublisher(
+            rospy.Publisher("health/depth", DiagnosticStatus, queue_size=2), "ms5837_node: depth", self.hardware_id)
         self.diagnostics = Updater()
         self.diagnostics.setHardwareID(self.hardware_id)
         self.diagnostics.add("depth sensor", self._diagnose)
@@ -121,14 +118,8 @@ class Ms5837Node:
         self.pose_pub.publish(pose)
 
     def _publish_health(self) -> None:
-        health = self.runner.health(self.clock())
-        if not self.gate.due(self.clock(), health):
-            return
-        if health.level == ERROR:
-            rospy.logwarn_throttle(5.0, "ms5837_node: health/depth ERROR: %s" % health.message)
-        self.health_pub.publish(DiagnosticStatus(
-            level=health.level, name="ms5837_node: depth", message=health.message, hardware_id=self.hardware_id,
-            values=[KeyValue(key, value) for key, value in ((("reason", health.reason),) + health.values)]))
+        now = self.clock()
+        self.health_pub.publish(self.runner.health(now), now)
 
     def _diagnose(self, stat: DiagnosticStatusWrapper) -> DiagnosticStatusWrapper:
         now = self.clock()

@@ -32,7 +32,7 @@ import time
 from typing import List, Optional
 
 import rospy
-from diagnostic_msgs.msg import DiagnosticStatus, KeyValue
+from diagnostic_msgs.msg import DiagnosticStatus
 from diagnostic_updater import DiagnosticStatusWrapper
 from sensor_msgs.msg import BatteryState, JointState
 
@@ -44,12 +44,9 @@ from quadruped_common.ros.diagnostics import Updater
 from quadruped_drivers.battery import BatteryMonitor, PackStatus
 from quadruped_drivers.calibration import load_servo_calibration
 from quadruped_drivers.hardware_config import load_hardware_config, with_batteries_fitted
-from quadruped_drivers.health import ERROR, HealthGate
+from quadruped_drivers.health_publisher import HealthPublisher
 from quadruped_drivers.node_support import open_bus
 from quadruped_drivers.servo_feedback import ServoFeedbackArray, SpareInput
-
-#: Seconds between two health/battery messages when nothing changes (2 Hz).
-HEALTH_PERIOD = 0.5
 
 
 class ServoFeedbackNode:
@@ -86,8 +83,9 @@ class ServoFeedbackNode:
                               "electronics": lambda: rospy.Publisher("battery/electronics", BatteryState,
                                                                      queue_size=5)}
         self.battery_pubs = {name: battery_publishers[name]() for name in self.cells}
-        self.health_pub = rospy.Publisher("health/battery", DiagnosticStatus, queue_size=2)
-        self.health_gate = HealthGate(HEALTH_PERIOD)
+        self.health_pub = HealthPublisher(
+            rospy.Publisher("health/battery", DiagnosticStatus, queue_size=2), "servo_feedback_node: battery",
+            "lipo packs on ads1115 spare inputs")
         self.diagnostics = Updater()
         self.diagnostics.setHardwareID("ads1115 x12 behind tca9548a")
         self.diagnostics.add("servo feedback", self._diagnose)
@@ -157,15 +155,7 @@ class ServoFeedbackNode:
 
     def _publish_health(self) -> None:
         now = self.clock()
-        health = self.batteries.health(now)
-        if not self.health_gate.due(now, health):
-            return
-        if health.level == ERROR:
-            rospy.logwarn_throttle(5.0, "servo_feedback_node: health/battery ERROR: %s" % health.message)
-        self.health_pub.publish(DiagnosticStatus(
-            level=health.level, name="servo_feedback_node: battery", message=health.message,
-            hardware_id="lipo packs on ads1115 spare inputs",
-            values=[KeyValue(key, value) for key, value in ((("reason", health.reason),) + health.values)]))
+        self.health_pub.publish(self.batteries.health(now), now)
 
     def _diagnose_battery(self, stat: DiagnosticStatusWrapper) -> DiagnosticStatusWrapper:
         health = self.batteries.health(self.clock())

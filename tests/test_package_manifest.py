@@ -20,6 +20,7 @@ KEYS = {
     "adafruit_pca9685": "python3-adafruit-circuitpython-pca9685-pip",
     "adafruit_ads1x15": "python3-adafruit-circuitpython-ads1x15-pip",
     "adafruit_tca9548a": "python3-adafruit-circuitpython-tca9548a-pip",
+    "Jetson": "python3-jetson-gpio-pip",
 }
 #: imported where present, with a plain-Python path without them: deliberately not a dependency of the
 #: package (numba: the batched simulator's compiled loops, quadruped_common/jit.py; requirements.txt

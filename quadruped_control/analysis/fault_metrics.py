@@ -16,12 +16,15 @@ Definitions (docs/faults.md's fault table states the expectation of each kind in
 - *leg motion while unarmed*: chip rows whose widths differ from the row before by more than half a tick
   on a channel that still produces pulses (a channel going limp is not motion), while the controller is
   unarmed: from a controller kill (plus 50 ms for the commands it sent before it died) until the next
-  arm command, and wherever the controller's telemetry says it is disarmed.
+  arm command, and wherever the controller's telemetry says it is disarmed; there, a row producing a command
+  sent while armed (in flight when it disarmed) is not motion.
 - *safe*: a chip row is safe when the legs are not driven by a stroke: the chip holds every width of the
   row before (the ``hold`` failsafe, or a command path that stopped), every channel is limp (``off``), or
   the controller reports that it holds. *Time to safe state*: from the injection to the first safe row
   after which every row stays safe until the fault ends or the stack tracks again by itself (0 if the
-  robot was safe at once).
+  robot was safe at once). A *stop* (an e-stop, the tether's heartbeat lost, a critical pack, a leak) is judged
+  from the moment the stack must act until the operator's arm, and may not track again by itself before it;
+  an e-stop's safe rows are the limp ones only.
 - *tracking*: the controller reports armed and not holding, and the chip produces one of the controller's
   last three commands (each width within one tick): the command path is closed end to end. *Time to
   recovery*: from the fault's end to the first tracking row.
@@ -33,8 +36,8 @@ from typing import Dict, List, Optional, Sequence, Tuple
 
 import numpy as np
 
-__all__ = ["FaultRecord", "InjectionResult", "Timeline", "judge_injection", "kind_summary", "lost_messages",
-           "pulses_outside_limits", "motion_rows", "safe_rows", "stamp_keys", "tracking_rows"]
+__all__ = ["FaultRecord", "InjectionResult", "Timeline", "judge_injection", "kind_summary", "landing_rows", "limp_rows",
+           "lost_messages", "pulses_outside_limits", "motion_rows", "safe_rows", "stamp_keys", "tracking_rows"]
 
 
 @dataclass
@@ -73,12 +76,15 @@ class FaultRecord:
     start: float
     end: float
     #: "safe": the robot must reach a safe state within the limit; "track": the control path must keep
-    #: tracking through the fault (it does not touch it).
+    #: tracking through the fault (it does not touch it); "stop": safe as "safe", from the moment the stack
+    #: must act, and disarmed until the operator's arm at ``end``.
     expect: str
     #: Spans in which the controller is unarmed whatever its telemetry says (a killed controller, until
     #: the arm command after its restart).
     unarmed: List[Tuple[float, float]] = field(default_factory=list)
     note: str = ""
+    #: The safe state must be every output off (an e-stop), not any safe state.
+    limp: bool = False
 
 
 @dataclass
@@ -148,6 +154,11 @@ def safe_rows(timeline: Timeline, tick_us: float, state_max_age: float = 0.05) -
     return held | limp | controller_safe
 
 
+def limp_rows(timeline: Timeline) -> np.ndarray:
+    """Chip rows (bool) with every output off (the servos limp)."""
+    return (timeline.chip_widths <= 0.0).all(axis=1)
+
+
 def tracking_rows(timeline: Timeline, tick_us: float, state_max_age: float = 0.05) -> np.ndarray:
     """Chip rows (bool) on which the robot tracks: the controller armed and stroking, and the chip producing
     one of its last three commands (module docstring)."""
@@ -163,6 +174,23 @@ def tracking_rows(timeline: Timeline, tick_us: float, state_max_age: float = 0.0
             close = (np.abs(commands - timeline.chip_widths) <= tick_us).all(axis=1)
             matched |= valid & close
     return ok & matched
+
+
+def landing_rows(timeline: Timeline, tick_us: float) -> np.ndarray:
+    """Chip rows (bool) that produce one of the last three commands stamped before the controller's latest armed
+    telemetry: a command sent while armed landing after the disarm (in flight on a loaded host), not motion."""
+    if len(timeline.command_t) == 0 or len(timeline.state_t) == 0:
+        return np.zeros(len(timeline.chip_t), dtype=bool)
+    armed_t = np.where(timeline.armed, timeline.state_t, -np.inf)
+    last_armed = np.maximum.accumulate(armed_t)[np.maximum(_latest(timeline.state_t, timeline.chip_t), 0)]
+    last = _latest(timeline.command_t, last_armed)
+    landing = np.zeros(len(timeline.chip_t), dtype=bool)
+    for back in range(3):
+        index = last - back
+        valid = index >= 0
+        commands = timeline.command_widths[np.where(valid, index, 0)]
+        landing |= valid & (np.abs(commands - timeline.chip_widths) <= tick_us).all(axis=1)
+    return landing
 
 
 def _in_spans(t: np.ndarray, spans: Sequence[Tuple[float, float]]) -> np.ndarray:
@@ -183,10 +211,10 @@ def judge_injection(timeline: Timeline, fault: FaultRecord, min_us: Sequence[flo
 
     fresh, armed, _holding = _state_at(timeline, t, state_max_age)
     disarmed = fresh & ~armed
-    unarmed = _in_spans(t, fault.unarmed) | disarmed
+    unarmed = _in_spans(t, fault.unarmed) | (disarmed & ~landing_rows(timeline, tick))
     moved = int((motion_rows(timeline.chip_widths, tick) & unarmed & window).sum())
 
-    safe = safe_rows(timeline, tick, state_max_age)
+    safe = limp_rows(timeline) if fault.limp else safe_rows(timeline, tick, state_max_age)
     tracking = tracking_rows(timeline, tick, state_max_age)
     during = (t >= fault.start) & (t <= fault.end)
     time_to_safe: Optional[float] = None
@@ -195,7 +223,7 @@ def judge_injection(timeline: Timeline, fault: FaultRecord, min_us: Sequence[flo
     if len(first_safe):
         # Safe until the fault ends, or until the stack tracks again by itself (a respawned driver can
         # close the command path before the campaign sees it registered).
-        resumed = rows[(rows > first_safe[0]) & tracking[rows]][:1]
+        resumed = rows[(rows > first_safe[0]) & tracking[rows]][:1] if fault.expect != "stop" else rows[:0]
         judged = rows[rows < resumed[0]] if len(resumed) else rows
         unsafe = judged[~safe[judged]]
         if len(unsafe) == 0:
@@ -233,8 +261,8 @@ def kind_summary(results: Sequence[InjectionResult], expect: str) -> Dict[str, o
     return {
         "injections": n,
         "expect": expect,
-        "never_safe": sum(1 for x in safe if x is None) if expect == "safe" else 0,
-        "time_to_safe_max": max((x for x in safe if x is not None), default=None) if expect == "safe" else None,
+        "never_safe": sum(1 for x in safe if x is None) if expect != "track" else 0,
+        "time_to_safe_max": max((x for x in safe if x is not None), default=None) if expect != "track" else None,
         "tracking_fraction_min": min((r.tracking_fraction for r in results), default=None)
         if expect == "track" else None,
         "recovered": len(done),

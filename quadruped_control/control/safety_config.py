@@ -64,7 +64,7 @@ SAFETY_SCHEMA = Schema("safety.yaml", (
           source="choice"),
     Param("health.battery_action", "", "armed, a pack below its critical voltage (health/battery ERROR, reason "
           "critical): warn, disarm or limp", kind="string", choices=HEALTH_ACTIONS, default="disarm", source="choice"),
-    Param("health.leak_action", "", "armed, water in the enclosure (health/leak ERROR; no leak node yet): warn, "
+    Param("health.leak_action", "", "armed, water in the enclosure (health/leak ERROR leak, leak_node): warn, "
           "disarm or limp",
           kind="string", choices=HEALTH_ACTIONS, default="disarm", source="choice"),
 ))

@@ -36,8 +36,8 @@ Parameters
   ~arm_on_start_delay (0 s: that arm not before this long after the start; sim.launch lock-step: 1 s)
   ~setpoint_rpy_deg ([0, 0, 0])
   ~require_preflight (false; robot.launch: true): arming waits for a passed pre-dive check
-  ~health_sources (default: what hardware_yaml fits: depth if depth.fitted, battery if a pack is; leak: none yet)
-  ~batteries_fitted (false: hardware_yaml decides; true: the simulated robot's packs)
+  ~health_sources (default: what hardware_yaml fits: depth if depth.fitted, battery if a pack is, leak if leak.fitted)
+  ~batteries_fitted ~leak_fitted (false: hardware_yaml decides; true: the simulated robot's packs, probe)
   ~heartbeat_timeout (0: not watched; robot.launch: 2 s): arming needs the tether heartbeat, and armed, none for
                          this long acts: ~tether_action (disarm | limp: the outputs off too | hold: armed, the
                          attitude it has as the setpoint)
@@ -115,7 +115,9 @@ class AttitudeControllerNode:
         hardware = load_hardware_config(_optional_path("~hardware_yaml"))
         if rospy.get_param("~batteries_fitted", False):
             hardware = with_batteries_fitted(hardware)
-        fitted = ["depth"] * hardware.depth.fitted + ["battery"] * bool(hardware.batteries.fitted)
+        leak_fitted = hardware.leak.fitted or bool(rospy.get_param("~leak_fitted", False))
+        fitted = (["depth"] * hardware.depth.fitted + ["battery"] * bool(hardware.batteries.fitted)
+                  + ["leak"] * leak_fitted)
         calibration = load_servo_calibration(_optional_path("~calibration_yaml"))
         self.loop_rate = float(rospy.get_param("~loop_rate", 100.0))
         imu_rate = float(rospy.get_param("~imu_rate", 200.0))

@@ -20,11 +20,21 @@ cpu_hogs                      two busy processes at the control path's priority 
 kill_rosmaster                SIGKILL of the master, a new one 2 s later with the old parameters     track
 setpoint_gone                 SIGKILL of the tether (its connections close); a new one 2 s later     track
 tether_gone                   SIGSTOP of the tether for 5 s (a cut cable: TCP stalls), then SIGCONT  track
+heartbeat_lost                SIGSTOP of the heartbeat for 3 s: disarmed at its 2 s timeout; re-armed  stop
+estop                         the e-stop (``estop`` service) mid-stroke; reset, enabled and re-armed   stop
+estop_controller_dead         SIGKILL of the controller, the e-stop 50 ms later; reset after respawn  stop
+battery_critical              both packs flat (``~battery_flat``), fresh again after 1 s; re-armed    stop
+leak                          water on the leak probe (``~water_inside``) for 1 s; ``~reset``, re-armed  stop
+depth_lost                    the MS5837 off the bus for 2 s (``~depth_sensor_fault``)               track
 ============================  =====================================================================  ======
 
 *safe*: the robot must reach a safe state (chip holding or limp, or the controller holding) within the PWM
 watchdog timeout plus one period, stay safe until the fault ends and track again within 5 s of its end;
-*track*: the control path is not touched and must keep tracking. Every kind: no pulse outside its
+*track*: the control path is not touched and must keep tracking; *stop*: a safe state within the same limit of the
+moment the stack must act (the heartbeat's timeout, the e-stop, health/battery or health/leak ERROR reaching the
+campaign), every arm refused (naming the cause) until the operator clears it, no leg motion until the operator's
+arm, which ends the fault. The laptop's heartbeat (``heartbeat_node``, 2 s timeout, disarm) runs at the simulated
+robot's priority: it stands for another machine, which the robot's CPU load does not starve. Every kind: no pulse outside its
 limits, no leg motion while unarmed. Definitions and figures: :mod:`quadruped_control.analysis.fault_metrics`.
 
 A master killed takes the parameter server and every registration with it; nodes keep their
@@ -74,7 +84,15 @@ KINDS: Dict[str, tuple] = {
     "setpoint_gone": ("track", 2.0),
     "tether_gone": ("track", 5.0),
     "kill_rosmaster": ("track", 2.0),
+    "heartbeat_lost": ("stop", 3.0),
+    "estop": ("stop", 1.0),
+    "estop_controller_dead": ("stop", None),
+    "battery_critical": ("stop", 1.0),
+    "leak": ("stop", 1.0),
+    "depth_lost": ("track", 2.0),
 }
+#: s: the heartbeat timeout the campaign's graph runs with (sim.launch heartbeat_timeout)
+HEARTBEAT_TIMEOUT = 2.0
 #: Setpoints (roll, pitch, yaw deg) the tether cycles through: always mid-manoeuvre.
 MANOEUVRES = ((30.0, 0.0, 0.0), (-30.0, 0.0, 0.0), (0.0, 20.0, 0.0), (20.0, -20.0, 0.0), (0.0, 0.0, 40.0),
               (-20.0, 15.0, -30.0))
@@ -109,7 +127,7 @@ class Graph:
     """A master of its own, ``sim.launch`` against it (recording into ``out/bags``), and the tether."""
 
     def __init__(self, out: str, port: int, seed: int, tether_period: float = 6.0) -> None:
-        self.out = out
+        self.out = os.path.abspath(out)  # roslaunch runs in ROS_HOME: a relative bag_dir would land there
         self.port = port
         self.uri = "http://localhost:%d" % port
         self.seed = seed
@@ -121,6 +139,7 @@ class Graph:
         self.master: Optional[subprocess.Popen] = None
         self.launch: Optional[subprocess.Popen] = None
         self.tether: Optional[subprocess.Popen] = None
+        self.heartbeat: Optional[subprocess.Popen] = None
         self.params_dump = os.path.join(out, "params.yaml")
         self.launch_log = open(os.path.join(out, "launch.log"), "ab")
 
@@ -146,8 +165,10 @@ class Graph:
         self.launch = self._popen(
             ["roslaunch", "underwater_quadruped", "sim.launch", "arm:=true", "record:=true",
              "bag_dir:=%s" % self.bag_dir, "description:=false", "launch_prefix:=%s" % control,
-             "sim_launch_prefix:=%s" % " ".join(sim_priority_prefix()), "sim_id:=faults%d" % self.port],
-            self.launch_log)
+             "sim_launch_prefix:=%s" % " ".join(sim_priority_prefix()), "sim_id:=faults%d" % self.port,
+             "heartbeat_timeout:=%g" % HEARTBEAT_TIMEOUT], self.launch_log)
+        self.heartbeat = self._popen(sim_priority_prefix() + ["rosrun", "underwater_quadruped", "heartbeat_node",
+                                                              "__name:=heartbeat"], self.launch_log)
         self.start_tether()
 
     def start_tether(self) -> None:
@@ -168,7 +189,8 @@ class Graph:
         subprocess.run(["rosparam", "load", self.params_dump, "/"], env=self.env, check=True, timeout=30)
 
     def stop(self) -> None:
-        for process, sig, wait in ((self.tether, signal.SIGKILL, 5.0), (self.launch, signal.SIGINT, 60.0),
+        for process, sig, wait in ((self.tether, signal.SIGKILL, 5.0), (self.heartbeat, signal.SIGKILL, 5.0),
+                                   (self.launch, signal.SIGINT, 60.0),
                                    (self.master, signal.SIGINT, 10.0)):
             if process is None or process.poll() is not None:
                 continue
@@ -298,9 +320,138 @@ def _set_bool(service: str, value: bool) -> None:
         raise RuntimeError("%s(%s) refused: %s" % (service, value, response.message))
 
 
+#: s: the operator retries an arm command this long once a stop is cleared (outputs_state and health/* come at
+#: 5 and 2 Hz: the controller may not have heard the all-clear yet)
+ARM_RETRY = 5.0
+#: The topics the operator watches: when the stack must act on a stop, and that it is clear again.
+WATCHED = ("tether/heartbeat", "health/battery", "health/leak", "health/depth")
+
+
 class Injector:
     def __init__(self, graph: Graph) -> None:
+        import rospy
+        from diagnostic_msgs.msg import DiagnosticStatus
+        from std_msgs.msg import Header
         self.graph = graph
+        self.lock = threading.Lock()
+        self.heard: Dict[str, List[tuple]] = {topic: [] for topic in WATCHED}
+        for topic in WATCHED:
+            rospy.Subscriber(topic, Header if topic == "tether/heartbeat" else DiagnosticStatus, self._on_message,
+                             callback_args=topic, queue_size=50, tcp_nodelay=True)
+
+    def _on_message(self, msg, topic: str) -> None:
+        import rospy
+        with self.lock:
+            self.heard[topic] = self.heard[topic][-100:] + [(rospy.get_time(), getattr(msg, "level", 0))]
+
+    def _first(self, topic: str, since: float, level: Optional[int] = None, timeout: float = 5.0) -> float:
+        """Arrival time of the first ``topic`` message after ``since`` (at ``level``); RuntimeError after ``timeout``."""
+        found: List[float] = []
+
+        def arrived() -> bool:
+            with self.lock:
+                found[:] = [t for t, lv in self.heard[topic] if t > since and (level is None or lv == level)][:1]
+            return bool(found)
+        if not _wait(arrived, timeout, 0.01):
+            raise RuntimeError("no %s%s within %.0f s" % (topic, "" if level is None else " at level %d" % level,
+                                                          timeout))
+        return found[0]
+
+    def _arm(self, retry: float = ARM_RETRY) -> float:
+        """The operator's arm command, repeated every 0.2 s for ``retry`` s until accepted; the time it was."""
+        import rospy
+        from std_srvs.srv import SetBool
+        rospy.wait_for_service("/attitude_controller/arm", timeout=30.0)
+        arm = rospy.ServiceProxy("/attitude_controller/arm", SetBool)
+        deadline = time.monotonic() + retry
+        while True:
+            at = rospy.get_time()
+            answer = arm(True)
+            if answer.success:
+                return at
+            if time.monotonic() > deadline:
+                raise RuntimeError("arming refused %.0f s after the stop was cleared: %s" % (retry, answer.message))
+            time.sleep(0.2)
+
+    def _refused(self, check: str) -> None:
+        """An arm command now must be refused, naming ``check``."""
+        import rospy
+        from std_srvs.srv import SetBool
+        answer = rospy.ServiceProxy("/attitude_controller/arm", SetBool)(True)
+        if answer.success or check + ": " not in answer.message:
+            raise RuntimeError("arm %s during the stop: %s" % ("accepted" if answer.success else
+                                                               "refused without naming %s" % check, answer.message))
+
+    def _stop(self, kind: str) -> FaultRecord:
+        """The *stop* kinds (module docstring)."""
+        import rospy
+        from diagnostic_msgs.msg import DiagnosticStatus as Status
+        from std_srvs.srv import Trigger
+        duration = KINDS[kind][1]
+        now = rospy.get_time
+        begin = now()
+        if kind == "heartbeat_lost":
+            heartbeat = self.graph.heartbeat
+            assert heartbeat is not None
+            os.killpg(heartbeat.pid, signal.SIGSTOP)
+            try:
+                with self.lock:
+                    last = max(t for t, _ in self.heard["tether/heartbeat"])
+                start = last + HEARTBEAT_TIMEOUT  # the controller's deadline
+                time.sleep(max(0.0, start + 0.3 - now()))
+                self._refused("tether")
+                time.sleep(max(0.0, begin + duration - now()))
+            finally:
+                os.killpg(heartbeat.pid, signal.SIGCONT)
+            self._first("tether/heartbeat", now(), timeout=5.0)
+            time.sleep(0.5)  # the heartbeat is back: nothing may move until the operator arms
+            cleared = "heartbeat back"
+        elif kind in ("estop", "estop_controller_dead"):
+            pid = _node_pid("/attitude_controller")
+            if kind == "estop_controller_dead":
+                if pid is None:
+                    raise RuntimeError("/attitude_controller is not running")
+                os.kill(pid, signal.SIGKILL)
+                time.sleep(0.05)
+            start = now()
+            _set_bool("/estop", True)
+            try:
+                if kind == "estop_controller_dead":
+                    if not _wait(lambda: (_node_pid("/attitude_controller") or pid) != pid, 60.0, 0.1):
+                        raise RuntimeError("the controller was not respawned within 60 s")
+                    rospy.wait_for_service("/attitude_controller/arm", timeout=30.0)
+                    time.sleep(0.5)  # its checks have heard the latched estop_state
+                else:
+                    time.sleep(0.3)
+                self._refused("e-stop")
+                time.sleep(max(0.0, start + (duration or 0.0) - now()))
+            finally:
+                _set_bool("/estop", False)
+                _set_bool("/pwm_node/enable", True)
+            cleared = "e-stop reset, outputs enabled"
+        else:
+            service, topic, check = {"battery_critical": ("/sim_node/battery_flat", "health/battery", "battery"),
+                                     "leak": ("/sim_node/water_inside", "health/leak", "leak")}[kind]
+            _set_bool(service, True)
+            try:
+                start = self._first(topic, begin, Status.ERROR)  # the hazard reported: the stack must act now
+                time.sleep(0.3)
+                self._refused(check)
+                time.sleep(max(0.0, start + duration - now()))
+            finally:
+                cleared_at = now()
+                _set_bool(service, False)
+            if kind == "leak":
+                time.sleep(0.3)  # the probe reads dry
+                answer = rospy.ServiceProxy("/leak_node/reset", Trigger)()
+                if not answer.success:
+                    raise RuntimeError("/leak_node/reset refused: %s" % answer.message)
+            self._first(topic, cleared_at, Status.OK)
+            cleared = "%s OK again" % topic
+        end = self._arm()
+        # From the safe state on (the limit after start), nothing may move until the operator's arm.
+        return FaultRecord(kind, start, end, "stop", unarmed=[(start + 0.15, end)],
+                           limp=kind.startswith("estop"), note="%s, re-armed by the operator" % cleared)
 
     def inject(self, kind: str) -> FaultRecord:
         import rospy
@@ -319,10 +470,7 @@ class Injector:
                 return FaultRecord(kind, start, now(), expect)
             rospy.wait_for_service(name + "/arm", timeout=30.0)
             time.sleep(1.0)  # the operator looks before arming: the restarted controller must not move the legs
-            from std_srvs.srv import SetBool
-            if not rospy.ServiceProxy(name + "/arm", SetBool)(True).success:
-                raise RuntimeError("the restarted controller refused the arm command")
-            end = now()
+            end = self._arm()
             # Unarmed from the kill until the arm command; the commands it published before it died may
             # still land in the first few ms (IMU-to-PWM latency p99 about 5 ms), hence the 50 ms.
             return FaultRecord(kind, start, end, expect, unarmed=[(start + 0.05, end)],
@@ -362,6 +510,16 @@ class Injector:
                 end = now()
                 os.killpg(tether.pid, signal.SIGCONT)
             return FaultRecord(kind, start, end, expect)
+        if expect == "stop":
+            return self._stop(kind)
+        if kind == "depth_lost":
+            start = now()
+            _set_bool("/sim_node/depth_sensor_fault", True)
+            time.sleep(duration)
+            end = now()
+            _set_bool("/sim_node/depth_sensor_fault", False)
+            lost = self._first("health/depth", start, 2, timeout=0.5) - start  # reported: a lost sensor, no hazard
+            return FaultRecord(kind, start, end, expect, note="health/depth ERROR %.2f s after" % lost)
         if kind == "kill_rosmaster":
             self.graph.dump_params()
             start = now()
@@ -588,7 +746,7 @@ def failures(summary: Dict[str, dict], safe_limit: float, recovery_limit: float 
             problems.append("%s: %d pulses outside limits" % (kind, row["pulses_outside"]))
         if row["moved_unarmed"]:
             problems.append("%s: legs moved while unarmed (%d rows)" % (kind, row["moved_unarmed"]))
-        if row["expect"] == "safe":
+        if row["expect"] != "track":
             if row["never_safe"]:
                 problems.append("%s: not safe in %d injections" % (kind, row["never_safe"]))
             elif row["time_to_safe_max"] is not None and row["time_to_safe_max"] > safe_limit:

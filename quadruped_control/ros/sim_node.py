@@ -63,6 +63,11 @@ Services (fault injection: tests and benchmarks/fault_campaign.py)
                                       powered again from its power-on reset state
   ~depth_sensor_fault std_srvs/SetBool  true: the MS5837 stops answering (off the bus: "depth sensor lost"),
                                       false: back from its power-on state
+  ~water_inside     std_srvs/SetBool  true: water bridges the leak probe, false: dry again
+  ~battery_flat     std_srvs/SetBool  true: every fitted pack at charge 0 (below its critical voltage), false:
+                                      back at its start charge (a fresh pack)
+The leak probe's pin: sim/leak_probe (std_msgs/Bool, the level hardware.yaml leak.active_high gives wet or dry,
+10 Hz of simulated time), what leak_node reads with ~backend sim.
 """
 from __future__ import annotations
 
@@ -78,6 +83,7 @@ from diagnostic_msgs.msg import DiagnosticStatus
 from diagnostic_updater import DiagnosticStatusWrapper
 from geometry_msgs.msg import PoseStamped, Vector3Stamped
 from rosgraph_msgs.msg import Clock
+from std_msgs.msg import Bool
 from std_srvs.srv import SetBool, SetBoolResponse
 
 from quadruped_common.ros.node_startup import start_node
@@ -200,6 +206,8 @@ class SimNode:
         rospy.Service("~i2c_bus_stuck", SetBool, self._on_bus_stuck)
         rospy.Service("~pca9685_power", SetBool, self._on_pca_power)
         rospy.Service("~depth_sensor_fault", SetBool, self._on_depth_fault)
+        rospy.Service("~water_inside", SetBool, self._on_water_inside)
+        rospy.Service("~battery_flat", SetBool, self._on_battery_flat)
         rospy.on_shutdown(self._shutdown)
         self.steps = 0
         self.overruns = 0
@@ -230,6 +238,9 @@ class SimNode:
             sensors.packs[pack.name], capacity if capacity > 0.0 else None, charge if charge >= 0.0 else None)))
             for pack in self.hardware.batteries.fitted}
         self._depth_due = 0
+        self.water_inside = False
+        self.leak_pub = rospy.Publisher("sim/leak_probe", Bool, queue_size=1)
+        self._leak_due = 0
 
     def _write_safety_sensors(self, dt: float) -> None:
         """Advance the packs by ``dt`` and write them and (every 50 ms) the depth into the fake chips."""
@@ -244,6 +255,10 @@ class SimNode:
                 self.fake.depth.set_state(self.depth_model.pressure(z), self.water_temperature)
                 self._depth_due = max(1, int(round(0.05 / self.dt)))
         self._depth_due -= 1
+        self._leak_due -= 1
+        if self._leak_due <= 0:
+            self._leak_due = max(1, int(round(0.1 / self.dt)))
+            self.leak_pub.publish(Bool(data=self.water_inside == self.hardware.leak.active_high))
 
     def run(self) -> None:
         if self.lockstep:
@@ -502,6 +517,22 @@ class SimNode:
             return SetBoolResponse(success=False, message="no depth sensor fitted (hardware.yaml depth.fitted false)")
         self.fake.set_depth_power(not request.data)
         message = "MS5837 %s" % ("off the bus: every transaction NACKs" if request.data else "answering again")
+        rospy.logwarn("sim_node: %s", message)
+        return SetBoolResponse(success=True, message=message)
+
+    def _on_water_inside(self, request) -> SetBoolResponse:
+        self.water_inside = bool(request.data)
+        message = "leak probe %s" % ("wet: water inside the enclosure" if request.data else "dry")
+        rospy.logwarn("sim_node: %s", message)
+        return SetBoolResponse(success=True, message=message)
+
+    def _on_battery_flat(self, request) -> SetBoolResponse:
+        if not self.packs:
+            return SetBoolResponse(success=False, message="no pack fitted (sim.launch batteries:=true fits both)")
+        with self.lock:
+            for _pack, simulated in self.packs.values():
+                simulated.set_charge(0.0 if request.data else simulated.settings.start_charge)
+        message = "packs %s" % ("run flat (charge 0)" if request.data else "fresh (start charge)")
         rospy.logwarn("sim_node: %s", message)
         return SetBoolResponse(success=True, message=message)
 

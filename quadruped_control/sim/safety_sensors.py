@@ -130,6 +130,10 @@ class SimulatedPack:
         self.current_a = self.settings.idle_current_a + self.settings.amps_per_rad_s * abs(speed)
         self.charge = max(0.0, self.charge - self.current_a * dt / (3600.0 * self.settings.capacity_ah))
 
+    def set_charge(self, charge: float) -> None:
+        """The pack at state of charge ``charge`` (0..1) from now: run flat, or another pack swapped in."""
+        self.charge = min(1.0, max(0.0, float(charge)))
+
     @property
     def voltage(self) -> float:
         """Terminal voltage (V) now: open-circuit voltage at this charge minus the internal resistance's drop."""

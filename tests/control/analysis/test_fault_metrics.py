@@ -3,7 +3,7 @@ import numpy as np
 import pytest
 
 from quadruped_control.analysis.fault_metrics import (FaultRecord, InjectionResult, Timeline, judge_injection,
-                                                      kind_summary, lost_messages, motion_rows,
+                                                      kind_summary, limp_rows, lost_messages, motion_rows,
                                                       pulses_outside_limits, safe_rows, stamp_keys, tracking_rows)
 
 FREQ = 50.0
@@ -104,6 +104,51 @@ def test_judge_no_recovery_when_the_chip_stays_limp():
     result = judge_injection(timeline(t, widths, commands=stroking(800)[1]), record, MIN_US, MAX_US, FREQ)
     assert result.time_to_safe == 0.0 or result.time_to_safe < DT + 1e-9
     assert result.time_to_recovery is None
+
+
+def test_judge_an_estop_on_the_limp_rows_only():
+    t, widths = stroking(600)
+    stop, armed_again = 1.0, 3.0
+    held = (t >= stop) & (t < stop + 0.03)
+    widths[held] = widths[np.searchsorted(t, stop) - 1]  # held 30 ms (the chip's last pulses), then limp
+    widths[(t >= stop + 0.03) & (t < armed_again + 0.02)] = 0.0  # limp until the first command after the arm
+    armed = ~((t >= stop + 0.01) & (t < armed_again))
+    line = timeline(t, widths, armed=armed)
+    estop = FaultRecord("estop", stop, armed_again, "stop", unarmed=[(stop + 0.15, armed_again)], limp=True)
+    assert limp_rows(line).sum() == np.count_nonzero((t >= stop + 0.03) & (t < armed_again + 0.02))
+    result = judge_injection(line, estop, MIN_US, MAX_US, FREQ)
+    assert result.time_to_safe == pytest.approx(0.03, abs=DT + 1e-9)  # a held chip is not an e-stop
+    assert result.moved_unarmed == 0 and result.time_to_recovery == pytest.approx(0.0, abs=DT + 1e-9)
+    kept_pulses = timeline(t, stroking(600)[1], armed=armed)  # disarmed, the chip never limp
+    assert judge_injection(kept_pulses, estop, MIN_US, MAX_US, FREQ).time_to_safe is None
+
+
+def test_a_command_sent_while_armed_may_land_after_the_disarm():
+    t, widths = stroking(300)
+    disarm = 1.0
+    armed = t < disarm
+    commands = widths.copy()
+    late = np.searchsorted(t, disarm + 0.04)
+    widths[np.searchsorted(t, disarm):late] = widths[np.searchsorted(t, disarm) - 2]
+    widths[late:] = commands[np.searchsorted(t, disarm) - 1]  # the last armed command lands 40 ms late
+    line = Timeline(t, widths, t, commands, t, armed, np.zeros(len(t), bool))
+    record = FaultRecord("heartbeat_lost", disarm, 2.5, "stop", unarmed=[(disarm + 0.15, 2.5)])
+    assert judge_injection(line, record, MIN_US, MAX_US, FREQ).moved_unarmed == 0
+    widths[late + 10:] += 5 * TICK  # a later move matches no command sent while armed
+    assert judge_injection(line, record, MIN_US, MAX_US, FREQ).moved_unarmed == 1
+
+
+def test_a_stop_that_tracks_again_before_the_operator_arms_is_never_safe():
+    t, widths = stroking(600)
+    lost, armed_again = 1.0, 4.0
+    back = (t >= lost) & (t < 2.0)
+    widths[back] = widths[np.searchsorted(t, lost) - 1]  # disarmed and held ...
+    armed = ~back                                          # ... then armed again by itself at 2 s
+    record = FaultRecord("heartbeat_lost", lost, armed_again, "stop", unarmed=[(lost + 0.15, armed_again)])
+    result = judge_injection(timeline(t, widths, armed=armed), record, MIN_US, MAX_US, FREQ)
+    assert result.time_to_safe is None
+    assert kind_summary([result], "stop")["never_safe"] == 1
+    assert result.moved_unarmed > 150  # from 2 s to the arm at 4 s, the legs moved without an arm command
 
 
 def test_lost_messages_and_summary():

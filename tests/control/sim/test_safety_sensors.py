@@ -95,6 +95,10 @@ def test_pack_discharges_with_time_and_load():
     assert busy.current_a == pytest.approx(3.5) and busy.voltage < idle.voltage
     assert busy.adc_volts(3.0) == pytest.approx(busy.voltage / 3.0)
     assert with_overrides(settings, capacity_ah=0.01) == dataclasses.replace(settings, capacity_ah=0.01)
+    busy.set_charge(1.5)  # a fresh pack swapped in (sim_node ~battery_flat false): clamped to full
+    assert busy.charge == 1.0 and busy.voltage > idle.voltage
+    busy.set_charge(0.0)  # run flat (~battery_flat true): below any critical cell voltage at rest
+    assert busy.voltage / 2 < 3.4
 
 
 def test_a_small_pack_reaches_critical_in_seconds_through_the_fake_adc():
