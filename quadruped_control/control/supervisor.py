@@ -61,6 +61,9 @@ from quadruped_control.model.kinematics import joint_angles
 TETHER_ACTIONS = ("disarm", "limp", "hold")
 
 #: health/<source> reason codes that say the measurement failed, not that the hazard it watches is there.
+#: s: a gap this long between two tether checks means the supervisor did not run (starved, stopped); the
+#: heartbeats queued meanwhile get as long again to arrive before their absence counts as a lost tether.
+TETHER_STALL = 0.25
 MEASUREMENT_FAULTS = frozenset(("stale", "no_reading", "no_answer", "absent", "implausible", "prom_crc", "dropped",
                                 "not_fitted"))
 
@@ -151,6 +154,8 @@ class ControlSupervisor:
         self._limiter = JointSpeedLimiter(safety.max_joint_speed) if safety is not None else None
         self.tracking: Optional[ServoTrackingWatch] = None
         if safety is not None:
+        self._tether_checked: Optional[float] = None  # the clock of the last check_tether
+        self._tether_grace_until = -math.inf
             speed = controller.robot.servo_no_load_speed * safety.tracking_speed_scale
             self.tracking = ServoTrackingWatch(dataclasses.replace(safety.tracking, max_speed=speed), JOINT_NAMES)
         self.tracking_levels: List[Tuple[str, int, float]] = []
@@ -212,8 +217,12 @@ class ControlSupervisor:
         returned once per loss: ``disarm`` or ``limp`` disarm (for limp the caller switches the outputs off), and
         when the heartbeat returns nothing moves until the next arm; ``hold`` keeps the robot armed with the
         attitude it has as its setpoint, until the operator sends another (``disarm`` when no IMU sample is
-        usable to hold)."""
-        lost = self.watch_heartbeat and self.heartbeat_lost(now)
+        usable to hold). After the supervisor itself stalled (no check for :data:`TETHER_STALL`: a starved
+        process), the heartbeats waiting in its socket get :data:`TETHER_STALL` to arrive before a loss counts."""
+        if self._tether_checked is not None and now - self._tether_checked > TETHER_STALL:
+            self._tether_grace_until = now + TETHER_STALL
+        self._tether_checked = now
+        lost = self.watch_heartbeat and self.heartbeat_lost(now) and now >= self._tether_grace_until
         if not lost:
             self._tether_holding = False
         if not (self._armed and lost) or self._tether_holding:

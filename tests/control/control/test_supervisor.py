@@ -11,7 +11,7 @@ from quadruped_common.so3 import rot_to_quat, rpy_to_rot
 from quadruped_control.control.controller import AttitudeController
 from quadruped_control.control.controller_config import load_controller_config
 from quadruped_control.control.safety_config import SafetyConfig
-from quadruped_control.control.supervisor import ControlSupervisor
+from quadruped_control.control.supervisor import TETHER_STALL, ControlSupervisor
 from quadruped_control.model.kinematics import joint_angles
 from quadruped_control.model.params import load_robot_params
 
@@ -213,6 +213,25 @@ def test_the_tether_heartbeat_gates_arming_and_its_loss_disarms(supervisor):
     outputs = run(watched, 0.5, start=3.0)
     assert not watched.armed and all(o.pulse_widths_us is None for o in outputs)
     assert watched.arm(True) == "armed: legs will stroke"
+
+
+def test_a_supervisor_that_stalled_lets_the_queued_heartbeats_arrive_first(supervisor):
+    watched = ControlSupervisor(supervisor.controller, supervisor.pulse_map, heartbeat_timeout=2.0)
+    watched.set_heartbeat(0.0)
+    watched.arm(True)
+    for k in range(1, 100):  # 100 Hz checks, a heartbeat every 0.2 s, until 1 s
+        now = 0.01 * k
+        if k % 20 == 0:
+            watched.set_heartbeat(now)
+        assert watched.check_tether(now) is None
+    # the process starved for 10 s (no check, no callback); at once the heartbeat queued meanwhile is not yet in
+    assert watched.check_tether(11.0) is None and watched.armed
+    watched.set_heartbeat(11.01)  # ... it arrives
+    assert watched.check_tether(11.3) is None and watched.armed
+    # a real loss across a stall still acts, TETHER_STALL late
+    assert watched.check_tether(30.0) is None
+    assert watched.check_tether(30.1) is None
+    assert watched.check_tether(30.0 + TETHER_STALL + 0.01) == "disarm" and not watched.armed
 
 
 def test_the_tether_failsafe_can_go_limp_and_refuses_bad_settings(supervisor):
