@@ -28,7 +28,7 @@
 set -uo pipefail
 ROOT="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"
 cd "$ROOT" || exit 1
-#: the fault-free rostests that, together, start every node of nodes/ but bag_record (fault_campaign only)
+#: the fault-free rostests that, together, start every node of nodes/ (bag_record: maneuver_sequence records)
 DEFAULT_TESTS=(sim_closed_loop maneuver_sequence controller_safety pwm_watchdog preflight)
 #: nodes that stay on the machine's ROS Python, with the reason (the check requires them on it)
 declare -A KEEP_ON_ROS_PYTHON=(

@@ -28,6 +28,7 @@ from __future__ import annotations
 import argparse
 import contextlib
 import glob
+import importlib
 import io
 import os
 import re
@@ -40,6 +41,7 @@ from typing import Callable, Dict, List, Optional, Sequence, Tuple
 from unittest import mock
 
 import pytest
+import yaml
 
 from tests.repo import REPO_ROOT
 
@@ -310,12 +312,24 @@ def check_rosrun(words: List[str]) -> None:
             assert "~" + name in source, "%s does not read ~%s" % (words[2], name)
 
 
+def service_request_fields(service: str) -> Dict[str, str]:
+    """The request fields of the package's service type ``service`` (quadruped_msgs/srv/)."""
+    path = os.path.join("quadruped_msgs", "srv", service + ".srv")
+    assert os.path.exists(os.path.join(REPO_ROOT, path)), "no service type %s (%s)" % (service, path)
+    fields = {}
+    for line in read(path).split("---")[0].splitlines():
+        words = line.split("#")[0].split()
+        if len(words) >= 2 and "=" not in words[1]:
+            fields[words[1]] = words[0]
+    return fields
+
+
 def check_rosservice(words: List[str]) -> None:
     assert words[1] == "call", "rosservice %s: only 'call' is checked" % words[1]
     parts = words[2].strip("/").split("/")
     assert len(parts) in (1, 2), "service %s: expected /service or /node/service" % words[2]
-    assert words[3:] and words[3] in ("true", "false"), "SetBool takes true or false, not %s" % words[3:]
     if len(parts) == 1:  # a node's public service (relative name): Service("name", SetBool, ...)
+        assert words[3:] and words[3] in ("true", "false"), "SetBool takes true or false, not %s" % words[3:]
         pattern = r"Service\(\s*[\"']%s[\"'],\s*SetBool" % re.escape(parts[0])
         assert re.search(pattern, package_sources()), \
             "no node offers the SetBool service %s" % words[2]
@@ -323,9 +337,18 @@ def check_rosservice(words: List[str]) -> None:
     node, service = parts
     nodes = launch_nodes()
     assert node in nodes, "no node %s in launch/ (nodes: %s)" % (node, ", ".join(sorted(nodes)))
-    assert re.search(r"Service\(\s*[\"']~%s[\"'],\s*SetBool" % re.escape(service), node_source(nodes[node])), \
-        "%s has no SetBool service ~%s" % (node, service)
-    assert words[3:] and words[3] in ("true", "false"), "SetBool takes true or false, not %s" % words[3:]
+    offered = re.search(r"Service\(\s*[\"']~%s[\"'],\s*(\w+)" % re.escape(service), node_source(nodes[node]))
+    assert offered, "%s has no SetBool service ~%s" % (node, service)
+    kind = offered.group(1)
+    if kind == "SetBool":
+        assert words[3:] and words[3] in ("true", "false"), "SetBool takes true or false, not %s" % words[3:]
+    elif kind == "Trigger":
+        assert not words[3:], "Trigger takes no request, not %s" % words[3:]
+    else:  # the package's own type (quadruped_msgs/srv/): a YAML mapping of its request's fields
+        request = yaml.safe_load(words[3]) if words[3:] else {}
+        fields = service_request_fields(kind)
+        assert isinstance(request, dict) and set(request) <= set(fields), \
+            "%s takes %s, not %s" % (kind, ", ".join(fields), words[3:])
 
 
 def check_rostopic(words: List[str]) -> None:
@@ -343,12 +366,52 @@ def check_rostopic(words: List[str]) -> None:
         raise AssertionError("rostopic %s: not covered by a check" % words[1])
 
 
+#: the field types rqt_plot draws
+NUMERIC = re.compile(r"^(float(32|64)|u?int(8|16|32|64)|bool|byte|char)$")
+
+
+def type_fields(message: str) -> Dict[str, str]:
+    """Field name -> type (``pkg/Name`` or a primitive) of message type ``pkg/Name``: the package's own from
+    quadruped_msgs/msg/, another package's from its generated Python class."""
+    package, _, name = message.rpartition("/")
+    if package == PACKAGE:
+        return {field: kind if "/" in kind or not kind[:1].isupper() else
+                ("std_msgs/Header" if kind == "Header" else "%s/%s" % (PACKAGE, kind))
+                for field, kind in message_fields(name).items()}
+    try:
+        cls = getattr(importlib.import_module(package + ".msg"), name)
+    except (ImportError, AttributeError):
+        raise AssertionError("no Python message class %s (ROS's messages not installed?)" % message) from None
+    return dict(zip(cls.__slots__, cls._slot_types))
+
+
+def published_type(topic: str) -> Optional[str]:
+    """``pkg/Name`` of what the package publishes on ``topic`` (Publisher("topic", Name)), None for nothing."""
+    sources = package_sources()
+    match = re.search(r"Publisher\(\s*[\"']%s[\"'],\s*(\w+)" % re.escape(topic), sources)
+    if not match:
+        return None
+    name = match.group(1)
+    if os.path.exists(os.path.join(REPO_ROOT, "quadruped_msgs", "msg", name + ".msg")):
+        return "%s/%s" % (PACKAGE, name)
+    imported = re.search(r"^from (\w+)\.msg import [^\n]*\b%s\b" % name, sources, re.M)
+    assert imported, "%s is published as %s, imported from no message package" % (topic, name)
+    return "%s/%s" % (imported.group(1), name)
+
+
 def check_rqt_plot(words: List[str]) -> None:
+    """Each /topic/field/...: the longest topic prefix the package publishes, its fields down to a number."""
     for arg in words[1:]:
-        topic, _, field = arg.strip("/").partition("/")
-        match = re.search(r"Publisher\(\s*[\"']%s[\"'],\s*(\w+)" % re.escape(topic), package_sources())
-        assert match, "nothing publishes %s" % topic
-        assert field.split("/")[0] in message_fields(match.group(1)), "%s has no field %s" % (match.group(1), field)
+        parts = arg.strip("/").split("/")
+        found = [(k, published_type("/".join(parts[:k]))) for k in range(len(parts) - 1, 0, -1)]
+        found = [(k, kind) for k, kind in found if kind]
+        assert found, "nothing publishes %s" % arg
+        k, kind = found[0]
+        for field in parts[k:]:
+            fields = type_fields(kind)
+            assert field.split("[")[0] in fields, "%s has no field %s" % (kind, field)
+            kind = fields[field.split("[")[0]].split("[")[0]
+        assert NUMERIC.match(kind), "%s is a %s, not a number rqt_plot draws" % (arg, kind)
 
 
 def check_rosmsg(words: List[str]) -> None:
@@ -538,8 +601,11 @@ def test_the_check_bites() -> None:
            ("bash scripts/nothing.sh", "no script"),
            ("rosservice call /attitude_controller/disarm true", "no SetBool service ~disarm"),
            ("rosservice call /e_stop true", "no node offers the SetBool service /e_stop"),
+           ("rosservice call /attitude_controller/save_gains '{file: /tmp/g.yaml}'", "SaveGains takes path"),
            ("rostopic pub -1 /attitude_setpoint geometry_msgs/Vector3Stamped '{}'", "nothing subscribes"),
            ("rqt_plot /controller_state/geodesic_err", "no field geodesic_err"),
+           ("rqt_plot /telemetry/rpy_deg/vector/w", "no field w"),
+           ("rqt_plot /telemetry/rpy_deg/vector", "not a number"),
            ("rosrun underwater_quadruped vn100_node _prot:=/dev/ttyUSB0", "does not read ~prot"),
            ("UQ_NO_SUCH_VARIABLE=1 bash scripts/run_main.sh", "not a variable"),
            ("curl http://example.org", "command not covered by a check")]

@@ -1,6 +1,6 @@
-"""Report of a recorded run from its rosbag: the paper's metrics, a figure, and the stack's health.
+"""Report of a recorded run from its rosbag, trial by trial: the paper's metrics, gains, figures, the stack's health.
 
-    python -m quadruped_control.analysis.bag_report BAG [BAG ...] --out DIR [--title TITLE]
+    python -m quadruped_control.analysis.bag_report BAG [BAG ...] --out DIR [--title TITLE] [--last-trial]
 
 Reads the bag with the pure-Python ``rosbags`` reader (no ROS installation needed: analyse the robot's
 bags on any laptop). Uses:
@@ -11,19 +11,26 @@ bags on any laptop). Uses:
 * ``/diagnostics``: the last value of every node's figures (rates, jitter, latency, error counters);
 * ``/joint_states`` (the measured servo angles) with the pair phases of ``/controller_state``: the
   strokes the robot made, power-stroke length, paw excursion and speed
-  (:mod:`quadruped_control.analysis.strokes`), to set a real robot's strokes beside the simulator's.
+  (:mod:`quadruped_control.analysis.strokes`), to set a real robot's strokes beside the simulator's;
+* :data:`GAINS_TOPIC` (the controller's latched dynamic_reconfigure updates): the gains, limits and stroke
+  scheme in force (:func:`gains_in_force`; "unknown" in a bag without them).
 
-The trial analysed starts at the last change of the setpoint (the maneuver), or at the first armed
-controller step.
+A trial is a span of armed controller steps under one setpoint: the record is split at each setpoint
+change, arm and disarm (:func:`split_trials`); each trial gets its metrics, the gains in force at its start
+and any change during it, and its figure ``trial_NN.png``; ``report.md`` opens with a table of them all,
+``attitude.png`` shows the whole record (:func:`analyse_trials`, :func:`write_trials_report`). With
+``--last-trial``, the report of one trial as before: from the last change of the setpoint (the maneuver), or
+the first armed controller step, to the end of the record (:func:`analyse`, :func:`write_report`).
 
 What the record is missing is part of the report. A bag still named ``*.bag.active`` was left open by a
 recorder that was killed (or lost power): it has no index, so a copy of it is reindexed (ROS's
 ``rosbag`` API, the same as ``rosbag reindex``; the original is not touched) and read; the chunk the
 recorder had not flushed yet is lost. The report lists each file's span, which files were reindexed, and
 the missing spans: a gap of more than :data:`MAX_RECORD_GAP` between the parts of a split recording or
-inside the /imu/data stream, and the end of a recording that stopped with a killed recorder. Writes ``DIR/metrics.json`` (the paper's metrics, eq. in section "Experiments", via
-:func:`quadruped_control.analysis.metrics.compute_metrics`, plus health figures), ``DIR/attitude.png`` and
-``DIR/report.md``; returns the metrics dict.
+inside the /imu/data stream, and the end of a recording that stopped with a killed recorder. Writes
+``DIR/metrics.json`` (the paper's metrics, eq. in section "Experiments", via
+:func:`quadruped_control.analysis.metrics.compute_metrics`, plus gains and health figures),
+``DIR/attitude.png`` and ``DIR/report.md``.
 """
 from __future__ import annotations
 
@@ -40,6 +47,7 @@ import numpy as np
 from quadruped_common.monitoring import STALE_IMU, hold_kind
 from quadruped_common.robot import JOINT_NAMES, load_leg_pairs
 from quadruped_common.so3 import geodesic_angle, geodesic_angles, quaternions_to_rotations, rot_to_rpy, rotations_to_rpy
+from quadruped_common.tunables import TUNABLES
 from quadruped_control.analysis.metrics import compute_metrics
 from quadruped_control.analysis.strokes import format_spread, stroke_statistics
 from quadruped_control.model.params import load_robot_params
@@ -54,6 +62,11 @@ HEALTH_KEYS = {
     "servo feedback": ("rate [Hz]", "read time p50 [ms]", "read time p99 [ms]", "mux errors"),
     "imu": ("rate [Hz]", "CRC errors", "resync bytes", "disconnects"),
 }
+
+
+#: The attitude controller's dynamic_reconfigure updates (dynamic_reconfigure/Config, latched): the gains,
+#: limits and stroke scheme in force, from the start (its gain set) and after every live change.
+GAINS_TOPIC = "/attitude_controller/parameter_updates"
 
 
 class BagReportError(RuntimeError):
@@ -123,6 +136,9 @@ class BagData:
     truth_q: List[Sequence[float]] = field(default_factory=list)
     diagnostics: Dict[str, Dict[str, str]] = field(default_factory=dict)
     files: List[BagFile] = field(default_factory=list)
+    #: receive time (s, the bag's) and values (name -> value) of every :data:`GAINS_TOPIC` message
+    gains_t: List[float] = field(default_factory=list)
+    gains: List[Dict[str, object]] = field(default_factory=list)
 
 
 def _stamp(msg) -> float:
@@ -176,8 +192,8 @@ def missing_spans(data: BagData, max_gap: float = MAX_RECORD_GAP) -> List[Dict[s
 def _read_into(data: BagData, reader) -> None:
     """The report's messages from an open AnyReader."""
     wanted = [c for c in reader.connections if c.topic in (
-        "/imu/data", "/controller_state", "/sim/pose", "/diagnostics", "/joint_states", "/servo_command")]
-    for connection, _timestamp, raw in reader.messages(connections=wanted):
+        "/imu/data", "/controller_state", "/sim/pose", "/diagnostics", "/joint_states", "/servo_command", GAINS_TOPIC)]
+    for connection, timestamp, raw in reader.messages(connections=wanted):
         msg = reader.deserialize(raw, connection.msgtype)
         if connection.topic == "/imu/data":
             o = msg.orientation
@@ -203,6 +219,9 @@ def _read_into(data: BagData, reader) -> None:
             targets = dict(zip(msg.name, msg.joint_target))
             data.command_t.append(_stamp(msg))
             data.command_q.append([float(targets.get(name, math.nan)) for name in JOINT_NAMES])
+        elif connection.topic == GAINS_TOPIC:  # no header: the time it was recorded
+            data.gains_t.append(timestamp * 1e-9)
+            data.gains.append({p.name: p.value for p in (*msg.bools, *msg.ints, *msg.strs, *msg.doubles)})
         elif connection.topic == "/sim/pose":
             o = msg.pose.orientation
             data.truth_t.append(_stamp(msg))
@@ -297,26 +316,36 @@ def health_across_runs(runs: Sequence[Dict[str, Dict[str, str]]]) -> Dict[str, D
             for name, figures in collected.items()}
 
 
-def analyse(data: BagData) -> Dict:
-    """The paper's metrics of the trial in ``data`` plus health figures."""
+def _check_streams(data: BagData) -> None:
     if len(data.imu_t) < 10 or len(data.state_t) < 10:
         raise BagReportError("need /imu/data and /controller_state in the bag (got %d and %d messages)"
                              % (len(data.imu_t), len(data.state_t)))
-    start = _trial_start(data)
+
+
+def _record(data: BagData) -> Dict:
+    return {"files": [{"path": f.path, "start": f.start, "end": f.end, "messages": f.messages,
+                       "reindexed": f.reindexed} for f in data.files],
+            "missing_spans": missing_spans(data)}
+
+
+def trial_metrics(data: BagData, start: float, end: float, setpoint: Sequence[float]) -> Dict:
+    """The paper's metrics of the measured attitude in [start, end) (stamps, s) against the setpoint (x, y, z, w),
+    with the share of held steps, the IMU against the true attitude (simulation), the strokes and ``_series``
+    (t from start, rpy, geodesic error: the figure's); BagReportError with fewer than 10 IMU samples."""
     imu_t, imu_q = sorted_unique(data.imu_t, np.asarray(data.imu_q, dtype=float).reshape(-1, 4))
-    keep = imu_t >= start
+    keep = (imu_t >= start) & (imu_t < end)
     if np.count_nonzero(keep) < 10:
-        raise BagReportError("fewer than 10 IMU samples after the maneuver started")
+        raise BagReportError("fewer than 10 IMU samples in the trial (%.2f s)" % (min(end, imu_t[-1]) - start))
     t = imu_t[keep] - start
     R = _rotations(imu_q[keep])
     rpy = rotations_to_rpy(R)
-    R_d = _rotations([data.state_setpoint[-1]])[0]
+    R_d = _rotations([setpoint])[0]
     geodesic = geodesic_angles(R_d, R)
     metrics = compute_metrics(t, rpy, np.array(rot_to_rpy(R_d)), geodesic)
     metrics["setpoint_rpy_deg"] = [math.degrees(a) for a in rot_to_rpy(R_d)]
     metrics["trial_start_unix"] = start
     state_t = np.array(data.state_t)
-    holding = np.array(data.state_holding)[state_t >= start]
+    holding = np.array(data.state_holding)[(state_t >= start) & (state_t < end)]
     metrics["holding_fraction"] = float(np.mean(holding)) if holding.size else None
     if data.truth_t:
         truth_t = np.array(data.truth_t)
@@ -326,14 +355,91 @@ def analyse(data: BagData) -> Dict:
         errors = [geodesic_angle(truth_R[j], R_k) for j, R_k in zip(idx, R)]
         metrics["imu_vs_truth_deg"] = {"p50": math.degrees(float(np.percentile(errors, 50))),
                                        "max": math.degrees(float(np.max(errors)))}
-    strokes = stroke_figures(data, start)
+    strokes = stroke_figures(data, start, end)
     metrics["strokes"] = strokes.as_dict() if strokes is not None else None
-    metrics["health"] = health(data)
-    metrics["record"] = {"files": [{"path": f.path, "start": f.start, "end": f.end, "messages": f.messages,
-                                    "reindexed": f.reindexed} for f in data.files],
-                         "missing_spans": missing_spans(data)}
     metrics["_series"] = (t, rpy, geodesic)
     return metrics
+
+
+def analyse(data: BagData) -> Dict:
+    """The paper's metrics of the one trial from the last setpoint change (or the first armed step) to the end
+    of the record, plus the gains in force, health figures and the record (``--last-trial``)."""
+    _check_streams(data)
+    start = _trial_start(data)
+    metrics = trial_metrics(data, start, math.inf, data.state_setpoint[-1])
+    metrics.update(gains_in_force(data, start, math.inf))
+    metrics["health"] = health(data)
+    metrics["record"] = _record(data)
+    return metrics
+
+
+@dataclass(frozen=True)
+class Trial:
+    """Armed controller steps under one setpoint: stamps (s) of its first step and of the step that ended it
+    (the next setpoint, a disarm, or the record's last step), and the setpoint (x, y, z, w)."""
+
+    start: float
+    end: float
+    setpoint: Tuple[float, ...]
+
+
+def split_trials(data: BagData) -> List[Trial]:
+    """The record's trials in stamp order: a new one at each armed step whose setpoint differs from the step
+    before or that follows a disarmed one; a disarmed step ends one."""
+    stamps, steps = sorted_unique(data.state_t, list(zip(data.state_armed, data.state_setpoint)))
+    trials: List[Trial] = []
+    begun: Optional[Tuple[float, Sequence[float]]] = None
+    for stamp, (armed, setpoint) in zip(stamps.tolist(), steps):
+        if begun is not None and (not armed or max(abs(a - b) for a, b in zip(setpoint, begun[1])) > 1e-6):
+            trials.append(Trial(begun[0], stamp, tuple(begun[1])))
+            begun = None
+        if armed and begun is None:
+            begun = (stamp, setpoint)
+    if begun is not None:
+        trials.append(Trial(begun[0], float(stamps[-1]), tuple(begun[1])))
+    return trials
+
+
+def gains_in_force(data: BagData, start: float, end: float) -> Dict:
+    """``{"gains": name -> value in force at start, "gain_changes": [{"at": s after start, "changes": name ->
+    [old, new]}, ...] before end}`` from :data:`GAINS_TOPIC`. In force at start: the last message at or before
+    it, else the bag's first (a latched topic's first message is the value in force when the recorder
+    subscribed: since before the record began). ``gains`` None when the bag has no such message."""
+    if not data.gains:
+        return {"gains": None, "gain_changes": []}
+    times, values = sorted_unique(data.gains_t, data.gains)
+    k = max(int(np.searchsorted(times, start, side="right")) - 1, 0)
+    current, changes = values[k], []
+    for t, new in zip(times[k + 1:].tolist(), values[k + 1:]):
+        if t >= end:
+            break
+        changed = {name: [current.get(name), value] for name, value in new.items() if current.get(name) != value}
+        if changed:
+            changes.append({"at": t - start, "changes": changed})
+        current = new
+    return {"gains": values[k], "gain_changes": changes}
+
+
+def analyse_trials(data: BagData) -> Dict:
+    """Every trial of the record (:func:`split_trials`), each ``{"trial": n, "start_unix", "end_unix",
+    "setpoint_rpy_deg", "gains", "gain_changes", "metrics"}`` (:func:`trial_metrics`; None for a trial too
+    short to measure, with the reason in ``"skipped"``), plus ``record_start_unix``, health and the record."""
+    _check_streams(data)
+    trials = split_trials(data)
+    if not trials:
+        raise BagReportError("the controller was never armed in this bag")
+    entries = []
+    for number, trial in enumerate(trials, 1):
+        entry = {"trial": number, "start_unix": trial.start, "end_unix": trial.end,
+                 "setpoint_rpy_deg": [math.degrees(a) for a in rot_to_rpy(_rotations([trial.setpoint])[0])]}
+        entry.update(gains_in_force(data, trial.start, trial.end))
+        try:
+            entry["metrics"] = trial_metrics(data, trial.start, trial.end, trial.setpoint)
+        except (BagReportError, ValueError) as exc:
+            entry["metrics"], entry["skipped"] = None, str(exc)
+        entries.append(entry)
+    return {"trials": entries, "record_start_unix": float(np.min(data.state_t)), "health": health(data),
+            "record": _record(data)}
 
 
 def sorted_unique(t: Sequence[float], values: Sequence) -> tuple:
@@ -370,15 +476,15 @@ def covered_by(times: np.ndarray, grid: np.ndarray, max_gap: float) -> np.ndarra
                      | (times[after - 1] == grid))
 
 
-def stroke_figures(data: BagData, start: float):
-    """:func:`~quadruped_control.analysis.strokes.stroke_statistics` of the trial (from ``start``), with the
-    package's robot.yaml and controller.yaml (leg pairs); None without joint angles, pair phases or a
+def stroke_figures(data: BagData, start: float, end: float = math.inf):
+    """:func:`~quadruped_control.analysis.strokes.stroke_statistics` of the trial (stamps in [start, end)), with
+    the package's robot.yaml and controller.yaml (leg pairs); None without joint angles, pair phases or a
     complete stroke cycle."""
     pairs = load_leg_pairs()
     phase_t, power = sorted_unique(data.state_t, data.state_pair_power)
     joint_t, joints = sorted_unique(data.joint_t, data.joint_q)
-    steps = [k for k, (t, p) in enumerate(zip(phase_t, power)) if t >= start and len(p) == len(pairs)]
-    samples = [k for k, t in enumerate(joint_t) if t >= start]
+    steps = [k for k, (t, p) in enumerate(zip(phase_t, power)) if start <= t < end and len(p) == len(pairs)]
+    samples = [k for k, t in enumerate(joint_t) if start <= t < end]
     if len(steps) < 2 or len(samples) < 2:
         return None
     return stroke_statistics(phase_t[steps], [power[k] for k in steps], joint_t[samples],
@@ -395,21 +501,35 @@ def _fmt(value) -> str:
     return str(value)
 
 
-def write_report(metrics: Dict, out_dir: str, title: str = "Simulated maneuver") -> str:
-    """Write metrics.json, attitude.png and report.md into ``out_dir``; returns the report path."""
-    from quadruped_control.analysis.plotting import plot_attitude
+def gains_text(gains: Optional[Dict[str, object]]) -> str:
+    """The tunables of :func:`gains_in_force` in one line, in the order of the reconfigure GUI; 'unknown' for None."""
+    if gains is None:
+        return "unknown"
+    order = [t.name for t in TUNABLES]
+    names = [n for n in order if n in gains] + sorted(n for n in gains if n not in order)
+    return ", ".join("%s %s" % (n, "%.4g" % gains[n] if isinstance(gains[n], float) else gains[n]) for n in names)
 
-    os.makedirs(out_dir, exist_ok=True)
-    t, rpy, geodesic = metrics.pop("_series")
-    setpoint = np.radians(metrics["setpoint_rpy_deg"])
-    plot_attitude(t, rpy, setpoint, geodesic, os.path.join(out_dir, "attitude.png"), title=title)
-    with open(os.path.join(out_dir, "metrics.json"), "w") as f:
-        json.dump(metrics, f, indent=2, sort_keys=True)
-    lines = ["# %s" % title, "",
-             "Setpoint roll/pitch/yaw: %s deg; initial geodesic error %.1f deg; settled: %s."
-             % (", ".join("%.1f" % v for v in metrics["setpoint_rpy_deg"]), metrics["theta_init_deg"],
-                _fmt(metrics["settled"])), "",
-             "| axis | t_r [s] | t_s [s] | e_ss [deg] | M_p [%] |", "|---|---|---|---|---|"]
+
+def _gains_line(entry: Dict) -> str:
+    """'Gains: ...' of a trial's :func:`gains_in_force`, with every change during the trial."""
+    changes = "; ".join("%s at %.1f s" % (", ".join("%s %s -> %s" % (name, old, new)
+                                                     for name, (old, new) in c["changes"].items()), c["at"])
+                        for c in entry["gain_changes"])
+    return "Gains: %s%s." % (gains_text(entry["gains"]), "; changed during the trial: " + changes if changes else "")
+
+
+def _summary_cells(m: Optional[Dict]) -> str:
+    """theta_init, geodesic t_s, final error, settled, held % of a trial's metrics (dashes without)."""
+    if m is None:
+        return " | ".join("-" * 5)
+    held = 100.0 * m["holding_fraction"] if m["holding_fraction"] is not None else None
+    return " | ".join(("%.1f" % m["theta_init_deg"], _fmt(m["geodesic"]["t_s"]),
+                       "%.1f" % m["geodesic"]["final_smoothed_deg"], _fmt(m["settled"]), _fmt(held)))
+
+
+def _trial_lines(metrics: Dict) -> List[str]:
+    """The per-axis table, IMU against truth and strokes of one trial's metrics."""
+    lines = ["| axis | t_r [s] | t_s [s] | e_ss [deg] | M_p [%] |", "|---|---|---|---|---|"]
     for axis in ("roll", "pitch", "yaw"):
         m = metrics[axis]
         lines.append("| %s | %s | %s | %s | %s |" % (axis, _fmt(m["t_r"]), _fmt(m["t_s"]), _fmt(m["e_ss"]),
@@ -417,37 +537,101 @@ def write_report(metrics: Dict, out_dir: str, title: str = "Simulated maneuver")
     if "imu_vs_truth_deg" in metrics:
         lines += ["", "Measured (VN-100 path) vs simulated attitude: p50 %.3f deg, max %.3f deg."
                   % (metrics["imu_vs_truth_deg"]["p50"], metrics["imu_vs_truth_deg"]["max"])]
-    record = metrics.get("record")
-    if record:
-        start = metrics["trial_start_unix"]
-        lines += ["", "## Record", ""]
-        for f in record["files"]:
-            lines.append("- %s: %.1f s to %.1f s of the trial, %d messages%s" % (
-                os.path.basename(f["path"]), f["start"] - start, f["end"] - start, f["messages"],
-                " (left open by a killed recorder: read from a reindexed copy)" if f["reindexed"] else ""))
-        spans = record["missing_spans"]
-        lines.append("- missing: none" if not spans else "- missing: " + "; ".join(
-            "%.2f s to %s (%s)" % (s["from"] - start, "the end" if s["to"] is None else "%.2f s" % (s["to"] - start),
-                                   s["why"]) for s in spans))
     strokes = metrics.get("strokes")
-    lines += ["", "## Strokes (measured joint angles)", ""]
     if strokes:
-        lines.append("%d power strokes: power phase %s s; paw excursion %s cm; peak paw speed %s m/s (median "
-                     "(p10-p90) over %d leg strokes); corrupt joint samples skipped: %d." % (
-                         strokes["strokes"], format_spread(strokes["power_duration"]),
-                         format_spread(strokes["excursion"], 100.0, 1), format_spread(strokes["peak_speed"]),
-                         strokes["leg_strokes"], strokes["skipped_samples"]))
+        lines += ["", "Strokes (measured joint angles): %d power strokes: power phase %s s; paw excursion %s cm; "
+                  "peak paw speed %s m/s (median (p10-p90) over %d leg strokes); corrupt joint samples skipped: %d."
+                  % (strokes["strokes"], format_spread(strokes["power_duration"]),
+                     format_spread(strokes["excursion"], 100.0, 1), format_spread(strokes["peak_speed"]),
+                     strokes["leg_strokes"], strokes["skipped_samples"])]
     else:
-        lines.append("No complete stroke cycle with joint angles in the record (/joint_states and the pair "
-                     "phases of /controller_state).")
+        lines += ["", "Strokes: no complete stroke cycle with joint angles in the record (/joint_states and the "
+                  "pair phases of /controller_state)."]
+    return lines
+
+
+def _record_lines(record: Dict, start: float, origin: str, health_figures: Dict) -> List[str]:
+    """The record's files and missing spans (times from ``start``, which is ``origin``) and the last diagnostics."""
+    lines = ["", "## Record", "", "Times from %s." % origin, ""]
+    for f in record["files"]:
+        lines.append("- %s: %.1f s to %.1f s, %d messages%s" % (
+            os.path.basename(f["path"]), f["start"] - start, f["end"] - start, f["messages"],
+            " (left open by a killed recorder: read from a reindexed copy)" if f["reindexed"] else ""))
+    spans = record["missing_spans"]
+    lines.append("- missing: none" if not spans else "- missing: " + "; ".join(
+        "%.2f s to %s (%s)" % (s["from"] - start, "the end" if s["to"] is None else "%.2f s" % (s["to"] - start),
+                               s["why"]) for s in spans))
     lines += ["", "## Stack health (last diagnostics in the bag)", ""]
-    for name, values in metrics["health"].items():
+    for name, values in health_figures.items():
         lines.append("- **%s**: %s" % (name, ", ".join("%s %s" % kv for kv in values.items())))
-    lines += ["", "![attitude](attitude.png)", ""]
+    return lines
+
+
+def _write(out_dir: str, result: Dict, lines: List[str]) -> str:
+    with open(os.path.join(out_dir, "metrics.json"), "w") as f:
+        json.dump(result, f, indent=2, sort_keys=True)
     path = os.path.join(out_dir, "report.md")
     with open(path, "w") as f:
-        f.write("\n".join(lines))
+        f.write("\n".join(lines + [""]))
     return path
+
+
+def write_report(metrics: Dict, out_dir: str, title: str = "Simulated maneuver") -> str:
+    """Write metrics.json, attitude.png and report.md of :func:`analyse` into ``out_dir``; returns the report path."""
+    from quadruped_control.analysis.plotting import plot_attitude
+
+    os.makedirs(out_dir, exist_ok=True)
+    t, rpy, geodesic = metrics.pop("_series")
+    setpoint = np.radians(metrics["setpoint_rpy_deg"])
+    plot_attitude(t, rpy, setpoint, geodesic, os.path.join(out_dir, "attitude.png"), title=title)
+    lines = ["# %s" % title, "",
+             "Setpoint roll/pitch/yaw: %s deg; initial geodesic error %.1f deg; settled: %s."
+             % (", ".join("%.1f" % v for v in metrics["setpoint_rpy_deg"]), metrics["theta_init_deg"],
+                _fmt(metrics["settled"])), "",
+             _gains_line(metrics), ""]
+    lines += _trial_lines(metrics)
+    lines += _record_lines(metrics["record"], metrics["trial_start_unix"], "the trial's start", metrics["health"])
+    lines += ["", "![attitude](attitude.png)"]
+    return _write(out_dir, metrics, lines)
+
+
+def write_trials_report(result: Dict, out_dir: str, title: str = "Recorded run") -> str:
+    """Write report.md (a table of every trial of :func:`analyse_trials`, then each trial: its gains, metrics and
+    figure trial_NN.png), attitude.png (the whole record, a colour per trial) and metrics.json into
+    ``out_dir``; returns the report path. Times are from the record's first controller step."""
+    from quadruped_control.analysis.plotting import Trace, plot_attitude, plot_trials
+
+    os.makedirs(out_dir, exist_ok=True)
+    origin = result["record_start_unix"]
+    traces, sections = [], []
+    rows = ["| trial | from [s] | for [s] | setpoint r, p, y [deg] | gains | theta_init [deg] | t_s [s] | "
+            "final error [deg] | settled | held [%] |", "|---|---|---|---|---|---|---|---|---|---|"]
+    for trial in result["trials"]:
+        n, m = trial["trial"], trial["metrics"]
+        setpoint = ", ".join("%.1f" % (round(v, 1) + 0.0) for v in trial["setpoint_rpy_deg"])  # no -0.0
+        gains = gains_text(trial["gains"]) + (" (changed)" if trial["gain_changes"] else "")
+        rows.append("| %d | %.1f | %.1f | %s | %s | %s |" % (n, trial["start_unix"] - origin, trial["end_unix"]
+                                                            - trial["start_unix"], setpoint, gains, _summary_cells(m)))
+        sections += ["", "## Trial %d: setpoint %s deg, from %.1f s" % (n, setpoint, trial["start_unix"] - origin), "",
+                     _gains_line(trial), ""]
+        if m is None:
+            sections.append("Not measured: %s." % trial["skipped"])
+            continue
+        t, rpy, geodesic = m.pop("_series")
+        setpoint_rad = np.radians(trial["setpoint_rpy_deg"])
+        figure = "trial_%02d.png" % n
+        plot_attitude(t, rpy, setpoint_rad, geodesic, os.path.join(out_dir, figure), title="%s, trial %d" % (title, n))
+        traces.append(Trace(t + trial["start_unix"] - origin, rpy, setpoint_rad, geodesic, "trial %d" % n))
+        sections += ["Initial geodesic error %.1f deg; settled: %s." % (m["theta_init_deg"], _fmt(m["settled"])), ""]
+        sections += _trial_lines(m) + ["", "![trial %d](%s)" % (n, figure)]
+    if traces:
+        plot_trials(traces, os.path.join(out_dir, "attitude.png"), title=title)
+    lines = ["# %s" % title, "", "%d trials: armed, one setpoint each (the record split at each setpoint change, arm "
+             "and disarm); times from the first controller step; gains from %s, the values in force at the trial's "
+             "start." % (len(result["trials"]), GAINS_TOPIC), ""]
+    lines += rows + (["", "![attitude](attitude.png)"] if traces else []) + sections
+    lines += _record_lines(result["record"], origin, "the first controller step", result["health"])
+    return _write(out_dir, result, lines)
 
 
 def main(argv: Optional[Sequence[str]] = None) -> int:
@@ -455,13 +639,16 @@ def main(argv: Optional[Sequence[str]] = None) -> int:
     parser.add_argument("bags", nargs="+", help="bag file(s) of one run (split parts together)")
     parser.add_argument("--out", required=True, help="output folder")
     parser.add_argument("--title", default="Recorded maneuver")
+    parser.add_argument("--last-trial", action="store_true",
+                        help="one trial only, from the last setpoint change to the end (the report before trials)")
     args = parser.parse_args(argv)
     try:
-        metrics = analyse(read_bags(args.bags))
+        data = read_bags(args.bags)
+        result = analyse(data) if args.last_trial else analyse_trials(data)
     except (BagReportError, OSError) as exc:
         print("bag_report: %s" % exc, file=sys.stderr)
         return 1
-    path = write_report(metrics, args.out, args.title)
+    path = (write_report if args.last_trial else write_trials_report)(result, args.out, args.title)
     with open(path) as f:
         print(f.read())
     return 0

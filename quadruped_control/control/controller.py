@@ -5,6 +5,9 @@ with anti-windup, eq. (pid), and the saturation, eq. (sat) (:func:`control_law_f
 stroke scheme (:mod:`quadruped_control.control.strokes`), which latches the allocation of eq.
 (foot_speed), (foot_vel) (:mod:`quadruped_control.control.allocation`) at each power-phase start,
 integrates the foot positions, eq. (foot_integration), and solves the leg IK for the joint targets.
+The setpoint R_d is a world attitude; with ``yaw_free`` only its tilt is tracked and no torque about the world
+vertical is commanded (:meth:`AttitudeController.set_setpoint`; how operator setpoints become R_d:
+:mod:`quadruped_control.control.yaw_reference`).
 
 Contract: bad measurements (non-finite, not a rotation, omega beyond ``max_angular_rate``) raise
 ValueError from :meth:`~AttitudeController.step` without changing any state, and the caller then calls
@@ -29,6 +32,7 @@ from quadruped_common.vec3 import ZERO, Mat3, Vec3, add, cross, mat_vec, norm, r
 from quadruped_control.control.allocation import estimate_body_torque, foot_velocity_command_f
 from quadruped_control.control.controller_config import ControllerConfig, Gains
 from quadruped_control.control.strokes import StrokeScheme, make_stroke_scheme
+from quadruped_control.control.yaw_reference import reject, tilt_setpoint
 from quadruped_control.model.params import RobotParams
 
 ArrayLike = Union[Sequence[float], Sequence[Sequence[float]], np.ndarray]
@@ -46,6 +50,7 @@ __all__ = [
     "pid_torque",
     "saturate",
     "saturate_f",
+    "without_yaw",
 ]
 
 
@@ -177,6 +182,15 @@ def control_law_f(R_d: Mat3, R: Mat3, omega: Vec3, z: Vec3, delta_sat: Vec3, h: 
     return LawResult(e_R, geodesic, z, tau_cmd, tau_sat, saturated, feedforward)
 
 
+def without_yaw(law: LawResult, vertical: Vec3, tau_max: float) -> LawResult:
+    """``law`` with no component about the world ``vertical`` (unit, body frame) in z, the feedforward and
+    tau_cmd, and tau_sat of eq. (sat) taken again from that tau_cmd: the tilt-only law (yaw reference ``tilt``)."""
+    tau_cmd = reject(law.tau_cmd, vertical)
+    tau_sat, saturated = saturate_f(tau_cmd, tau_max)
+    return law._replace(z=reject(law.z, vertical), tau_cmd=tau_cmd, tau_sat=tau_sat, saturated=saturated,
+                        feedforward=reject(law.feedforward, vertical))
+
+
 # --------------------------------------------------------------------------------------------------
 # Outputs
 # --------------------------------------------------------------------------------------------------
@@ -286,6 +300,7 @@ class AttitudeController:
         self._pending_scheme: Optional[str] = None
         self._R_d = Mat3(1.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 1.0)
         self._R_d_array = np.eye(3)
+        self._yaw_free = False
         self._hold_reason = ""
         self._law_gains_cache: Optional[Tuple[ControllerConfig, LawGains]] = None
         self._feedforward_cache: Optional[Tuple[ControllerConfig, Feedforward]] = None
@@ -302,8 +317,13 @@ class AttitudeController:
 
     @property
     def setpoint(self) -> np.ndarray:
-        """Desired attitude R_d (copy)."""
+        """Desired attitude R_d (copy): as set, or with ``yaw_free`` the last step's (:meth:`set_setpoint`)."""
         return self._R_d_array.copy()
+
+    @property
+    def yaw_free(self) -> bool:
+        """Is only the setpoint's tilt tracked (:meth:`set_setpoint`)?"""
+        return self._yaw_free
 
     @property
     def holding(self) -> bool:
@@ -331,14 +351,22 @@ class AttitudeController:
         self._config = config
         self._pending_scheme = None if name == self._stroke.name else name
 
-    def set_setpoint(self, R_d: ArrayLike) -> None:
+    def set_setpoint(self, R_d: ArrayLike, yaw_free: bool = False) -> None:
         """Desired attitude R_d (body -> world rotation); ValueError unless a finite rotation matrix.
+
+        ``yaw_free`` (yaw reference ``tilt``, :mod:`~quadruped_control.control.yaw_reference`): only R_d's tilt is
+        tracked, its yaw not at all. Each step then controls towards the rotation with R_d's tilt closest to the
+        measured attitude (:func:`~quadruped_control.control.yaw_reference.tilt_setpoint`), whose e_R of eq.
+        (error) has no component about the world vertical, and :func:`without_yaw` removes that component from
+        the integral and from tau_cmd of eq. (pid) before eq. (sat): no torque about the world vertical is
+        demanded from the allocation (docs/controller.md). That rotation is the step's R_d in the record.
 
         The integral is kept (the paper does not reset it on setpoint changes).
         """
         R_d = _rotation_floats(R_d, "setpoint R_d", self._config.rotation_tolerance)
         self._R_d = R_d
         self._R_d_array = np.array(R_d).reshape(3, 3)
+        self._yaw_free = bool(yaw_free)
 
     def set_setpoint_rpy(self, roll: float, pitch: float, yaw: float) -> None:
         """Desired attitude from REP-103 roll, pitch, yaw in radians (R = Rz(yaw) Ry(pitch) Rx(roll))."""
@@ -480,8 +508,16 @@ class AttitudeController:
         if config.buoyancy_feedforward:
             for foot in self._stroke.positions:
                 feet_sum = add(feet_sum, foot)
-        law = control_law_f(self._R_d, R_measured, omega_measured, self._integral, self._delta_sat, h,
-                            self._law_gains(), self._feedforward(), feet_sum)
+        if self._yaw_free:  # tilt only: R_d with the setpoint's tilt nearest R, nothing about the vertical
+            vertical = row(R_measured, 2)  # the world vertical in the body frame
+            R_d = tilt_setpoint(self._R_d, R_measured)
+            self._R_d_array = np.array(R_d).reshape(3, 3)
+            law = without_yaw(control_law_f(R_d, R_measured, omega_measured, reject(self._integral, vertical),
+                                            self._delta_sat, h, self._law_gains(), self._feedforward(), feet_sum),
+                              vertical, config.tau_max)
+        else:
+            law = control_law_f(self._R_d, R_measured, omega_measured, self._integral, self._delta_sat, h,
+                                self._law_gains(), self._feedforward(), feet_sum)
         self._e_R, self._geodesic, self._integral = law.e_R, law.geodesic, law.z
         self._delta_sat = sub(law.tau_cmd, law.tau_sat)
         self._tau_sat = law.tau_sat

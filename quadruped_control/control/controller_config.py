@@ -40,6 +40,7 @@ from quadruped_common.schema import Param, Schema
 from quadruped_common.tunables import GAIN_NAMES, TUNABLES
 from quadruped_common.tunables import bounds as tunable_bounds
 from quadruped_control.control.strokes import COORDINATED_PARAMS, SCHEMES, CoordinatedParams
+from quadruped_control.control.yaw_reference import YAW_REFERENCES
 
 __all__ = [
     "CONTROLLER_SCHEMA",
@@ -125,6 +126,10 @@ CONTROLLER_SCHEMA = Schema("controller.yaml", (
     Param("stroke.scheme", "", "stroke scheme: paper (the paper's power and recovery cycle) or coordinated "
           "(docs/stroke_schemes.md)", kind="string", choices=SCHEMES, default=SCHEMES[0], source="choice"),
     *COORDINATED_PARAMS,
+    Param("yaw_reference", "", "how the controller node reads a setpoint's yaw unless the message names it: "
+          "relative (to the heading measured at arming), absolute (world ENU, yaw = magnetic heading: the paper's) "
+          "or tilt (roll and pitch only, no torque about the vertical); node parameter ~yaw_reference",
+          kind="string", choices=YAW_REFERENCES, default=YAW_REFERENCES[0], source="choice"),
 ), names={"set": None})
 
 #: key -> declaration of CONTROLLER_SCHEMA (the constructors' checks)
@@ -184,6 +189,9 @@ class ControllerConfig:
     - ``rotation_tolerance``: largest |R^T R - I| accepted for measured and desired attitudes.
     - ``stroke_scheme``: 'paper' (the paper's stroke cycle) or 'coordinated'; ``coordinated``: the
       parameters of the latter (:mod:`quadruped_control.control.strokes`).
+    - ``yaw_reference``: how the supervisor reads an operator's setpoint given without one: 'relative',
+      'absolute' or 'tilt' (:mod:`quadruped_control.control.yaw_reference`). The controller itself and the
+      offline simulator take world setpoints R_d.
     """
 
     gains: Gains
@@ -201,6 +209,7 @@ class ControllerConfig:
     rotation_tolerance: float = _PARAMS["rotation_tolerance"].default
     stroke_scheme: str = _PARAMS["stroke.scheme"].default
     coordinated: CoordinatedParams = dataclasses.field(default_factory=CoordinatedParams)
+    yaw_reference: str = _PARAMS["yaw_reference"].default
 
     def __post_init__(self) -> None:
         if not isinstance(self.gains, Gains):
@@ -218,6 +227,7 @@ class ControllerConfig:
         for name in ("normalize_force_direction", "gyroscopic_feedforward", "buoyancy_feedforward"):
             _read(name, getattr(self, name))
         _read("stroke.scheme", self.stroke_scheme)
+        _read("yaw_reference", self.yaw_reference)
         if not isinstance(self.coordinated, CoordinatedParams):
             raise ParameterError("coordinated must be a CoordinatedParams instance, got %r" % (self.coordinated,))
         for name in ("integral_limit", "max_angular_rate"):
@@ -277,6 +287,7 @@ def _config_for_set(v: Mapping[str, Any], name: str, chosen: Mapping[str, Any]) 
             rotation_tolerance=v["rotation_tolerance"],
             stroke_scheme=v["stroke.scheme"],
             coordinated=CoordinatedParams(**{p.key.rsplit(".", 1)[1]: v[p.key] for p in COORDINATED_PARAMS}),
+            yaw_reference=v["yaw_reference"],
         )
     except ParameterError as exc:
         raise ParameterError("gain set '%s': %s" % (name, exc)) from None

@@ -20,6 +20,10 @@ with pytest:
   makes the controller hold when ``tracking.hold_on_error`` says so.
 * Armed with a usable IMU sample: one controller step (eq. error .. foot_integration), joint targets
   mapped to pulse widths and clamped to the per-channel limits.
+* Setpoints (:meth:`ControlSupervisor.set_setpoint`) are read in a yaw reference
+  (:mod:`~quadruped_control.control.yaw_reference`: relative, absolute, tilt; by default the controller
+  configuration's ``yaw_reference``); every arm captures the heading a relative setpoint is turned by from the
+  latest IMU sample (from the first stepped one when there is none), and the controller gets the world R_d.
 * Armed with an unusable IMU sample (NaN, non-unit quaternion, stale; see
   :func:`~quadruped_common.monitoring.imu_sample_problem`) or a controller error: the controller's
   hold (no stroking, integral frozen, feet at the nominal pose) and the reason in the output.
@@ -54,16 +58,17 @@ from quadruped_control.control.controller import AttitudeController, ControllerO
 from quadruped_control.control.safety_config import SafetyConfig
 from quadruped_control.control.servo_watch import ERROR, ServoTrackingWatch
 from quadruped_control.control.soft_start import JointSpeedLimiter
+from quadruped_control.control.yaw_reference import WorldSetpoint, YawReference, heading, world_setpoint
 from quadruped_control.model.kinematics import joint_angles
 
+#: s: a gap this long between two tether checks means the supervisor did not run (starved, stopped); the
+#: heartbeats queued meanwhile get as long again to arrive before their absence counts as a lost tether.
+TETHER_STALL = 0.25
 #: What the tether failsafe does when the heartbeat is lost: stop stroking (the servos hold where they are), that
 #: and every output off (limp), or stay armed holding the attitude the robot had (hold).
 TETHER_ACTIONS = ("disarm", "limp", "hold")
 
 #: health/<source> reason codes that say the measurement failed, not that the hazard it watches is there.
-#: s: a gap this long between two tether checks means the supervisor did not run (starved, stopped); the
-#: heartbeats queued meanwhile get as long again to arrive before their absence counts as a lost tether.
-TETHER_STALL = 0.25
 MEASUREMENT_FAULTS = frozenset(("stale", "no_reading", "no_answer", "absent", "implausible", "prom_crc", "dropped",
                                 "not_fitted"))
 
@@ -149,13 +154,13 @@ class ControlSupervisor:
         self.last_heartbeat: Optional[float] = None
         self.tether_losses = 0
         self._tether_holding = False  # a hold taken for the current loss of the heartbeat
+        self._tether_checked: Optional[float] = None  # the clock of the last check_tether
+        self._tether_grace_until = -math.inf
         self.clock_now = 0.0  # the node's clock at the last tick (the arming gate's heartbeat age)
         self.safety = safety
         self._limiter = JointSpeedLimiter(safety.max_joint_speed) if safety is not None else None
         self.tracking: Optional[ServoTrackingWatch] = None
         if safety is not None:
-        self._tether_checked: Optional[float] = None  # the clock of the last check_tether
-        self._tether_grace_until = -math.inf
             speed = controller.robot.servo_no_load_speed * safety.tracking_speed_scale
             self.tracking = ServoTrackingWatch(dataclasses.replace(safety.tracking, max_speed=speed), JOINT_NAMES)
         self.tracking_levels: List[Tuple[str, int, float]] = []
@@ -175,6 +180,10 @@ class ControlSupervisor:
         self._outputs_problem: Optional[str] = None  # pwm_node's outputs_state (None: never received)
         self._outputs_stamp = -math.inf
         self._imu: Optional[ImuInput] = None
+        #: the operator's setpoint, its yaw reference and the heading at arming
+        self.yaw = YawReference(controller.config.yaw_reference, controller.setpoint)
+        self.yaw.mode = "tilt" if controller.yaw_free else "absolute"
+        self._heading_due = False  # armed without an IMU sample: the first stepped one gives the heading
         self._joint_positions: Optional[np.ndarray] = None
         self._joint_velocities: Optional[np.ndarray] = None
         self._joint_stamp: Optional[float] = None
@@ -229,8 +238,7 @@ class ControlSupervisor:
             return None
         self.tether_losses += 1
         if self.tether_action == "hold" and self._imu is not None and self.imu_problem(now) is None:
-            q = self._imu.orientation_xyzw
-            self.controller.set_setpoint(quat_to_rot(q / np.linalg.norm(q)))
+            self.set_setpoint(self._imu_rotation(self._imu), "absolute")
             self._tether_holding = True
             return "hold"
         self._armed = False
@@ -351,8 +359,38 @@ class ControlSupervisor:
             return "pwm_node's outputs_state is %.1f s old (is it running?)" % age
         return self._outputs_problem or None
 
+    def set_setpoint(self, R: Sequence[Sequence[float]], mode: Optional[str] = None) -> WorldSetpoint:
+        """The operator's setpoint R (3x3) in yaw reference ``mode`` (None: ``yaw.default``); returns what the
+        controller now tracks. ValueError, nothing changed, for an unknown mode or a non-rotation."""
+        mode = self.yaw.resolve(mode)
+        R_s = np.array(R, dtype=float)
+        target = world_setpoint(R_s, mode, self.yaw.psi_0)
+        self.controller.set_setpoint(target.R_d, target.yaw_free)
+        self.yaw.R_s, self.yaw.mode = R_s, mode
+        return target
+
+    @staticmethod
+    def _imu_rotation(imu: ImuInput) -> np.ndarray:
+        q = imu.orientation_xyzw
+        return quat_to_rot(q / np.linalg.norm(q))
+
+    def attitude(self) -> Optional[np.ndarray]:
+        """The attitude of the latest plausible IMU sample (3x3, world ENU <- body FLU), fresh or not; None before
+        the first."""
+        return None if self._imu is None else self._imu_rotation(self._imu)
+
+    def _take_heading(self, R: np.ndarray) -> None:
+        """psi_0 := the heading of R; the controller's R_d follows."""
+        self.yaw.psi_0 = heading(R)
+        self._heading_due = False
+        target = self.yaw.world()
+        self.controller.set_setpoint(target.R_d, target.yaw_free)
+
     def _arm(self) -> None:
         self.controller.reset()
+        self._heading_due = True
+        if self._imu is not None:
+            self._take_heading(self._imu_rotation(self._imu))
         self._armed = True
         self.arm_pending = False
         self._soft_start_due = self._limiter is not None
@@ -467,8 +505,10 @@ class ControlSupervisor:
             output = self.controller.hold(t, problem)
         else:
             assert imu is not None
-            R = quat_to_rot(imu.orientation_xyzw / np.linalg.norm(imu.orientation_xyzw))
+            R = self._imu_rotation(imu)
             omega = imu.angular_velocity
+            if self._heading_due:
+                self._take_heading(R)
             try:
                 output = self.controller.step(t, R, omega)
             except ValueError as exc:  # the controller refuses input it cannot use: hold, say why

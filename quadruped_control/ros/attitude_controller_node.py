@@ -7,9 +7,12 @@ steps). This module only moves data between ROS and those objects.
 Subscribes
   imu/data               sensor_msgs/Imu                 world ENU <- base_link FLU (REP-145)
   joint_states           sensor_msgs/JointState          measured joint angles / velocities
-  attitude_setpoint      geometry_msgs/QuaternionStamped R_d, world ENU <- body FLU
-  attitude_setpoint_rpy_deg  geometry_msgs/Vector3Stamped  R_d as roll, pitch, yaw in DEGREES (unit in the name, REP-103)
-                                                         (R = Rz(yaw) Ry(pitch) Rx(roll))
+  attitude_setpoint      geometry_msgs/QuaternionStamped the setpoint, body FLU -> its yaw reference's frame
+  attitude_setpoint_rpy_deg  geometry_msgs/Vector3Stamped  the setpoint as roll, pitch, yaw in DEGREES (unit in the
+                                                         name, REP-103: R = Rz(yaw) Ry(pitch) Rx(roll))
+                         Both in the yaw reference header.frame_id names: relative (yaw from the heading at arming),
+                         absolute (world ENU) or tilt (roll and pitch only); empty: ~yaw_reference
+                         (quadruped_control.control.yaw_reference). controller_state.setpoint is the world R_d.
   preflight/result       diagnostic_msgs/DiagnosticStatus  the pre-dive check's verdict (latched; OK: passed)
   estop_state            std_msgs/Bool      pwm_node's e-stop: true disarms at once and refuses arming until reset
   tether/heartbeat       std_msgs/Header    the laptop's heartbeat (heartbeat_node); watched with ~heartbeat_timeout
@@ -21,11 +24,20 @@ Publishes
   servo_command          underwater_quadruped/ServoCommand   12 pulse widths (us) + joint targets,
                                                              header.stamp = the IMU sample's stamp
   controller_state       underwater_quadruped/ControllerState  telemetry of every step (stamp: step time)
+  telemetry/rpy_deg, telemetry/setpoint_rpy_deg, telemetry/error_rpy_deg  geometry_msgs/Vector3Stamped  for the
+                         operator's plots at ~telemetry_rate: measured and commanded (world: controller_state's
+                         setpoint) x roll, y pitch, z yaw in DEGREES, and setpoint - measured wrapped to +-180
+                         (quadruped_control.control.attitude_degrees); frame_id odom (world ENU)
+  telemetry/heading_at_arming_deg  std_msgs/Float64 (latched)  the heading a relative setpoint's yaw counts from
+                         (NaN before the first arm): relative yaw = world yaw - this
   diagnostics            diagnostic_msgs/DiagnosticArray
 Services
   ~arm                   std_srvs/SetBool   legs move only when armed; refused (success false, every reason in
                                             the message and in the "arming" diagnostic) while a check fails
                                             (ControlSupervisor.arming_checks); armed, the soft start first
+  ~save_gains            underwater_quadruped/SaveGains  the gains in force as a gain set of a yaml file, new or
+                                            given (quadruped_control.control.gain_file: refused without overwrite
+                                            over an existing set or the shipped config/controller.yaml)
 Parameters
   ~gain_set (experiment) ~controller_yaml ~robot_yaml ~hardware_yaml ~calibration_yaml ~vn100_yaml ~safety_yaml
                          (package config/; vn100.yaml gives the IMU's plausible ranges, safety.yaml the soft
@@ -34,7 +46,9 @@ Parameters
                           the command leaves right after the sample that caused it)
   ~imu_max_age (0.05 s)  ~arm_on_start (false: arms once the checks pass; the first start only)
   ~arm_on_start_delay (0 s: that arm not before this long after the start; sim.launch lock-step: 1 s)
-  ~setpoint_rpy_deg ([0, 0, 0])
+  ~setpoint_rpy_deg ([0, 0, 0]: in ~yaw_reference)
+  ~telemetry_rate (20 Hz: telemetry/*_rpy_deg every loop_rate/telemetry_rate-th step; 0: off)
+  ~yaw_reference (yaw_reference of controller.yaml: relative | absolute | tilt)
   ~require_preflight (false; robot.launch: true): arming waits for a passed pre-dive check
   ~health_sources (default: what hardware_yaml fits: depth if depth.fitted, battery if a pack is, leak if leak.fitted)
   ~batteries_fitted ~leak_fitted (false: hardware_yaml decides; true: the simulated robot's packs, probe)
@@ -45,7 +59,9 @@ Parameters
                          comes back disarmed whatever ~arm_on_start says
   ~stroke_scheme (stroke.scheme of controller.yaml: paper | coordinated)
   dynamic_reconfigure (AttitudeController.cfg): k_p k_i k_d k_aw tau_max t_rec t_pow_max stroke_scheme
-                         (a scheme switch is smooth: the feet return to the nominal pose first)
+                         (a scheme switch is smooth: the feet return to the nominal pose first); seeded from the
+                         gain set, so the latched ~parameter_updates (dynamic_reconfigure/Config, recorded) holds
+                         the values in force from the start and after every change
 """
 from __future__ import annotations
 
@@ -62,25 +78,29 @@ from diagnostic_updater import DiagnosticStatusWrapper
 from dynamic_reconfigure.server import Server as ReconfigureServer
 from geometry_msgs.msg import Point, Quaternion, QuaternionStamped, Vector3, Vector3Stamped
 from sensor_msgs.msg import Imu, JointState
-from std_msgs.msg import Bool, Header
+from std_msgs.msg import Bool, Float64, Header
 from std_srvs.srv import SetBool, SetBoolResponse
 
 from quadruped_common.config import ParameterError
 from quadruped_common.monitoring import STALE_IMU, HoldEpisodes, RateMonitor, WindowStatistics, hold_kind
 from quadruped_common.robot import JOINT_NAMES
 from quadruped_common.ros.node_startup import start_node
-from quadruped_common.so3 import quat_to_rot, rot_to_quat, rpy_to_rot
+from quadruped_common.so3 import quat_to_rot, rot_to_quat, rot_to_rpy, rpy_to_rot
 from quadruped_common.ros.diagnostics import Updater
+from quadruped_control.control.attitude_degrees import attitude_degrees
 from quadruped_control.control.controller import AttitudeController
 from quadruped_control.control.controller_config import TUNABLE_BOUNDS, apply_tunables, load_controller_config
+from quadruped_control.control.gain_file import save_gain_set
 from quadruped_control.control.safety_config import load_safety_config
 from quadruped_control.control.supervisor import ControlSupervisor
+from quadruped_control.control.yaw_reference import mode_of_frame
 from quadruped_control.model.params import load_robot_params
 from quadruped_drivers.calibration import load_servo_calibration
 from quadruped_drivers.hardware_config import load_hardware_config, with_batteries_fitted
 from quadruped_drivers.vn100.settings import load_vn100_settings, sensor_limits
 from underwater_quadruped.cfg import AttitudeControllerConfig
 from underwater_quadruped.msg import ControllerState, ServoCommand
+from underwater_quadruped.srv import SaveGains, SaveGainsResponse
 
 _PHASE_CODES = {"recovery": ControllerState.PHASE_RECOVERY, "power": ControllerState.PHASE_POWER,
                 "hold": ControllerState.PHASE_HOLD}
@@ -109,9 +129,13 @@ class AttitudeControllerNode:
     def __init__(self) -> None:
         robot = load_robot_params(_optional_path("~robot_yaml"))
         gain_set = rospy.get_param("~gain_set", "experiment")
+        self.gain_source = "gain set '%s' of %s" % (gain_set,
+                                                    _optional_path("~controller_yaml") or "config/controller.yaml")
         self.config = load_controller_config(_optional_path("~controller_yaml"), gain_set)
         scheme = rospy.get_param("~stroke_scheme", "") or self.config.stroke_scheme
         self.config = self.config.replace(stroke_scheme=scheme)
+        yaw_reference = rospy.get_param("~yaw_reference", "") or self.config.yaw_reference
+        self.config = self.config.replace(yaw_reference=yaw_reference)
         hardware = load_hardware_config(_optional_path("~hardware_yaml"))
         if rospy.get_param("~batteries_fitted", False):
             hardware = with_batteries_fitted(hardware)
@@ -132,8 +156,6 @@ class AttitudeControllerNode:
         imu_limits = sensor_limits(vn100)
         self.config = self.config.replace(max_angular_rate=imu_limits.max_angular_rate)
         controller = AttitudeController(robot, self.config)
-        roll, pitch, yaw = [math.radians(v) for v in rospy.get_param("~setpoint_rpy_deg", [0.0, 0.0, 0.0])]
-        controller.set_setpoint(rpy_to_rot(roll, pitch, yaw))
         # A respawned controller (roslaunch respawns it after a crash or a kill) never moves the legs
         # without a new arm command: ~arm_on_start applies to the first start only. The parameter server
         # outlives the process, so a start that finds ~starts already set is a restart.
@@ -154,6 +176,9 @@ class AttitudeControllerNode:
                                             tether_action=str(rospy.get_param("~tether_action", "disarm")),
                                             safety=self.safety,
                                             health_sources=list(rospy.get_param("~health_sources", fitted)))
+        roll, pitch, yaw = [math.radians(v) for v in rospy.get_param("~setpoint_rpy_deg", [0.0, 0.0, 0.0])]
+        self.supervisor.set_setpoint(rpy_to_rot(roll, pitch, yaw))
+        rospy.set_param("~yaw_reference", self.config.yaw_reference)
         if arm_on_start:
             rospy.loginfo("attitude controller: ~arm_on_start: arming once every check passes")
         self.was_armed = False
@@ -184,6 +209,15 @@ class AttitudeControllerNode:
 
         self.command_pub = rospy.Publisher("servo_command", ServoCommand, queue_size=10)
         self.state_pub = rospy.Publisher("controller_state", ControllerState, queue_size=10)
+        telemetry_rate = float(rospy.get_param("~telemetry_rate", 20.0))
+        self.telemetry_every = max(1, int(round(self.loop_rate / telemetry_rate))) if telemetry_rate > 0 else 0
+        self.telemetry_steps = 0
+        self.rpy_pub = rospy.Publisher("telemetry/rpy_deg", Vector3Stamped, queue_size=5)
+        self.setpoint_rpy_pub = rospy.Publisher("telemetry/setpoint_rpy_deg", Vector3Stamped, queue_size=5)
+        self.error_rpy_pub = rospy.Publisher("telemetry/error_rpy_deg", Vector3Stamped, queue_size=5)
+        self.heading_pub = rospy.Publisher("telemetry/heading_at_arming_deg", Float64, queue_size=1, latch=True)
+        self.heading_published: Optional[float] = None
+        self.heading_pub.publish(Float64(math.nan))
         self.diagnostics = Updater()
         self.diagnostics.setHardwareID("none")  # no hardware of its own (diagnostic_updater convention)
         self.diagnostics.add("control loop", self._diagnose_loop)
@@ -202,6 +236,7 @@ class AttitudeControllerNode:
         self.reconfigure = ReconfigureServer(AttitudeControllerConfig, self._on_reconfigure)
 
         rospy.Service("~arm", SetBool, self._on_arm)
+        rospy.Service("~save_gains", SaveGains, self._on_save_gains)
         rospy.Subscriber("preflight/result", DiagnosticStatus, self._on_preflight, queue_size=1)
         rospy.Subscriber("estop_state", Bool, self._on_estop, queue_size=1, tcp_nodelay=True)
         rospy.Subscriber("tether/heartbeat", Header, self._on_heartbeat, queue_size=1, tcp_nodelay=True)
@@ -215,9 +250,9 @@ class AttitudeControllerNode:
         # Fallback: when IMU samples stop, this timer still ticks the supervisor so that it holds.
         self.fallback_timer = rospy.Timer(rospy.Duration(self.period), self._on_fallback_timer)
         rospy.loginfo("attitude controller: gain set '%s' (K_p %.3g K_i %.3g K_d %.3g K_aw %.3g), "
-                      "%.0f Hz stepped every %d IMU samples, %s strokes, %s", gain_set, gains.k_p, gains.k_i,
-                      gains.k_d, gains.k_aw, self.loop_rate, self.decimation, self.config.stroke_scheme,
-                      "ARMED" if self.supervisor.armed else "disarmed (call ~arm)")
+                      "%.0f Hz stepped every %d IMU samples, %s strokes, %s yaw reference, %s", gain_set, gains.k_p,
+                      gains.k_i, gains.k_d, gains.k_aw, self.loop_rate, self.decimation, self.config.stroke_scheme,
+                      self.config.yaw_reference, "ARMED" if self.supervisor.armed else "disarmed (call ~arm)")
 
     # ---- callbacks -----------------------------------------------------------------------------
 
@@ -271,24 +306,37 @@ class AttitudeControllerNode:
             self.supervisor.set_joint_feedback(positions, velocities, msg.header.stamp.to_sec())
             self.joint_monitor.tick(time.monotonic())
 
-    def _set_setpoint(self, R: np.ndarray, text: str) -> None:
-        with self.lock:
-            self.supervisor.controller.set_setpoint(R)
-        rospy.loginfo("attitude setpoint: %s", text)
+    def _set_setpoint(self, R: np.ndarray, frame_id: str, text: str) -> None:
+        """A setpoint message's rotation in the yaw reference its frame_id names (mode_of_frame)."""
+        try:
+            mode = mode_of_frame(frame_id)
+            with self.lock:
+                target = self.supervisor.set_setpoint(R, mode)
+                mode, psi_0 = self.supervisor.yaw.mode, self.supervisor.yaw.psi_0
+        except ValueError as exc:
+            rospy.logerr("attitude setpoint rejected: %s", exc)
+            return
+        if mode == "relative":
+            text += " relative to the heading at arming (%s)" % (
+                "not armed yet" if psi_0 is None else "%.1f deg" % math.degrees(psi_0))
+        rospy.loginfo("attitude setpoint: %s, %s: world roll %.1f pitch %.1f yaw %s deg", text, mode,
+                      *np.degrees(rot_to_rpy(target.R_d)[:2]),
+                      "free" if target.yaw_free else "%.1f" % math.degrees(rot_to_rpy(target.R_d)[2]))
 
     def _on_setpoint(self, msg: QuaternionStamped) -> None:
         q = np.array([msg.quaternion.x, msg.quaternion.y, msg.quaternion.z, msg.quaternion.w])
         if not np.all(np.isfinite(q)) or abs(np.linalg.norm(q) - 1.0) > 1e-3:
             rospy.logerr("attitude setpoint rejected: quaternion %s is not a finite unit quaternion", q)
             return
-        self._set_setpoint(quat_to_rot(q / np.linalg.norm(q)), "quaternion %s" % np.round(q, 4))
+        self._set_setpoint(quat_to_rot(q / np.linalg.norm(q)), msg.header.frame_id, "quaternion %s" % np.round(q, 4))
 
     def _on_setpoint_rpy(self, msg: Vector3Stamped) -> None:
         rpy = np.array([msg.vector.x, msg.vector.y, msg.vector.z])
         if not np.all(np.isfinite(rpy)):
             rospy.logerr("attitude setpoint rejected: roll/pitch/yaw %s not finite", rpy)
             return
-        self._set_setpoint(rpy_to_rot(*np.radians(rpy)), "roll %.1f pitch %.1f yaw %.1f deg" % tuple(rpy))
+        self._set_setpoint(rpy_to_rot(*np.radians(rpy)), msg.header.frame_id,
+                           "roll %.1f pitch %.1f yaw %.1f deg" % tuple(rpy))
 
     def _on_arm(self, request) -> SetBoolResponse:
         with self.lock:
@@ -381,6 +429,20 @@ class AttitudeControllerNode:
             rospy.loginfo("reconfigure: %s", ", ".join(changed))
         return config
 
+    def _on_save_gains(self, request) -> SaveGainsResponse:
+        """Write the gains in force as a gain set (:func:`~quadruped_control.control.gain_file.save_gain_set`);
+        a refusal or a failed write is the response's message; this callback never raises."""
+        note = "saved by %s ~save_gains at %s: %s as tuned live" % (
+            rospy.get_name(), time.strftime("%Y-%m-%d %H:%M:%S"), self.gain_source)
+        try:
+            message = save_gain_set(self.supervisor.controller.config, request.path, request.gain_set,
+                                    request.overwrite, note)
+        except (ValueError, OSError) as exc:
+            rospy.logwarn("save_gains refused: %s", exc)
+            return SaveGainsResponse(False, str(exc))
+        rospy.loginfo("save_gains: %s", message)
+        return SaveGainsResponse(True, message)
+
     # ---- the control step ------------------------------------------------------------------------
 
     def _step(self) -> None:
@@ -411,6 +473,10 @@ class AttitudeControllerNode:
             armed_now, was_armed, self.was_armed = result.armed, self.was_armed, result.armed
             failure = self.supervisor.last_arm_failure
             tracking = {name: level for name, level, _ in self.supervisor.tracking_levels if level}
+            self.telemetry_steps += 1
+            telemetry = bool(self.telemetry_every) and self.telemetry_steps % self.telemetry_every == 0
+            attitude = self.supervisor.attitude() if telemetry else None
+            psi_0 = self.supervisor.yaw.psi_0
         if tether is not None:
             self._on_tether_lost(tether)
         for source, action, why in health:
@@ -455,12 +521,26 @@ class AttitudeControllerNode:
                 command.joint_target = result.joint_targets.tolist()
                 self.command_pub.publish(command)
             self.state_pub.publish(self._state_message(result, step_stamp))
+            if telemetry:
+                self._publish_telemetry(attitude, result.output.state.R_d, step_stamp)
+            if psi_0 != self.heading_published:
+                self.heading_published = psi_0
+                self.heading_pub.publish(Float64(math.nan if psi_0 is None else math.degrees(psi_0)))
         except rospy.ROSException:
             if not rospy.core.is_shutdown_requested():
                 raise
             return  # shutting down: the publishers are already closed
         self.step_time.add(time.monotonic() - started)
         self.diagnostics.update()
+
+    def _publish_telemetry(self, R: Optional[np.ndarray], R_d: np.ndarray, stamp) -> None:
+        """telemetry/*_rpy_deg of measured attitude R (None: not known yet) and world setpoint R_d."""
+        degrees = attitude_degrees(R, R_d)
+        for publisher, values in ((self.rpy_pub, degrees.rpy), (self.setpoint_rpy_pub, degrees.setpoint),
+                                  (self.error_rpy_pub, degrees.error)):
+            msg = Vector3Stamped(vector=Vector3(*values))
+            msg.header.stamp, msg.header.frame_id = stamp, "odom"
+            publisher.publish(msg)
 
     def _state_message(self, result, stamp) -> ControllerState:
         record = result.output.state

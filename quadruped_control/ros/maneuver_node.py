@@ -19,7 +19,7 @@ from __future__ import annotations
 
 import math
 import threading
-from typing import List, Optional
+from typing import List, Optional, Tuple
 
 import rospy
 from geometry_msgs.msg import Vector3Stamped
@@ -30,25 +30,35 @@ from underwater_quadruped.msg import ControllerState
 
 
 class ManeuverNode:
-    def __init__(self) -> None:
-        maneuver = tuple(float(rospy.get_param("~" + axis, default)) for axis, default in
-                         (("roll", 45.0), ("pitch", 0.0), ("yaw", 0.0)))
-        self.sequence = command_sequence(str(rospy.get_param("~protocol", "") or ""),
-                                         rospy.get_param("~sequence", []), maneuver,  # type: ignore[arg-type]
-                                         float(rospy.get_param("~duration", 120.0)))
-        self.delay = float(rospy.get_param("~delay", 5.0))
-        self.timeout = float(rospy.get_param("~timeout", 60.0))
+    """The sequence, ~delay and ~timeout from the node's parameters (module docstring), or given (the operator tool's
+    ``uq sequence``, the tank day's runs); :meth:`run` commands it and ends the node, :meth:`command` only commands
+    it. ``frame_id``: the setpoints' yaw reference (header.frame_id; empty: the controller's ~yaw_reference). Setting
+    ``stop`` ends a sequence early, within 10 s, and silences the warning of a controller that stops acting."""
+
+    def __init__(self, sequence: Optional[Tuple[SetpointHold, ...]] = None, delay: Optional[float] = None,
+                 timeout: Optional[float] = None, frame_id: str = "") -> None:
+        if sequence is None:
+            maneuver = tuple(float(rospy.get_param("~" + axis, default)) for axis, default in
+                             (("roll", 45.0), ("pitch", 0.0), ("yaw", 0.0)))
+            sequence = command_sequence(str(rospy.get_param("~protocol", "") or ""),
+                                        rospy.get_param("~sequence", []), maneuver,  # type: ignore[arg-type]
+                                        float(rospy.get_param("~duration", 120.0)))
+        self.sequence = sequence
+        self.delay = float(rospy.get_param("~delay", 5.0)) if delay is None else delay
+        self.timeout = float(rospy.get_param("~timeout", 60.0)) if timeout is None else timeout
         self.armed = threading.Event()
         self.last_error = math.nan
         self.acting = False
         self.index = -1  # the setpoint being published, from 0; -1 before the first
+        self.frame_id = frame_id
+        self.stop = threading.Event()
         self.publisher = rospy.Publisher("attitude_setpoint_rpy_deg", Vector3Stamped, queue_size=1, latch=True)
         rospy.Subscriber("controller_state", ControllerState, self._on_state, queue_size=1)
 
     def _on_state(self, msg: ControllerState) -> None:
         self.last_error = msg.geodesic_error
         acting = bool(msg.armed and not msg.holding)
-        if not acting and self.acting and self.armed.is_set():
+        if not acting and self.acting and self.armed.is_set() and not self.stop.is_set():
             # the sequence keeps its schedule (a disarmed or holding controller ignores the setpoint); say so, as
             # the step test's reading cuts the response here and leaves out a step taken soon after
             rospy.logwarn("maneuver: the controller stopped acting %s (%s); the sequence goes on", self._where(),
@@ -62,33 +72,41 @@ class ManeuverNode:
     def _where(self) -> str:
         return "before the first setpoint" if self.index < 0 else "during setpoint %d" % (self.index + 1)
 
-    def _publish(self, hold: SetpointHold, index: int) -> None:
+    def publish(self, hold: SetpointHold, index: int) -> None:
+        """Publish the ``index``-th setpoint of the sequence (latched) and log it."""
         msg = Vector3Stamped()
         msg.header.stamp = rospy.Time.now()
+        msg.header.frame_id = self.frame_id
         msg.vector.x, msg.vector.y, msg.vector.z = hold.rpy_deg
         self.publisher.publish(msg)
         rospy.loginfo("maneuver: setpoint %d of %d: roll %.1f pitch %.1f yaw %.1f deg, for %.0f s",
                       index + 1, len(self.sequence), *(hold.rpy_deg + (hold.seconds,)))
 
-    def run(self) -> None:
+    def run(self) -> bool:
+        """Wait for the armed controller, command the sequence, shut the node down; True when it ran to its end."""
+        completed = self.command()
+        rospy.signal_shutdown("maneuver complete" if completed else "maneuver not completed")
+        return completed
+
+    def command(self) -> bool:
+        """Wait for the armed controller and command the sequence; True when it ran to its end."""
         if not self.armed.wait(self.timeout):
             rospy.logfatal("maneuver: the controller did not report armed and stroking within %.0f s", self.timeout)
-            rospy.signal_shutdown("controller not ready")
-            return
+            return False
         rospy.sleep(self.delay)
         end = rospy.get_time() + total_seconds(self.sequence)
         hold_end = rospy.get_time()
         for index, hold in enumerate(self.sequence):
-            if rospy.is_shutdown():
-                return
+            if rospy.is_shutdown() or self.stop.is_set():
+                return False
             self.index = index
-            self._publish(hold, index)
+            self.publish(hold, index)
             hold_end += hold.seconds  # from the sequence's start: no drift from the publishing's own time
-            while not rospy.is_shutdown() and rospy.get_time() < hold_end:
+            while not rospy.is_shutdown() and not self.stop.is_set() and rospy.get_time() < hold_end:
                 rospy.sleep(min(10.0, max(0.0, hold_end - rospy.get_time())))
                 rospy.loginfo("maneuver: %3.0f s left, geodesic error %.1f deg", max(0.0, end - rospy.get_time()),
                               math.degrees(self.last_error))
-        rospy.signal_shutdown("maneuver complete")
+        return not (rospy.is_shutdown() or self.stop.is_set())
 
 
 def main(argv: Optional[List[str]] = None) -> None:

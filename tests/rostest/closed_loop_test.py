@@ -6,7 +6,9 @@ widths the fake PCA9685 really produces). Passes when the geodesic error, smooth
 centred 3 s moving average, enters the 6 degree band and stays in it for ~hold_duration seconds before
 ~settle_timeout; and no pulse width ever left its channel's limits; with ~expected_scheme, that the
 controller runs that stroke scheme (sim_coordinated.test); with ~expected_plant and ~expected_tank_yaml,
-that sim_node runs that plant and tank (sim_tank.test).
+that sim_node runs that plant and tank (sim_tank.test); with ~expected_heading_deg (the relative yaw reference,
+sim_closed_loop.test), that the world setpoint's yaw is that heading at arming and the body's true heading never
+leaves it by more than 5 degrees.
 
 With ~trajectory_file set, the simulated trajectory (/sim/pose stamps and quaternions) up to the
 sensor-stall part is saved there (numpy .npz) for scripts/check_lockstep_determinism.sh.
@@ -21,6 +23,7 @@ import rospy
 import rostest
 from std_srvs.srv import SetBool
 
+from quadruped_common.so3 import quat_to_rot, rot_to_rpy
 from quadruped_control.analysis.metrics import moving_average_centered
 from quadruped_drivers.hardware_config import load_hardware_config
 from geometry_msgs.msg import PoseStamped
@@ -35,6 +38,7 @@ class ClosedLoopTest(unittest.TestCase):
         self.lock = threading.Lock()
         self.times, self.errors = [], []
         self.armed_seen = False
+        self.armed_at, self.setpoint_yaw = None, None
         self.width_violations = []
         self.pose_t, self.pose_q = [], []
         self.recording = True
@@ -62,6 +66,10 @@ class ClosedLoopTest(unittest.TestCase):
         with self.lock:
             self.armed_seen |= msg.armed
             stamp = msg.header.stamp.to_sec()
+            if msg.armed:
+                s = msg.setpoint
+                self.setpoint_yaw = math.degrees(rot_to_rpy(quat_to_rot((s.x, s.y, s.z, s.w)))[2])
+                self.armed_at = stamp if self.armed_at is None else self.armed_at
             if msg.armed and not msg.holding and (not self.times or stamp > self.times[-1]):
                 self.times.append(stamp)
                 self.errors.append(msg.geodesic_error)
@@ -117,6 +125,14 @@ class ClosedLoopTest(unittest.TestCase):
             if expected:
                 self.assertEqual(rospy.get_param("sim_node/" + name), expected)
         self.save_trajectory()
+        heading = rospy.get_param("~expected_heading_deg", None)
+        if heading is not None:  # the relative yaw reference: a roll step where the robot faced at arming
+            self.assertAlmostEqual(self.setpoint_yaw, heading, delta=2.0)
+            with self.lock:
+                armed = np.array(self.pose_t) >= self.armed_at * 1e9
+                yaw = np.array([math.degrees(rot_to_rpy(quat_to_rot(q))[2]) for q in np.array(self.pose_q)[armed]])
+            self.assertGreater(len(yaw), 1000)
+            self.assertLess(np.max(np.abs(yaw - self.setpoint_yaw)), 5.0, "the heading left the one at arming")
 
         # The sensor stalls (fake VN-100 silent behind its pty): the controller must hold the safe pose
         # with a stale-IMU reason within ~imu_max_age, and stroke again when the samples return.

@@ -8,8 +8,9 @@ import numpy as np
 import pytest
 
 from quadruped_common.so3 import rot_to_quat, rpy_to_rot
-from quadruped_control.analysis.bag_report import (BagReportError, analyse, attitude_rpy, covered_by, main,
-                                                  missing_spans, read_bags, sorted_unique, write_report)
+from quadruped_control.analysis.bag_report import (BagData, BagReportError, analyse, analyse_trials, attitude_rpy,
+                                                  covered_by, gains_in_force, gains_text, main, missing_spans,
+                                                  read_bags, sorted_unique, write_report, write_trials_report)
 from tests.repo import REPO_ROOT
 
 rosbags = pytest.importorskip("rosbags")
@@ -84,7 +85,7 @@ def write_bag(path, duration=60.0, armed=True, roll_final=math.radians(30.0), ta
 
 
 @pytest.mark.parametrize("state_type", [STATE_TYPE, OLD_STATE_TYPE])
-def test_report_of_first_order_roll_step(tmp_path, state_type):
+def test_report_of_first_order_roll_step(tmp_path, state_type, monkeypatch):
     bag = str(tmp_path / "run.bag")
     write_bag(bag, state_type=state_type)
     metrics = analyse(read_bags([bag]))
@@ -95,11 +96,18 @@ def test_report_of_first_order_roll_step(tmp_path, state_type):
     assert metrics["settled"] is True
     assert metrics["health"] == {"pwm_node: servo output": {"latency p99 [ms]": "1.5"}}
     out = tmp_path / "report"
-    assert main([bag, "--out", str(out)]) == 0
+    assert main([bag, "--out", str(out), "--last-trial"]) == 0  # the one trial from the last setpoint change
     saved = json.loads((out / "metrics.json").read_text())
-    assert saved["settled"] is True
+    assert saved["settled"] is True and saved["gains"] is None
     assert (out / "attitude.png").stat().st_size > 1000
-    assert "| roll |" in (out / "report.md").read_text()
+    assert "| roll |" in (out / "report.md").read_text() and "Gains: unknown." in (out / "report.md").read_text()
+    if state_type != STATE_TYPE:
+        return
+    from quadruped_control.analysis import plotting
+    monkeypatch.setattr(plotting, "plot_trials", lambda traces, path, **_: None)  # drawn in the tests below
+    assert main([bag, "--out", str(tmp_path / "trials")]) == 0  # by default, trial by trial: level, then 30 deg
+    trials = json.loads((tmp_path / "trials" / "metrics.json").read_text())["trials"]
+    assert [round(t["setpoint_rpy_deg"][0]) for t in trials] == [0, 30] and trials[1]["metrics"]["settled"] is True
 
 
 def test_never_armed_is_a_clear_error(tmp_path, capsys):
@@ -295,3 +303,106 @@ def test_the_report_measures_the_strokes_of_the_record(tmp_path):
     assert main([bag, "--out", str(out)]) == 0
     assert "4 power strokes: power phase 0.10 (0.10-0.10) s; paw excursion 3.0 (3.0-3.0) cm" in (
         out / "report.md").read_text()
+
+
+# ---- trial by trial: setpoint changes, arm and disarm; the gains in force -----------------------------
+
+EXPERIMENT = {"k_p": 10.0, "k_i": 3.0, "k_d": 0.5, "k_aw": 0.25, "tau_max": 2.0, "t_rec": 1.5, "t_pow_max": 0.5}
+
+
+def write_schedule_bag(path, schedule, end, updates=()):
+    """IMU and /controller_state at 100 Hz from t = 0 to ``end`` (s; stamps 1000 s on). ``schedule``: (from s,
+    armed, roll setpoint deg) in time order; the roll follows the setpoint first order (tau 1 s) while armed.
+    ``updates``: (s, values) recorded on the controller's parameter_updates as dynamic_reconfigure/Config."""
+    from quadruped_control.analysis.bag_report import GAINS_TOPIC
+
+    store = typestore()
+    T = store.types
+    zero3, cov = T["geometry_msgs/msg/Vector3"](x=0.0, y=0.0, z=0.0), np.zeros(9)
+    Quaternion, Config = T["geometry_msgs/msg/Quaternion"], T["dynamic_reconfigure/msg/Config"]
+    roll = 0.0
+    with Writer(path) as writer:
+        imu_c = writer.add_connection("/imu/data", "sensor_msgs/msg/Imu", typestore=store)
+        state_c = writer.add_connection("/controller_state", STATE_TYPE, typestore=store)
+        gains_c = writer.add_connection(GAINS_TOPIC, Config.__msgtype__, typestore=store)
+        for at, values in updates:
+            config = Config(bools=[], ints=[], groups=[], doubles=[T["dynamic_reconfigure/msg/DoubleParameter"](
+                name=k, value=v) for k, v in values.items() if k != "stroke_scheme"],
+                strs=[T["dynamic_reconfigure/msg/StrParameter"](name="stroke_scheme", value=values.get("stroke_scheme",
+                                                                                                     "paper"))])
+            writer.write(gains_c, int((1000.0 + at) * 1e9), store.serialize_ros1(config, Config.__msgtype__))
+        for k in range(int(round(end * 100))):
+            t = k * 0.01
+            _, armed, setpoint = [row for row in schedule if row[0] <= t + 1e-9][-1]
+            roll += (math.radians(setpoint) - roll) * 0.01 if armed else 0.0
+            ns = int(round((1000.0 + t) * 1e9))
+            header = T["std_msgs/msg/Header"](seq=k, stamp=T["builtin_interfaces/msg/Time"](
+                sec=ns // 1000000000, nanosec=ns % 1000000000), frame_id="")
+            x, y, z, w = rot_to_quat(rpy_to_rot(roll, 0.0, 0.0))
+            writer.write(imu_c, ns, store.serialize_ros1(T["sensor_msgs/msg/Imu"](
+                header=header, orientation=Quaternion(x=x, y=y, z=z, w=w), orientation_covariance=cov,
+                angular_velocity=zero3, angular_velocity_covariance=cov, linear_acceleration=zero3,
+                linear_acceleration_covariance=cov), "sensor_msgs/msg/Imu"))
+            x, y, z, w = rot_to_quat(rpy_to_rot(math.radians(setpoint), 0.0, 0.0))
+            writer.write(state_c, ns, store.serialize_ros1(T[STATE_TYPE](
+                header=header, setpoint=Quaternion(x=x, y=y, z=z, w=w), attitude_error=zero3,
+                geodesic_error=abs(math.radians(setpoint) - roll), torque_command=zero3, torque_saturated=zero3,
+                integral=zero3, torque_estimated=zero3, armed=armed, holding=False, hold_reason="",
+                pair_phase=np.zeros(2, dtype=np.uint8), pair_phase_time=np.zeros(2),
+                foot_targets=[T["geometry_msgs/msg/Point"](x=0.0, y=0.0, z=0.0)] * 4), STATE_TYPE))
+
+
+def test_five_setpoints_are_five_trials_each_with_its_gains_and_a_live_change_shows(tmp_path, monkeypatch):
+    from quadruped_control.analysis import plotting
+    drawn = {}  # figure file -> the trials' setpoints (roll, deg) it shows (drawing takes a second each: not here)
+    monkeypatch.setattr(plotting, "plot_trials", lambda traces, path, **_: drawn.setdefault(
+        os.path.basename(path), [round(math.degrees(trace.setpoint[0])) for trace in traces]))
+    bag = str(tmp_path / "five.bag")
+    schedule = [(8.0 * i, True, roll) for i, roll in enumerate((10.0, 20.0, 30.0, 20.0, 0.0))]
+    # the latched value reaches the recorder just after the first step; K_p is raised live in trial 2
+    updates = [(0.3, EXPERIMENT), (12.0, dict(EXPERIMENT, k_p=20.0)),
+               (30.0, dict(EXPERIMENT, k_p=20.0, stroke_scheme="coordinated"))]
+    write_schedule_bag(bag, schedule, 40.0, updates)
+    out = tmp_path / "report"
+    assert main([bag, "--out", str(out), "--title", "Five steps"]) == 0
+    trials = json.loads((out / "metrics.json").read_text())["trials"]
+    assert [t["trial"] for t in trials] == [1, 2, 3, 4, 5]
+    assert [round(t["setpoint_rpy_deg"][0], 6) for t in trials] == [10.0, 20.0, 30.0, 20.0, 0.0]
+    assert [round(t["end_unix"] - t["start_unix"], 6) for t in trials] == [8.0, 8.0, 8.0, 8.0, 7.99]
+    assert [t["gains"]["k_p"] for t in trials] == [10.0, 10.0, 20.0, 20.0, 20.0]
+    assert all(t["gains"]["k_i"] == 3.0 and t["metrics"]["theta_init_deg"] > 0.0 for t in trials[:4])
+    assert trials[1]["gain_changes"] == [{"at": pytest.approx(4.0), "changes": {"k_p": [10.0, 20.0]}}]
+    assert trials[3]["gain_changes"][0]["changes"] == {"stroke_scheme": ["paper", "coordinated"]}
+    assert trials[4]["gains"]["stroke_scheme"] == "coordinated" and trials[4]["gain_changes"] == []
+    report = (out / "report.md").read_text()
+    assert report.count("\n| %d | " % 3) == 1 and "| 5 | 32.0 | 8.0 | 0.0, 0.0, 0.0 | k_p 20, k_i 3," in report
+    assert "Gains: k_p 10, k_i 3, k_d 0.5, k_aw 0.25, tau_max 2, t_rec 1.5, t_pow_max 0.5, stroke_scheme paper; " \
+           "changed during the trial: k_p 10.0 -> 20.0 at 4.0 s." in report
+    assert drawn == dict({"trial_%02d.png" % n: [roll] for n, roll in enumerate((10, 20, 30, 20, 0), 1)},
+                         **{"attitude.png": [10, 20, 30, 20, 0]})
+
+
+def test_arm_and_disarm_split_trials_a_blip_is_not_measured_and_gains_are_unknown_without_updates(tmp_path):
+    bag = str(tmp_path / "arm.bag")
+    schedule = [(0.0, False, 0.0), (2.0, True, 15.0), (10.0, False, 15.0), (12.0, True, 15.0), (20.0, False, 15.0),
+                (21.0, True, 15.0), (21.04, False, 15.0)]
+    write_schedule_bag(bag, schedule, 23.0)
+    result = analyse_trials(read_bags([bag]))
+    spans = [(round(t["start_unix"] - 1000.0, 6), round(t["end_unix"] - 1000.0, 6)) for t in result["trials"]]
+    assert spans == [(2.0, 10.0), (12.0, 20.0), (21.0, 21.04)]
+    assert [t["gains"] for t in result["trials"]] == [None] * 3
+    assert result["trials"][1]["metrics"]["theta_init_deg"] < result["trials"][0]["metrics"]["theta_init_deg"]
+    assert result["trials"][2]["metrics"] is None and "fewer than 10 IMU samples" in result["trials"][2]["skipped"]
+    report = open(write_trials_report(result, str(tmp_path / "out"))).read()
+    assert "3 trials" in report and "Gains: unknown." in report and "Not measured: fewer than 10" in report
+    assert "| 3 | 21.0 | 0.0 | 15.0, 0.0, 0.0 | unknown | - | - | - | - | - |" in report
+
+
+def test_the_gains_in_force_are_the_last_update_at_or_before_the_start_else_the_first_recorded():
+    data = BagData(gains_t=[5.0, 1.0, 9.0], gains=[{"k_p": 2.0}, {"k_p": 1.0}, {"k_p": 3.0}])
+    assert gains_in_force(data, 0.0, 0.5) == {"gains": {"k_p": 1.0}, "gain_changes": []}
+    assert gains_in_force(data, 5.0, 20.0) == {"gains": {"k_p": 2.0}, "gain_changes": [
+        {"at": 4.0, "changes": {"k_p": [2.0, 3.0]}}]}
+    assert gains_in_force(data, 0.0, 9.0)["gain_changes"] == [{"at": 5.0, "changes": {"k_p": [1.0, 2.0]}}]
+    assert gains_in_force(BagData(), 0.0, 1.0) == {"gains": None, "gain_changes": []}
+    assert gains_text(None) == "unknown" and gains_text({"x": "a", "k_i": 0.5, "k_p": 1.0}) == "k_p 1, k_i 0.5, x a"

@@ -72,7 +72,10 @@ def test_record_launch_uses_relative_names_and_the_wrapper():
     global_topics = {t for t in topics if t.startswith("/")}
     assert global_topics == {"/diagnostics", "/tf", "/tf_static", "/rosout"}
     assert {"imu/data", "joint_states", "servo_command", "controller_state", "attitude_setpoint",
-            "attitude_setpoint_rpy_deg"} <= set(topics)
+            "attitude_setpoint_rpy_deg", "attitude_controller/parameter_updates"} <= set(topics)
+    # the gains in force: the controller's dynamic_reconfigure updates, under the name controller.launch gives it
+    controller = ET.parse(launch.replace("record.launch", "controller.launch")).getroot().find("node")
+    assert controller.get("name") + "/parameter_updates" in topics
 
 
 def test_a_recorder_that_dies_is_started_again_until_the_launch_stops(tmp_path):

@@ -46,8 +46,9 @@ def test_bad_analyzer_files_are_refused(tree, message):
 
 
 def test_monitor_launch_starts_the_tether_tools(launch_file):
-    """launch/monitor.launch parses and names its nodes (the GUI packages are Noetic's, not Debian's, so
-    only the launch file is checked here, not the programs)."""
+    """launch/monitor.launch parses and names its nodes: one rqt window with the perspective, or rqt_robot_monitor
+    and rqt_reconfigure apart (the GUI packages are Noetic's, not Debian's, so only the launch file is checked
+    here, not the programs)."""
     launch = launch_file("monitor.launch")
 
     def nodes(*args):
@@ -56,8 +57,8 @@ def test_monitor_launch_starts_the_tether_tools(launch_file):
         assert out.returncode == 0, out.stderr
         return set(out.stdout.split())
 
-    assert nodes() == {"/diagnostic_aggregator", "/robot_monitor", "/reconfigure", "/robot_state_publisher",
-                       "/visualization", "/rviz", "/heartbeat"}
-    assert nodes("rviz:=false", "description:=false", "aggregator:=false") == {"/robot_monitor", "/reconfigure",
-                                                                                "/heartbeat"}
+    assert nodes() == {"/diagnostic_aggregator", "/tuning_gui", "/robot_state_publisher", "/visualization", "/rviz",
+                       "/heartbeat"}
+    assert nodes("rviz:=false", "description:=false", "aggregator:=false", "perspective:=false") == {
+        "/robot_monitor", "/reconfigure", "/heartbeat"}
     assert "/heartbeat" not in nodes("heartbeat:=false")
