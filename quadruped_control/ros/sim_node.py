@@ -41,7 +41,8 @@ Parameters
   ~robot_yaml ~hardware_yaml ~calibration_yaml ~simulation_yaml (package config/)
   ~servo_model (rate-limited | ideal)  ~initial_rpy_deg ([0, 0, 0])  ~restoring_offset ([]: off)
   ~plant (paper | tank: the robot on its rope in the test tank, ~tank_yaml default config/tank.yaml;
-    a ~tank_yaml with ~plant paper is refused)
+    a ~tank_yaml with ~plant paper is refused)  ~tank_disturbance ([]: the tank.yaml's; [SIGMA, TAU]: a tank that
+    pushes, N m and s, as the studies' --tank-disturbance)
   ~hardware_faults ("": none; a file or an inline YAML mapping of quadruped_drivers.hardware_faults: a
     robot built wrong, its faults unknown to the stack's configuration)
   ~physics_rate (100 Hz)  ~bus_socket (/tmp/uq_sim_i2c.sock)  ~imu_port (/tmp/uq_sim_vn100)
@@ -144,6 +145,10 @@ class SimNode:
             raise ParameterError("~tank_yaml %r is for ~plant tank; ~plant is 'paper'" % tank_yaml)
         if plant != "paper":
             tank = load_tank_params(tank_yaml)
+            push = rospy.get_param("~tank_disturbance", [])
+            if push:
+                tank = tank.with_values(disturbance_torque_std=float(push[0]),
+                                        disturbance_correlation_time=float(push[1]))
             model = make_plant(plant, self.robot, tank)
             servo_params = tank_servo_params(servo_params, tank)  # the tank's servos, as the offline trials
             rospy.logwarn("sim_node: %s", VALIDITY_NOTE)

@@ -8,9 +8,10 @@ stiffness set beside the tank.yaml files' own.
         [--duration 660] [--seed 0] [--attitude-noise-deg 0.05] (and the options above)
 
 A RUN is a bag (or a split recording's parts joined by commas) with ``/imu/data``, read by
-:func:`quadruped_control.analysis.bag_report.read_bags`. The attitude's roll and pitch (Z-Y-X Euler angles,
-REP 103) go on a ``--grid`` s grid by linear interpolation; samples not finite, quaternions far from unit
-length, and gaps of more than ``--max-gap`` s end a stretch; the first ``--skip`` s (the robot let go and
+:func:`quadruped_control.analysis.bag_report.read_bags`, or a folder: a tank day's (its hang run) or one run's
+(:mod:`~quadruped_control.studies.day_folder`, which says what it found missing). The attitude's roll and pitch
+(Z-Y-X Euler angles, REP 103) go on a ``--grid`` s grid by linear interpolation; samples not finite, quaternions far
+from unit length, and gaps of more than ``--max-gap`` s end a stretch; the first ``--skip`` s (the robot let go and
 settling) are left out. ``--simulated`` records the tank plant of TRUTH_YAML instead (the robot's own
 trial with the controller off, legs at the nominal pose, through :func:`~.trial.run_trial`), in a tank that
 pushes with ``--tank-disturbance SIGMA TAU`` and the IMU's attitude noise added: what a hang would tell
@@ -54,6 +55,7 @@ from quadruped_control.sim.plants.tank import TankModel
 from quadruped_control.sim.plants.tank_params import TankParams, load_tank_params
 from quadruped_control.sim.simulation import load_simulation_settings, nominal_joint_angles
 from quadruped_control.studies import StudyError
+from quadruped_control.studies.day_folder import is_folder, missing_text, one_run
 from quadruped_control.studies.ensemble import DEFAULT_FOLDER, disturbance_overrides, tank_files
 from quadruped_control.studies.runner import code_record, command_line, warn_uncommitted, write_study_report
 from quadruped_control.studies.trial import TrialSpec, run_trial
@@ -333,7 +335,7 @@ def _text(report: Dict[str, Any]) -> str:
             cells += ["%.3g" % (-side["torque"] * 1e3), "%.3g (%s)" % (side["stiffness"] * 1e3, side["verdict"])]
         cells.append("%.3g, %.3g" % (entry["roll"]["relaxing_stiffness"] * 1e3, entry["roll"]["relaxation_time"]))
         lines.append("| %s | %s |" % (entry["tank_yaml"], " | ".join(cells)))
-    lines += ["", _legs_text(report)]
+    lines += ["", _legs_text(report)] + missing_text(report.get("missing", []))
     own = [entry for entry in report["comparison"] if "own_hang" in entry]
     if own:
         lines += ["", "Each model hung in the simulator with the fitted push (--model-hangs; trial seed %d) and fitted "
@@ -383,8 +385,8 @@ def _plot(path: str, record: HangRecord, fits: Dict[str, HangFit]) -> None:
 
 def main(argv: Optional[Sequence[str]] = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
-    parser.add_argument("run", nargs="?", metavar="RUN", help="the recorded hang: a bag, or a split recording's "
-                        "parts joined by commas")
+    parser.add_argument("run", nargs="?", metavar="RUN", help="the recorded hang: a bag, a split recording's "
+                        "parts joined by commas, or a tank day's folder (its hang run)")
     parser.add_argument("--skip", type=float, default=60.0, help="leave out the first so many s (default %(default)s)")
     parser.add_argument("--grid", type=float, default=0.1, help="grid step, s (default %(default)s)")
     parser.add_argument("--max-gap", type=float, default=0.5,
@@ -431,20 +433,25 @@ def main(argv: Optional[Sequence[str]] = None) -> int:
         tanks = [load_tank_params(path) for path in compare]
         tank = tanks[0]  # --tank-yaml's: the body's inertia
         legs = None  # a simulated hang holds the legs at the nominal pose
+        missing: List[str] = []
         if args.simulated:
             truth_tank = load_tank_params(args.simulated)
             truth_tank.with_values(**dict(disturbance_overrides(args.tank_disturbance)))  # the push's bounds
             record = simulated_record(args.simulated, args.tank_disturbance, args.duration, args.seed,
                                       args.attitude_noise_deg, args.grid, args.robot_yaml)
         else:
-            paths = [part for part in args.run.split(",") if part]
+            source = args.run
+            if is_folder(args.run):
+                run, missing = one_run(args.run, "hang", "hang", needs=("/imu/data",), wants=("/joint_states",))
+                source = run.source
+            paths = [part for part in source.split(",") if part]
             for path in paths:
                 if not os.path.isfile(path):
                     raise StudyError("hang: no such bag: %s" % path)
             data = read_bags(paths)
             if not data.imu_t:
                 raise StudyError("hang: %s has no /imu/data" % args.run)
-            record = record_from_bag(data.imu_t, data.imu_q, args.grid, args.max_gap, args.run)
+            record = record_from_bag(data.imu_t, data.imu_q, args.grid, args.max_gap, source)
             legs = recorded_legs(data.joint_t, data.joint_q, args.skip, robot)
         record = record.after(args.skip)
         inertia = dict(zip(("roll", "pitch"), tilt_inertia(robot, tank)))
@@ -483,7 +490,7 @@ def main(argv: Optional[Sequence[str]] = None) -> int:
         "mean_deg": {name: math.degrees(mean[name]) for name, _ in AXES},
         "fits": {name: fits[name].as_dict() for name, _ in AXES},
         "disturbance": push,
-        "comparison": comparison, "tether": args.tether, "seed": args.seed,
+        "comparison": comparison, "tether": args.tether, "seed": args.seed, "missing": missing,
         "legs": None if legs is None else {
             "joint_angles": legs.tolist(),
             "from_nominal_deg": math.degrees(float(np.max(np.abs(legs - nominal_joint_angles(robot)))))}}

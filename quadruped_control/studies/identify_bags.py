@@ -8,7 +8,10 @@ plant, its parameters fitted to the recorded attitude, and checked on runs held 
         [--hold-out-rpy R P Y ...] [--initial-rpy R P Y] [--duration 120] [--gains experiment]
         [--attitude-noise-deg 0.2] [--joint-noise-deg 0.3] (and the options above)
 
-A RUN is a recorded bag, or the parts of one split recording joined by commas (``a_0.bag,a_1.bag``).
+A RUN is a recorded bag, the parts of one split recording joined by commas (``a_0.bag,a_1.bag``), or a folder: a
+tank day's, whose armed runs (step test and Table 1) it stands for, and whose last round of Table-1 runs (the last
+repeat, when there are two or more) is held out unless ``--hold-out`` names runs; or one run's
+(:func:`expand_folders`; what the folder is missing is said, :mod:`~quadruped_control.studies.day_folder`).
 Each is read with :func:`quadruped_control.analysis.bag_report.read_bags` (``/imu/data`` attitude and
 body rate, ``/joint_states`` the ADS1115 feedback) and put on the plant's 10 ms grid
 (:func:`record_from_bag`), and its joint angles are low-passed without delay at ``--joint-filter-hz``
@@ -80,13 +83,14 @@ from quadruped_control.sim.replay import (Record, attitude_errors, joint_errors,
                                           sample_index, still_errors, window_starts)
 from quadruped_control.sim.servo_model import ServoParams, load_servo_params
 from quadruped_control.studies import StudyError
+from quadruped_control.studies.day_folder import day_runs, is_folder, missing_text, say_missing
 from quadruped_control.studies.identify_parameters import (BOUNDS, PARAMETERS, nominal_values, tank_overrides,
                                                            update_tank_yaml)
 from quadruped_control.studies.identify_search import fit
 from quadruped_control.studies.runner import code_record, command_line, describe_source, warn_uncommitted
 
 __all__ = ["PLANT_PARAMETERS", "SERVO_FITTED", "SERVO_GRID", "SERVO_PARAMETERS", "ReplayObjective", "ServoObjective",
-           "fit_servos", "main", "read_run", "record_from_bag", "simulated_record", "smoothed"]
+           "expand_folders", "fit_servos", "main", "read_run", "record_from_bag", "simulated_record", "smoothed"]
 
 #: The identification's parameters of the servo model: the replay drives the plant with the measured
 #: joints, so these do not enter it.
@@ -410,6 +414,37 @@ def _check_parameters(names: Sequence[str]) -> List[str]:
     return list(names)
 
 
+def expand_folders(runs: Sequence[str], hold_out: Sequence[str]) -> Tuple[List[str], List[str], List[str]]:
+    """The training and held-out RUNs with each folder replaced by its usable armed runs (module docstring), and
+    what the folders were missing."""
+    training: List[str] = []
+    held: List[str] = []
+    missing: List[str] = []
+    kinds = ("step_test", "table1")
+    needs, wants = ("/imu/data", "/joint_states"), ("/servo_command",)
+    for arg in runs:
+        if not is_folder(arg):
+            training.append(arg)
+            continue
+        found, lines = day_runs(arg, kinds, needs, wants)
+        missing += lines
+        if not found:
+            raise StudyError("identify_bags: no usable step-test or Table-1 run in %s%s"
+                             % (arg, "".join("\n  - " + line for line in lines)))
+        last = max([run.repeat for run in found if run.kind == "table1"], default=0)
+        out = [run for run in found if not hold_out and last > 1 and run.kind == "table1" and run.repeat == last]
+        held += [run.source for run in out]
+        training += [run.source for run in found if run not in out]
+    for arg in hold_out:
+        if is_folder(arg):
+            found, lines = day_runs(arg, kinds, needs, wants)
+            missing += lines
+            held += [run.source for run in found]
+        else:
+            held.append(arg)
+    return training, held, missing
+
+
 def _records(args: argparse.Namespace, robot: RobotParams) -> Tuple[List[Record], List[Record], List[int]]:
     """The training and held-out records, and the corrupt joint samples skipped in each bag."""
     if args.simulated:
@@ -553,13 +588,13 @@ def _text(report: Dict[str, Any]) -> str:
             lines.append("- %s (%s): %.1f s, %d windows; per window, fitted [deg]: %s" % (
                 run["source"], part.replace("_", " "), run["duration"], len(run["fitted_per_window"]),
                 ", ".join("%.2f" % e for e in run["fitted_per_window"]) or "-"))
-    return "\n".join(lines) + "\n"
+    return "\n".join(lines + missing_text(report.get("missing", []))) + "\n"
 
 
 def main(argv: Optional[Sequence[str]] = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
-    parser.add_argument("runs", nargs="*", metavar="RUN", help="recorded runs to fit: a bag, or a split "
-                        "recording's parts joined by commas")
+    parser.add_argument("runs", nargs="*", metavar="RUN", help="recorded runs to fit: a bag, a split "
+                        "recording's parts joined by commas, or a tank day's folder")
     parser.add_argument("--hold-out", nargs="+", default=[], metavar="RUN", help="runs to predict, not fitted")
     parser.add_argument("--tank-yaml", default=None, help="base tank parameters (default: config/tank.yaml)")
     parser.add_argument("--robot-yaml", default=None, help="robot parameters (default: config/robot.yaml)")
@@ -621,6 +656,8 @@ def main(argv: Optional[Sequence[str]] = None) -> int:
         robot = load_robot_params(args.robot_yaml)
         base = load_tank_params(args.tank_yaml)
         nominal = nominal_values(base)
+        args.runs, args.hold_out, missing = expand_folders(args.runs, args.hold_out or [])
+        say_missing("identify_bags", missing)
         training, held_out, skipped = _records(args, robot)
         objective = ReplayObjective(robot, base, nominal, training, steps, stride, args.every, lead)
         # the base itself competes: a short search need not find a set better than its start (and its
@@ -664,7 +701,7 @@ def main(argv: Optional[Sequence[str]] = None) -> int:
         "evaluations": objective.evaluations, "popsize": args.popsize, "sigma": args.sigma,
         "skipped_joint_samples": skipped, "base": {n: nominal[n] for n in names}, "fitted": fitted,
         "fit_objective": evaluated[0]["objective"], "training": sides["training"], "held_out": sides["held_out"],
-        "servos": servos, "wall_time": time.perf_counter() - start_time}
+        "servos": servos, "wall_time": time.perf_counter() - start_time, "missing": missing}
     if truth is not None:
         report["truth"] = {"tank_yaml": os.path.abspath(args.simulated), "values": {n: truth[n] for n in names},
                            "attitude_noise_deg": args.attitude_noise_deg, "joint_noise_deg": args.joint_noise_deg}

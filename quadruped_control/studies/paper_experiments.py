@@ -180,10 +180,10 @@ def agreement(rows: Sequence[Dict[str, Any]]) -> Dict[str, int]:
     return {"cases": len(rows), "same_settled_outcome": same, "t_s_within_2x": within}
 
 
-def format_table(rows: Sequence[Dict[str, Any]], title: str) -> str:
-    """Markdown: Table 1's columns, paper / simulation in each cell."""
+def format_table(rows: Sequence[Dict[str, Any]], title: str, other: str = "simulation") -> str:
+    """Markdown: Table 1's columns, paper / ``other`` (the simulation's, or a record's) in each cell."""
     lines = ["### %s" % title, "",
-             "Each cell: paper / simulation. Coupled cases: worst of roll and pitch, (R) or (P).", "",
+             "Each cell: paper / %s. Coupled cases: worst of roll and pitch, (R) or (P)." % other, "",
              "| set | cmd [deg] | theta_init [deg] | t_r [s] | t_s [s] | e_ss [deg] | M_p [%] | psi_init [deg] "
              "| yaw t_r [s] | yaw t_s [s] | yaw e_ss [deg] | yaw M_p [%] |",
              "|---|---|---|---|---|---|---|---|---|---|---|---|"]

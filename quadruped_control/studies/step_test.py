@@ -22,7 +22,12 @@ any single-axis sequence is read, not only this one; once the controller has fir
 apart), a step's response ends where it stopped acting, and a step taken less than ten seconds after such a
 stop is listed as not read (:func:`~quadruped_control.analysis.steps.response_ends`). ``--simulated`` runs the
 protocol on the tank plant of TRUTH_YAML instead (the robot's own closed loop, experiment gains, rate-limited
-servos, through :func:`~.trial.trial_simulation`): what the test would show of a plant whose values are known.
+servos, through :func:`~.trial.trial_simulation`): what the test would show of a plant whose values are known. A RUN
+may also be a folder: a tank day's (its step-test run) or one run's (:mod:`~quadruped_control.studies.day_folder`,
+which says what it found missing).
+
+The models run the gains the robot ran (:func:`record_gains`): those in force at the record's first step, from the
+bag's controller parameter_updates, else from the run's run.yaml, else (said in the report) the experiment gain set.
 
 Each step's response (:func:`~quadruped_control.analysis.steps.step_response`): the paper's settling time
 within 6 deg, the same within 2 deg, the overshoot past the new setpoint, and how well the tilt before it was
@@ -51,20 +56,23 @@ import numpy as np
 
 from quadruped_common.config import ParameterError, config_path
 from quadruped_common.so3 import rpy_to_rot
+from quadruped_control.control.controller_config import apply_tunables, load_controller_config
 from quadruped_control.control.setpoint_sequence import STEP_TEST
-from quadruped_control.analysis.bag_report import BagReportError, attitude_rpy, read_bags
+from quadruped_control.analysis.bag_report import (BagReportError, attitude_rpy, gains_in_force, gains_text,
+                                                  read_bags)
 from quadruped_control.analysis.metrics import SETTLING_HOLD
 from quadruped_control.analysis.steps import (HOLD_CHECK, Step, StepResponse, agrees, find_steps, judged,
                                               response_ends, step_response)
 from quadruped_control.sim.simulation import SimulationError
 from quadruped_control.studies import StudyError
+from quadruped_control.studies.day_folder import is_folder, missing_text, one_run
 from quadruped_control.studies.ensemble import DEFAULT_FOLDER, disturbance_overrides, member_tanks, tank_files
 from quadruped_control.studies.runner import (code_record, command_line, describe_source, warn_uncommitted,
                                               write_study_report)
 from quadruped_control.studies.trial import TrialSpec, trial_simulation
 
-__all__ = ["CONTROLLER_STATES", "PROTOCOL", "Hold", "StepRecord", "controller_states", "model_run", "record_from_bag",
-           "record_sequence", "run_sequence", "step_test_spec"]
+__all__ = ["CONTROLLER_STATES", "PROTOCOL", "Hold", "StepRecord", "controller_states", "gains_overrides", "model_run",
+           "record_from_bag", "record_gains", "record_sequence", "run_sequence", "step_test_spec"]
 
 #: The test's setpoints (roll, pitch, yaw in deg) and how long each is held (s), in order from level: the
 #: maneuver node's ``protocol:=step_test`` (:data:`~quadruped_control.control.setpoint_sequence.STEP_TEST`).
@@ -92,6 +100,8 @@ class StepRecord:
                  ends: Optional[List[Optional[float]]] = None,
                  controller: Optional[List[Tuple[float, str]]] = None) -> None:
         self.t, self.rpy, self.steps, self.source = t, rpy, steps, source
+        #: the bag's gains_in_force from the first step to the record's end (None: not recorded)
+        self.gains: Optional[Dict[str, Any]] = None
         self.controller = [(float(t[0]), "acting")] if not controller else list(controller)
         self.ends = response_ends(steps, (), float(t[-1])) if ends is None else list(ends)
         if len(self.ends) != len(steps):
@@ -107,17 +117,49 @@ class StepRecord:
         return [step for step, end in zip(self.steps, self.ends) if end is None]
 
 
+def gains_overrides(gains: Optional[Dict[str, Any]]) -> Tuple[Tuple[str, Any], ...]:
+    """The controller configuration's overrides (TrialSpec.config_overrides) that make the experiment gain set the
+    ``gains`` a record ran (parameter_updates' names: k_p ... t_pow_max, stroke_scheme); none for None. ParameterError
+    for values the controller would refuse."""
+    if not gains:
+        return ()
+    tunables = {k: float(v) for k, v in gains.items() if k in ("k_p", "k_i", "k_d", "k_aw", "tau_max", "t_rec",
+                                                               "t_pow_max")}
+    config = apply_tunables(load_controller_config(None, "experiment"), tunables)
+    if gains.get("stroke_scheme"):
+        config = config.replace(stroke_scheme=str(gains["stroke_scheme"]))
+    return (("gains", config.gains), ("tau_max", config.tau_max), ("t_rec", config.t_rec),
+            ("t_pow_max", config.t_pow_max), ("stroke_scheme", config.stroke_scheme))
+
+
+def record_gains(record: "StepRecord", run_record: Optional[Dict[str, Any]]) -> Tuple[Optional[Dict[str, Any]], str]:
+    """The gains the robot ran the record's steps with, and where they come from: the bag's parameter_updates in
+    force at the first step (a change during the record is named: the models keep the first), else the run's
+    run.yaml (``gains.at_arming``, else ``at_start``), else none (the models then run the experiment gain set)."""
+    if record.gains is not None and record.gains["gains"] is not None:
+        changes = record.gains["gain_changes"]
+        return record.gains["gains"], "the bag's parameter_updates%s" % (
+            "" if not changes else " (changed %d time(s) during the record; the models keep the first)" % len(changes))
+    logged = (run_record or {}).get("gains") or {}
+    recorded = logged.get("at_arming") or logged.get("at_start")
+    if recorded:
+        return dict(recorded), "the run's run.yaml (the bag has no parameter_updates)"
+    return None, "the robot's unknown: no parameter_updates in the bag, no run.yaml"
+
+
 def step_test_spec(tank_yaml: str, seed: int, overrides: Tuple[Tuple[str, Any], ...], noise_deg: float,
                    robot_yaml: Optional[str], start_deg: Sequence[float],
-                   setpoint_deg: Optional[Sequence[float]] = None) -> TrialSpec:
-    """The trial the test runs: the robot's closed loop on the tank plant with the experiment gains and
-    rate-limited servos (Table 1's settings), starting at rest at ``start_deg`` with the setpoint
-    ``setpoint_deg`` (default the start)."""
+                   setpoint_deg: Optional[Sequence[float]] = None,
+                   config_overrides: Tuple[Tuple[str, Any], ...] = ()) -> TrialSpec:
+    """The trial the test runs: the robot's closed loop on the tank plant with the experiment gains (or those of
+    ``config_overrides``: :func:`gains_overrides`) and rate-limited servos (Table 1's settings), starting at rest at
+    ``start_deg`` with the setpoint ``setpoint_deg`` (default the start)."""
     start = tuple(float(v) for v in start_deg)
     setpoint = start if setpoint_deg is None else tuple(float(v) for v in setpoint_deg)
     return TrialSpec(label="step test", setpoint_rpy_deg=setpoint, initial_rpy_deg=start, duration=1.0, seed=seed,
                      gains="experiment", servo_model="rate-limited", plant="tank", tank_yaml=tank_yaml,
-                     robot_yaml=robot_yaml, tank_overrides=overrides, attitude_noise_deg=noise_deg, quiet=True)
+                     robot_yaml=robot_yaml, tank_overrides=overrides, attitude_noise_deg=noise_deg, quiet=True,
+                     config_overrides=tuple(config_overrides))
 
 
 def run_sequence(spec: TrialSpec, sequence: Sequence[Hold], source: str) -> StepRecord:
@@ -197,7 +239,9 @@ def record_from_bag(paths: Sequence[str], source: str) -> StepRecord:
     states = controller_states(state_times, armed[order], holding[order])
     # a hold or disarm before the controller first acted is the run's start, not a stop in the test
     stops = state_times[~acting_in_order & (state_times > np.min(state_times[acting_in_order]))]
-    return StepRecord(times, rpy, steps, source, response_ends(steps, stops, float(times[-1])), states)
+    record = StepRecord(times, rpy, steps, source, response_ends(steps, stops, float(times[-1])), states)
+    record.gains = gains_in_force(data, start + steps[0].time, math.inf)
+    return record
 
 
 def record_sequence(record: StepRecord) -> Tuple[List[float], List[float], List[Hold]]:
@@ -228,13 +272,13 @@ def record_sequence(record: StepRecord) -> Tuple[List[float], List[float], List[
     return start, first, sequence
 
 
-def model_run(job: Tuple[str, List[float], List[float], List[Hold], int,
-                         Tuple[Tuple[str, Any], ...], float, Optional[str]]) -> Dict[str, Any]:
+def model_run(job: Tuple[Any, ...]) -> Dict[str, Any]:
     """One tank.yaml asked what the record asked of the robot (:func:`record_sequence`): from rest at the
-    record's first attitude, the same setpoints held as long; its steps' responses. A loop that cannot go on is
-    reported, not raised."""
-    path, start, first, sequence, seed, overrides, noise_deg, robot_yaml = job
-    spec = step_test_spec(path, seed, overrides, noise_deg, robot_yaml, start, first)
+    record's first attitude, the same setpoints held as long, with the record's gains (:func:`gains_overrides`; job:
+    path, start, first, sequence, seed, tank overrides, noise, robot.yaml and optionally the config overrides); its
+    steps' responses. A loop that cannot go on is reported, not raised."""
+    path, start, first, sequence, seed, overrides, noise_deg, robot_yaml = job[:8]
+    spec = step_test_spec(path, seed, overrides, noise_deg, robot_yaml, start, first, job[8] if len(job) > 8 else ())
     try:
         record = run_sequence(spec, sequence, os.path.basename(path))
     except SimulationError as exc:
@@ -278,6 +322,9 @@ def _text(report: Dict[str, Any]) -> str:
     lines = ["# Step test: %s" % report["source"], "",
              "Command: `%s`  " % " ".join(report["command"]),
              "Code: %s (fingerprint %s)" % (describe_source(report["code_source"]), report["code"]), "",
+             ("Gains the models ran, from %s: %s." % (report["gains_source"], gains_text(report["gains"]))
+              if report.get("gains") else "Gains the models ran: the experiment gain set (%s)."
+              % report.get("gains_source", "")), "",
              "Settling time within 6 deg / within 2 deg (s from the step; --: not settled in the record), "
              "overshoot past the new setpoint (deg). A model agrees on a step when its 6 deg time is within 2x "
              "of the robot's, or neither settles (*: it does not).", ""]
@@ -312,7 +359,7 @@ def _text(report: Dict[str, Any]) -> str:
     if report.get("truth"):
         lines += ["", "Simulated record: %s (seed %d, tank disturbance %s)."
                   % (report["truth"]["tank_yaml"], report["seed"], report["truth"]["disturbance"] or "none")]
-    return "\n".join(lines) + "\n"
+    return "\n".join(lines + missing_text(report.get("missing", []))) + "\n"
 
 
 def _plot(path: str, report: Dict[str, Any], record: StepRecord) -> None:
@@ -353,8 +400,8 @@ def _plot(path: str, report: Dict[str, Any], record: StepRecord) -> None:
 
 def main(argv: Optional[Sequence[str]] = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
-    parser.add_argument("run", nargs="?", metavar="RUN", help="the recorded test: a bag, or a split recording's "
-                        "parts joined by commas")
+    parser.add_argument("run", nargs="?", metavar="RUN", help="the recorded test: a bag, a split recording's "
+                        "parts joined by commas, or a tank day's folder (its step-test run)")
     parser.add_argument("--compare", nargs="*", default=None, metavar="YAML_OR_DIR",
                         help="tank.yaml files or folders of them to run on the same steps (default: the shipped "
                              "ensemble, config/%s)" % DEFAULT_FOLDER)
@@ -376,6 +423,8 @@ def main(argv: Optional[Sequence[str]] = None) -> int:
         parser.error("give one recorded RUN or --simulated TRUTH_YAML")
     warn_uncommitted()
     overrides = disturbance_overrides(args.tank_disturbance)
+    missing: List[str] = []
+    gains, gains_source = None, "the simulated record's"
     try:
         compare = tank_files(args.compare if args.compare is not None else [config_path(DEFAULT_FOLDER)])
         if not compare:
@@ -386,15 +435,25 @@ def main(argv: Optional[Sequence[str]] = None) -> int:
                                         args.robot_yaml, (0.0, 0.0, 0.0)), PROTOCOL,
                                   "simulated: %s" % os.path.basename(args.simulated))
         else:
-            paths = [part for part in args.run.split(",") if part]
+            source, run_record = args.run, None
+            if is_folder(args.run):
+                run, missing = one_run(args.run, "step_test", "step_test", needs=("/imu/data", "/controller_state"),
+                                       wants=("/attitude_controller/parameter_updates",))
+                source, run_record = run.source, run.record
+            paths = [part for part in source.split(",") if part]
             for path in paths:
                 if not os.path.isfile(path):
                     raise StudyError("step_test: no such bag: %s" % path)
-            record = record_from_bag(paths, args.run)
+            record = record_from_bag(paths, source)
+            gains, gains_source = record_gains(record, run_record)
+            if gains is None:
+                missing.append("gains: %s; the models run the experiment gain set" % gains_source)
+                sys.stderr.write("step_test: missing: %s\n" % missing[-1])
+        config_overrides = gains_overrides(gains)
         responses = record.responses()
         start, first, sequence = record_sequence(record)
-        jobs = [(path, start, first, sequence, args.seed + 1, overrides, args.attitude_noise_deg, args.robot_yaml)
-                for path in compare]
+        jobs = [(path, start, first, sequence, args.seed + 1, overrides, args.attitude_noise_deg, args.robot_yaml,
+                 config_overrides) for path in compare]
         if args.jobs > 1:
             with ProcessPoolExecutor(max_workers=min(args.jobs, len(jobs))) as pool:
                 runs = list(pool.map(model_run, jobs))
@@ -423,6 +482,7 @@ def main(argv: Optional[Sequence[str]] = None) -> int:
         "source": record.source, "seconds": float(record.t[-1]), "seed": args.seed,
         "tank_overrides": [list(item) for item in overrides], "models": names, "steps": steps,
         "agreement": agreement, "single_axis_steps": sum(step.single_axis for step, _ in responses),
+        "gains": gains, "gains_source": gains_source, "missing": missing,
         "counted_steps": sum(step.single_axis and judged(response) for step, response in responses)}
     report["unread_steps"] = [{"time": step.time, "before": list(step.before), "after": list(step.after)}
                               for step in record.unread()]
