@@ -236,15 +236,32 @@ def _rotations(quaternions: Sequence[Sequence[float]]) -> np.ndarray:
     return quaternions_to_rotations(np.asarray(quaternions, dtype=float).reshape(-1, 4))
 
 
+#: Steps a new setpoint must stay unchanged to count as the operator's (a tilt-only setpoint's R_d follows the
+#: measured heading every step; only a change of its tilt is the operator's).
+SETTLED_STEPS = 5
+
+
+def setpoint_changes(setpoints: Sequence[Sequence[float]]) -> List[bool]:
+    """Per step (quaternions x, y, z, w of R_d): did the operator's setpoint change there? Its tilt (R_d's world
+    vertical in the body frame) changed, or R_d changed and then held for :data:`SETTLED_STEPS` steps."""
+    q = np.asarray(setpoints, dtype=float).reshape(-1, 4)
+    x, y, z, w = q.T
+    tilt = np.stack([2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y)], axis=1)
+    moved = np.r_[False, np.max(np.abs(np.diff(q, axis=0)), axis=1) > 1e-6]
+    tilted = np.r_[False, np.max(np.abs(np.diff(tilt, axis=0)), axis=1) > 1e-6]
+    settled = [not moved[i + 1:i + SETTLED_STEPS].any() and i + SETTLED_STEPS <= len(q) for i in range(len(q))]
+    return [bool(tilted[i] or (moved[i] and settled[i])) for i in range(len(q))]
+
+
 def _trial_start(data: BagData) -> float:
     """Time of the last setpoint change while armed, else of the first armed step."""
     armed = [i for i, a in enumerate(data.state_armed) if a]
     if not armed:
         raise BagReportError("the controller was never armed in this bag")
-    setpoints = np.array(data.state_setpoint)
+    changed = setpoint_changes(data.state_setpoint)
     start = armed[0]
     for i in armed[1:]:
-        if np.max(np.abs(setpoints[i] - setpoints[i - 1])) > 1e-6:
+        if changed[i]:
             start = i
     return data.state_t[start]
 
@@ -384,13 +401,14 @@ class Trial:
 
 
 def split_trials(data: BagData) -> List[Trial]:
-    """The record's trials in stamp order: a new one at each armed step whose setpoint differs from the step
-    before or that follows a disarmed one; a disarmed step ends one."""
+    """The record's trials in stamp order: a new one at each armed step where the operator's setpoint changed
+    (:func:`setpoint_changes`) or that follows a disarmed one; a disarmed step ends one."""
     stamps, steps = sorted_unique(data.state_t, list(zip(data.state_armed, data.state_setpoint)))
+    changed = setpoint_changes([setpoint for _, setpoint in steps]) if steps else []
     trials: List[Trial] = []
     begun: Optional[Tuple[float, Sequence[float]]] = None
-    for stamp, (armed, setpoint) in zip(stamps.tolist(), steps):
-        if begun is not None and (not armed or max(abs(a - b) for a, b in zip(setpoint, begun[1])) > 1e-6):
+    for stamp, (armed, setpoint), new in zip(stamps.tolist(), steps, changed):
+        if begun is not None and (not armed or new):
             trials.append(Trial(begun[0], stamp, tuple(begun[1])))
             begun = None
         if armed and begun is None:

@@ -10,7 +10,8 @@ import pytest
 from quadruped_common.so3 import rot_to_quat, rpy_to_rot
 from quadruped_control.analysis.bag_report import (BagData, BagReportError, analyse, analyse_trials, attitude_rpy,
                                                   covered_by, gains_in_force, gains_text, main, missing_spans,
-                                                  read_bags, sorted_unique, write_report, write_trials_report)
+                                                  read_bags, setpoint_changes, sorted_unique, write_report,
+                                                  write_trials_report)
 from tests.repo import REPO_ROOT
 
 rosbags = pytest.importorskip("rosbags")
@@ -350,6 +351,18 @@ def write_schedule_bag(path, schedule, end, updates=()):
                 integral=zero3, torque_estimated=zero3, armed=armed, holding=False, hold_reason="",
                 pair_phase=np.zeros(2, dtype=np.uint8), pair_phase_time=np.zeros(2),
                 foot_targets=[T["geometry_msgs/msg/Point"](x=0.0, y=0.0, z=0.0)] * 4), STATE_TYPE))
+
+
+def test_a_tilt_only_setpoint_following_the_heading_is_one_setpoint():
+    """In tilt mode R_d's yaw follows the measured heading every step: only a change of its tilt, or a setpoint
+    that then holds (absolute, relative), is the operator's."""
+    def q(roll, pitch, yaw):
+        return rot_to_quat(rpy_to_rot(math.radians(roll), math.radians(pitch), math.radians(yaw)))
+    tilt = [q(20.0, 0.0, 0.1 * k) for k in range(30)]                        # yaw drifts, the tilt holds
+    tilt += [q(20.0, 10.0, 3.0 + 0.1 * k) for k in range(30)]                # the operator changes the tilt
+    held = [q(0.0, 0.0, 0.0)] * 10 + [q(0.0, 0.0, 45.0)] * 10 + [q(0.0, 0.0, 50.0)] * 2 + [q(0.0, 0.0, 0.0)] * 10
+    assert [i for i, new in enumerate(setpoint_changes(tilt)) if new] == [30]
+    assert [i for i, new in enumerate(setpoint_changes(held)) if new] == [10, 22]  # a 2-step blip is not one
 
 
 def test_five_setpoints_are_five_trials_each_with_its_gains_and_a_live_change_shows(tmp_path, monkeypatch):
