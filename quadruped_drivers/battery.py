@@ -24,8 +24,8 @@ import bisect
 import math
 from typing import Dict, List, NamedTuple, Optional, Sequence, Tuple
 
+from quadruped_common.health import ERROR, LEVEL_NAMES, OK, WARN, Health
 from quadruped_drivers.hardware_config import LIPO_MAX_CELL_V, BatteryHardware, BatteryPackHardware
-from quadruped_drivers.health import ERROR, LEVEL_NAMES, OK, WARN, Health
 
 #: Resting LiPo cell voltage (V) -> state of charge (fraction), piecewise linear. [estimate] The curve most
 #: hobby chargers and flight controllers use; a given pack differs by a few percent, and under load the

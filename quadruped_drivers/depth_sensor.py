@@ -22,8 +22,8 @@ import math
 import time
 from typing import Any, Callable, Dict, List, NamedTuple, Optional, Tuple
 
+from quadruped_common.health import ERROR, OK, WARN, Health
 from quadruped_drivers.hardware_config import DepthSensorHardware
-from quadruped_drivers.health import ERROR, OK, WARN, Health
 from quadruped_drivers.ms5837 import DepthReading, Ms5837, PromCrcError, depth_m
 
 #: Standard gravity (m/s^2), as the driver's depth.

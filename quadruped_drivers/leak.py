@@ -14,8 +14,8 @@ from __future__ import annotations
 
 from typing import Callable, Optional, Tuple
 
+from quadruped_common.health import ERROR, OK, WARN, Health
 from quadruped_drivers.hardware_config import LeakProbeHardware
-from quadruped_drivers.health import ERROR, OK, WARN, Health
 
 
 class GpioUnavailable(RuntimeError):

@@ -22,9 +22,9 @@ from std_msgs.msg import Bool
 from std_srvs.srv import Trigger, TriggerResponse
 
 from quadruped_common.ros.diagnostics import Updater
+from quadruped_common.ros.health import HEALTH_PERIOD, HealthPublisher
 from quadruped_common.ros.node_startup import stack_clock, start_node
 from quadruped_drivers.hardware_config import load_hardware_config, with_leak_fitted
-from quadruped_drivers.health_publisher import HEALTH_PERIOD, HealthPublisher
 from quadruped_drivers.leak import GpioUnavailable, LeakWatch, open_gpio_probe
 from quadruped_drivers.node_support import BACKENDS
 

@@ -31,11 +31,11 @@ from sensor_msgs.msg import FluidPressure, Temperature
 
 from quadruped_common.monitoring import RateMonitor
 from quadruped_common.ros.diagnostics import Updater
+from quadruped_common.ros.health import HEALTH_PERIOD, HealthPublisher
 from quadruped_common.ros.node_startup import stack_clock, start_node
 from quadruped_drivers.depth_sensor import (DepthSensorRunner, SurfaceReference, make_driver, poll_period,
                                             pose_covariance)
 from quadruped_drivers.hardware_config import load_hardware_config
-from quadruped_drivers.health_publisher import HEALTH_PERIOD, HealthPublisher
 from quadruped_drivers.node_support import open_bus
 
 

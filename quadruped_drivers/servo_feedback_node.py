@@ -39,12 +39,12 @@ from sensor_msgs.msg import BatteryState, JointState
 from quadruped_common.config import ParameterError
 from quadruped_common.monitoring import LowPassDifferentiator, RateMonitor, WindowStatistics
 from quadruped_common.robot import JOINT_NAMES, load_servo_no_load_speed
+from quadruped_common.ros.health import HealthPublisher
 from quadruped_common.ros.node_startup import stack_clock, start_node
 from quadruped_common.ros.diagnostics import Updater
 from quadruped_drivers.battery import BatteryMonitor, PackStatus
 from quadruped_drivers.calibration import load_servo_calibration
 from quadruped_drivers.hardware_config import load_hardware_config, with_batteries_fitted
-from quadruped_drivers.health_publisher import HealthPublisher
 from quadruped_drivers.node_support import open_bus
 from quadruped_drivers.servo_feedback import ServoFeedbackArray, SpareInput
 

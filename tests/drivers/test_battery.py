@@ -8,11 +8,11 @@ import pytest
 import yaml
 
 from quadruped_common.config import ParameterError, config_path
+from quadruped_common.health import ERROR, OK, WARN
 from quadruped_drivers.battery import (LIPO_CURVE, BatteryMonitor, PackMonitor, lipo_charge,
                                        lipo_open_circuit_voltage)
 from quadruped_drivers.calibration import load_servo_calibration
 from quadruped_drivers.hardware_config import hardware_config_from_dict, load_hardware_config, with_batteries_fitted
-from quadruped_drivers.health import ERROR, OK, WARN
 from quadruped_drivers.i2c.fake_devices import build_fake_hardware
 from quadruped_drivers.servo_feedback import ServoFeedbackArray, SpareInput
 

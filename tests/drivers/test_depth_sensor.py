@@ -7,10 +7,10 @@ import pytest
 import yaml
 
 from quadruped_common.config import ParameterError, config_path
+from quadruped_common.health import ERROR, OK, WARN, Health, HealthGate
 from quadruped_drivers.depth_sensor import (G, UNMEASURED_VARIANCE, DepthSensorRunner, SurfaceReference,
                                             depth_variance, make_driver, poll_period, pose_covariance, publishable)
 from quadruped_drivers.hardware_config import hardware_config_from_dict, load_hardware_config
-from quadruped_drivers.health import ERROR, OK, WARN, Health, HealthGate
 from quadruped_drivers.i2c.bus_lock import ROLES
 from quadruped_drivers.i2c.fake_bus import FakeI2CBus
 from quadruped_drivers.i2c.fake_ms5837 import FakeMs5837

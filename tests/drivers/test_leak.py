@@ -6,8 +6,8 @@ import pytest
 import yaml
 
 from quadruped_common.config import ParameterError, config_path
+from quadruped_common.health import ERROR, OK, WARN
 from quadruped_drivers.hardware_config import hardware_config_from_dict, load_hardware_config, with_leak_fitted
-from quadruped_drivers.health import ERROR, OK, WARN
 from quadruped_drivers.leak import GpioUnavailable, LeakWatch, open_gpio_probe
 
 LEAK = with_leak_fitted(load_hardware_config()).leak  # 10 Hz, 3 readings to confirm, 1 s timeout

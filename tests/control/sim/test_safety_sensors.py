@@ -7,13 +7,13 @@ import pytest
 import yaml
 
 from quadruped_common.config import ParameterError, config_path
+from quadruped_common.health import ERROR, OK, WARN
 from quadruped_control.sim.safety_sensors import (DepthModel, PackSettings, SafetySensorSettings, SimulatedPack,
                                                   with_overrides)
 from quadruped_control.sim.simulation import load_simulation_settings, simulation_settings_from_dict
 from quadruped_drivers.battery import BatteryMonitor, lipo_open_circuit_voltage
 from quadruped_drivers.depth_sensor import DepthSensorRunner, make_driver, poll_period
 from quadruped_drivers.hardware_config import load_hardware_config, with_batteries_fitted
-from quadruped_drivers.health import ERROR, OK, WARN
 from quadruped_drivers.i2c.fake_devices import build_fake_hardware
 
 HW = with_batteries_fitted(load_hardware_config())  # the simulated robot fits both packs

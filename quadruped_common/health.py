@@ -1,4 +1,4 @@
-"""Health summaries of the safety sensors (``health/depth``, ``health/battery``), no ROS.
+"""Health summaries of the hazard watchers (``health/depth``, ``health/battery``, ``health/leak``), no ROS.
 
 A :class:`Health` is what a node publishes as one ``diagnostic_msgs/DiagnosticStatus``: a level (the message's
 OK / WARN / ERROR values), a stable ``reason`` code (what a consumer may switch on), a message for people and

@@ -1,10 +1,10 @@
-"""ROS glue of :mod:`quadruped_drivers.health`: one ``health/<source>`` topic, as every hazard watcher publishes it."""
+"""ROS glue of :mod:`quadruped_common.health`: one ``health/<source>`` topic, as every hazard watcher publishes it."""
 from __future__ import annotations
 
 import rospy
 from diagnostic_msgs.msg import DiagnosticStatus, KeyValue
 
-from quadruped_drivers.health import ERROR, Health, HealthGate
+from quadruped_common.health import ERROR, Health, HealthGate
 
 #: Seconds between two health messages when nothing changes (2 Hz; the controller's health.max_age is 5 s).
 HEALTH_PERIOD = 0.5
@@ -13,7 +13,7 @@ HEALTH_PERIOD = 0.5
 class HealthPublisher:
     """Publishes a ``health/<source>`` topic (``publisher``, of DiagnosticStatus) as
     ``diagnostic_msgs/DiagnosticStatus`` (the reason code first among its values) every :data:`HEALTH_PERIOD` and
-    at once on a change (:class:`~quadruped_drivers.health.HealthGate`); an ERROR is also logged, at most every 5 s."""
+    at once on a change (:class:`~quadruped_common.health.HealthGate`); an ERROR is also logged, at most every 5 s."""
 
     def __init__(self, publisher: rospy.Publisher, name: str, hardware_id: str) -> None:
         self.publisher, self.name, self.hardware_id = publisher, name, hardware_id
