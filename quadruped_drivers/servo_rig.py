@@ -30,8 +30,9 @@ class SimulatedServoRig:
     The servos as bought differ from ``calibration``'s estimate (feedback slope x ``slope_scale``, offset
     + ``offset_shift_deg``), and the robot may be built wrong (``faults``,
     :class:`~quadruped_drivers.hardware_faults.BuiltRobot`). Each joint moves toward its servo's target at
-    ``speed`` rad/s (a servo without pulses is limp and stays put, or goes where :meth:`place` puts it);
-    feedback carries Gaussian noise of ``noise_v``. Time is virtual: :meth:`sleep` advances it in 1 ms steps.
+    ``speed`` rad/s times its ``faults.servo_speed_scale`` (a servo without pulses is limp and stays put, or goes
+    where :meth:`place` puts it); feedback carries Gaussian noise of ``noise_v``. Time is virtual: :meth:`sleep`
+    advances it in 1 ms steps.
     """
 
     def __init__(self, hardware_config: HardwareConfig, calibration: ServoCalibration, slope_scale: float = 1.04,
@@ -79,8 +80,9 @@ class SimulatedServoRig:
         target = self.built.joint_targets(self.hardware.pulse_widths_us())  # only commands change them
         on = ~np.isnan(target)
         target = np.where(on, target, self.angles)
+        limit = self.speed * self.built.speed_scale * dt
         for _ in range(steps):
-            step = np.clip(target - self.angles, -self.speed * dt, self.speed * dt)
+            step = np.clip(target - self.angles, -limit, limit)
             self.angles = self.angles + step
         self.time += seconds
         self._feed()

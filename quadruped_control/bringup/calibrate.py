@@ -39,16 +39,29 @@ def run_on_rig(rig: SimulatedServoRig, hardware: HardwareConfig, calibration: Se
                 params, settings, log)
 
 
+def speeds_on_rig(rig: SimulatedServoRig, hardware: HardwareConfig, calibration: ServoCalibration,
+                  params: RobotParams, settings: ServoCheckSettings = ServoCheckSettings()) -> ServoCheckResult:
+    """The pre-dive check's speed check (:meth:`ServoCheck.check_speeds`) on a simulated rig whose limp legs are at
+    the stance, read through ``calibration`` (a passed calibration's)."""
+    def speeds(check: ServoCheck) -> ServoCheckResult:
+        check.bench.current = check._mean(check.bench.read_angles, powered=False)  # where the legs are, limp
+        return check.check_speeds(reference_poses(params)[0])
+    return _run(rig.bus, rig.clock, rig.sleep, lambda pose: rig.place(pose.joint_angles()), hardware, calibration,
+                params, settings, lambda line: None, speeds)
+
+
 def _run(bus, clock, sleep, place: Callable[[ReferencePose], None], hardware: HardwareConfig,
          calibration: ServoCalibration, params: RobotParams, settings: ServoCheckSettings,
-         log: Callable[[str], None]) -> ServoCheckResult:
+         log: Callable[[str], None],
+         procedure: Callable[[ServoCheck], ServoCheckResult] = lambda check: check.calibrate(
+             reference_poses(check.params))) -> ServoCheckResult:
     pwm = ServoPwmOutput(bus, hardware, clock=clock, sleep=sleep)
     feedback = ServoFeedbackArray(bus, hardware, calibration, clock=clock)
     try:
         pwm.start()
         feedback.start()
         bench = DriverBench(PoseDriver(pwm, feedback, calibration, clock=clock, sleep=sleep), pwm)
-        return ServoCheck(bench, params, calibration, place, settings, log).calibrate(reference_poses(params))
+        return procedure(ServoCheck(bench, params, calibration, place, settings, log))
     finally:
         pwm.shutdown()
 

@@ -29,7 +29,7 @@ import sys
 import termios
 import threading
 import time
-from typing import Callable, Dict, List, Optional, Sequence, TextIO, Tuple, Union
+from typing import Callable, Dict, Optional, Sequence, TextIO, Tuple, Union
 
 import numpy as np
 

@@ -1,16 +1,20 @@
-"""The pre-dive check: the robot on its stand, the stack running disarmed; four checks and a report.
+"""The pre-dive check: the robot on its stand, the stack running disarmed; five checks and a report.
 
 1. **sensors**: the IMU and the joint feedback arrive at rate, every joint has an angle;
 2. **IMU mount**: gravity at the operator's level and two guided tilts (:mod:`~quadruped_control.bringup.imu_check`);
 3. **channels**: each PWM channel moves its own joint, only it, the right way, by its command, its zero at the
    stance marks, read through the calibration file (:meth:`~quadruped_control.bringup.servo_check.ServoCheck.
    check_channels`);
-4. **strokes**: a small torque command about each body axis makes strokes whose drag turns the body that way
+4. **servo speed**: each joint stepped across 60 deg at once turns at no less than 0.7 of its rated speed
+   (:meth:`~quadruped_control.bringup.servo_check.ServoCheck.check_speeds`): a worn or wet servo, which tracks
+   the slow strokes of a hold and lags only in the fast ones, shows here before the dive;
+5. **strokes**: a small torque command about each body axis makes strokes whose drag turns the body that way
    (:mod:`~quadruped_control.bringup.stroke_check`).
 
-A check that cannot run because an earlier one failed is reported as skipped, never as passed. The report is
-markdown and json (:meth:`PreflightReport.markdown`, :meth:`PreflightReport.as_dict`); the ROS node saves it
-beside the bags and publishes the verdict the controller's arming gate waits for.
+A check that cannot run because an earlier one failed is reported as skipped, never as passed; the summary names
+the joints a failed check found. The report is markdown and json (:meth:`PreflightReport.markdown`,
+:meth:`PreflightReport.as_dict`); the ROS node saves it beside the bags and publishes the verdict the controller's
+arming gate waits for.
 """
 from __future__ import annotations
 
@@ -34,12 +38,14 @@ __all__ = ["CheckItem", "PreflightReport", "SensorReadings", "run_preflight"]
 
 @dataclass
 class CheckItem:
-    """One check: ``name``, ``status`` (passed, FAILED, skipped), what was seen, and its figures."""
+    """One check: ``name``, ``status`` (passed, FAILED, skipped), what was seen, its figures and the ``parts`` (joints)
+    it found at fault."""
 
     name: str
     status: str
     detail: str
     figures: Dict[str, Any] = field(default_factory=dict)
+    parts: List[str] = field(default_factory=list)
 
 
 @dataclass
@@ -55,8 +61,9 @@ class PreflightReport:
         return bool(self.items) and all(item.status == "passed" for item in self.items)
 
     def summary(self) -> str:
-        """One line: the verdict and the failed checks."""
-        failed = [item.name for item in self.items if item.status != "passed"]
+        """One line: the verdict and the failed checks, each with the joints it found."""
+        failed = [item.name + (" (%s)" % ", ".join(item.parts) if item.parts else "")
+                  for item in self.items if item.status != "passed"]
         return "passed" if self.passed else "FAILED: %s" % ", ".join(failed)
 
     def as_dict(self) -> Dict[str, Any]:
@@ -64,7 +71,8 @@ class PreflightReport:
                             ("started", time.strftime("%Y-%m-%d %H:%M:%S", time.localtime(self.started))),
                             ("notes", self.notes),
                             ("checks", [OrderedDict([("name", i.name), ("status", i.status), ("detail", i.detail),
-                                                     ("figures", i.figures)]) for i in self.items])])
+                                                     ("parts", i.parts), ("figures", i.figures)])
+                                        for i in self.items])])
 
     def markdown(self) -> str:
         lines = ["# Pre-dive check: %s" % self.summary(), "", "Started %s." % self.as_dict()["started"], ""]
@@ -95,13 +103,13 @@ def run_preflight(bench: Bench, sensors: SensorReadings, guide: Callable[[str, s
                   params: RobotParams, calibration: ServoCalibration, expected_rates: Dict[str, float],
                   settings: ServoCheckSettings = ServoCheckSettings(),
                   log: Callable[[str], None] = print, min_rate_fraction: float = 0.9) -> PreflightReport:
-    """The four checks of the module docstring. ``guide(name, instruction, roll_deg, pitch_deg)`` has the operator
+    """The five checks of the module docstring. ``guide(name, instruction, roll_deg, pitch_deg)`` has the operator
     hold the robot in a guided pose (returns when it is held); ``expected_rates``: ``imu`` and ``joints`` (Hz), each
     passing from ``min_rate_fraction`` of it."""
     report = PreflightReport()
     stance = reference_poses(params)[0]
 
-    log("pre-dive check 1/4: sensors")
+    log("pre-dive check 1/5: sensors")
     rates = sensors.rates(2.0)
     angles = sensors.joint_angles()
     slow = ["%s %.0f Hz (expected %.0f)" % (name, rates.get(name, 0.0), rate)
@@ -114,7 +122,7 @@ def run_preflight(bench: Bench, sensors: SensorReadings, guide: Callable[[str, s
                                   {"rates_hz": {k: round(v, 1) for k, v in rates.items()}}))
     sensors_ok = not problems
 
-    log("pre-dive check 2/4: IMU mount (guided poses)")
+    log("pre-dive check 2/5: IMU mount (guided poses)")
     if rates.get("imu", 0.0) > 0.0:
         readings = []
         for name, instruction, (roll_sign, pitch_sign) in GUIDED_POSES:
@@ -130,19 +138,32 @@ def run_preflight(bench: Bench, sensors: SensorReadings, guide: Callable[[str, s
     else:
         report.items.append(CheckItem("IMU mount", "skipped", "no IMU data"))
 
-    log("pre-dive check 3/4: channels")
+    log("pre-dive check 3/5: channels")
+    check = ServoCheck(bench, params, calibration, lambda pose: None, settings, log)
     if sensors_ok:
-        check = ServoCheck(bench, params, calibration, lambda pose: None, settings, log)
         channels = check.check_channels(stance)
         report.items.append(CheckItem("channels", "passed" if channels.passed else "FAILED",
                                       "; ".join(str(f) for f in channels.findings) or
                                       "each channel moves its own joint, the right way, zero at the marks",
-                                      {"findings": [str(f) for f in channels.findings]}))
+                                      {"findings": [str(f) for f in channels.findings]}, channels.named()))
     else:
         channels = None
         report.items.append(CheckItem("channels", "skipped", "the sensors check failed"))
 
-    log("pre-dive check 4/4: strokes")
+    log("pre-dive check 4/5: servo speed")
+    if channels is not None and channels.passed:
+        speeds = check.check_speeds(stance)
+        slowest = min(speeds.speeds, key=lambda name: speeds.speeds[name])
+        report.items.append(CheckItem("servo speed", "passed" if speeds.passed else "FAILED",
+                                      "; ".join(str(f) for f in speeds.findings) or
+                                      "every servo at %.2f or more of its rated speed (slowest: %s, %.2f)" % (
+                                          settings.min_speed_fraction, slowest, speeds.speeds[slowest]),
+                                      {"speed_fraction": {k: round(v, 3) for k, v in speeds.speeds.items()}},
+                                      speeds.named()))
+    else:
+        report.items.append(CheckItem("servo speed", "skipped", "the channels check did not pass"))
+
+    log("pre-dive check 5/5: strokes")
     if channels is not None and channels.passed:
         strokes = check_strokes(bench, params, stance)
         report.items.append(CheckItem("strokes", "passed" if strokes.passed else "FAILED",

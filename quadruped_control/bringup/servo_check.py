@@ -1,4 +1,4 @@
-"""Servo calibration against the reference poses, and the channel check: what finds a servo built wrong.
+"""Servo calibration against the reference poses, the channel and speed checks: what finds a servo built wrong.
 
 :meth:`ServoCheck.calibrate` (``python -m quadruped_control.bringup.calibrate``):
 
@@ -10,28 +10,37 @@
 3. from the sweeps: each servo's zero (the pulse that puts it at its neutral angle), direction and gain.
 
 :meth:`ServoCheck.check_channels` is step 2 with the maps of the calibration file (the pre-dive check).
+:meth:`ServoCheck.check_speeds` (the pre-dive check's next step) commands each joint across a wide step at once
+and times its 20-80 % rise: the servo model (:mod:`quadruped_control.model.servo`) inverted gives the speed it
+turned at, as a fraction of the rated no-load speed (robot.yaml; the stand is in air, so no-load applies).
 
 A joint whose feedback does not follow the geometry (stuck, or another servo's), whose sweep moves another
 joint, which moves against its command (mounted reversed), whose zero is more than ``zero_tolerance_deg``
-off (horn off a spline), or which follows only part of its command (blocked, overloaded) is a
-:class:`Finding` naming the joint and the fix; with any finding nothing is written.
+off (horn off a spline), or which follows only part of its command (blocked, overloaded) is a :class:`Finding`
+naming the joint and the fix; with any finding the calibration writes nothing. The speed check's finding is a servo
+slower than ``min_speed_fraction`` of its rating (worn, wet, a weak supply).
 """
 from __future__ import annotations
 
 import math
+import statistics
 from dataclasses import dataclass, field, replace
 from typing import Callable, Dict, List, Optional, Sequence, Tuple
 
 import numpy as np
 
+from quadruped_common.config import ParameterError
 from quadruped_common.robot import JOINT_NAMES
 from quadruped_control.bringup.reference import ReferencePose, sweep_half_width
+from quadruped_control.control.safety_config import SAFETY_SCHEMA
 from quadruped_control.model.params import RobotParams
+from quadruped_control.model.servo import rate_limited_lag_step
 from quadruped_drivers.calibration import ServoCalibration
 from quadruped_drivers.pwm_output import ServoPwmOutput
 from quadruped_drivers.servo_rig import PoseDriver
 
-__all__ = ["Bench", "DriverBench", "Finding", "ServoCheck", "ServoCheckResult", "ServoCheckSettings"]
+__all__ = ["Bench", "DriverBench", "Finding", "ServoCheck", "ServoCheckResult", "ServoCheckSettings", "model_rise_time",
+           "rise_time", "speed_fraction"]
 
 
 @dataclass(frozen=True)
@@ -47,11 +56,26 @@ class ServoCheckSettings:
     zero_tolerance_deg: float = 3.0   # a zero further off is a horn off its spline
     gain_tolerance: float = 0.2       # the joint follows 1 +- this of its command
     cross_motion_deg: float = 3.0     # another joint moving more than this during a sweep is wired wrong
+    speed_step_deg: float = 60.0      # the speed check's step across the stance, commanded at once
+    speed_steps: int = 3              # steps per joint, alternately each way: the median rise is judged
+    speed_record_s: float = 0.5       # feedback recorded after each step (one at 0.2 of its speed finishes in it)
+    min_speed_fraction: float = 0.7   # a servo slower than this fraction of its rated speed is a finding
+    time_constant: float = SAFETY_SCHEMA["tracking.time_constant"].default  # s, the servo model's lag
+
+    def __post_init__(self) -> None:
+        if not 0.0 < self.min_speed_fraction <= 1.0:
+            raise ParameterError("min_speed_fraction must be in (0, 1], got %r" % (self.min_speed_fraction,))
+        if not (self.speed_steps >= 1 and self.speed_record_s > 0.0 and 0.0 < self.speed_step_deg <= 120.0):
+            raise ParameterError("the speed check needs speed_steps >= 1, speed_record_s > 0 and speed_step_deg in "
+                                 "(0, 120], got %r, %r, %r" % (self.speed_steps, self.speed_record_s,
+                                                                self.speed_step_deg))
+        if not (math.isfinite(self.time_constant) and self.time_constant >= 0.0):
+            raise ParameterError("time_constant must be >= 0 s, got %r" % (self.time_constant,))
 
 
 @dataclass(frozen=True)
 class Finding:
-    """One problem: the ``joints`` it concerns, its ``kind`` (feedback, wiring, reversed, zero, tracking),
+    """One problem: the ``joints`` it concerns, its ``kind`` (feedback, wiring, reversed, zero, tracking, slow),
     what was seen and the fix."""
 
     joints: Tuple[str, ...]
@@ -87,6 +111,7 @@ class ServoCheckResult:
     findings: List[Finding] = field(default_factory=list)
     sweeps: Dict[str, JointSweep] = field(default_factory=dict)
     calibration: Optional[ServoCalibration] = None
+    speeds: Dict[str, float] = field(default_factory=dict)  # check_speeds: fraction of the rated speed per joint
 
     @property
     def passed(self) -> bool:
@@ -115,6 +140,11 @@ class Bench:
 
     def move_to(self, angles: np.ndarray) -> None:
         """Ramp from :attr:`current` to ``angles`` at a bounded joint speed."""
+        raise NotImplementedError
+
+    def step(self, angles: np.ndarray, duration: float) -> Tuple[np.ndarray, np.ndarray]:
+        """Command ``angles`` at once (no ramp) and hold them ``duration`` s; the feedback read meanwhile: (times in
+        s on one clock, angles rad: readings x 12)."""
         raise NotImplementedError
 
     def wait(self, seconds: float) -> None:
@@ -156,6 +186,15 @@ class DriverBench(Bench):
 
     def move_to(self, angles: np.ndarray) -> None:
         self.driver.move_to(angles)
+
+    def step(self, angles: np.ndarray, duration: float) -> Tuple[np.ndarray, np.ndarray]:
+        start = self.driver.clock()
+        times, rows = [], []
+        while self.driver.clock() - start < duration:
+            self.driver.hold(angles, 0.005)
+            rows.append(self.read_angles())
+            times.append(self.driver.clock())
+        return np.array(times), np.array(rows)
 
     def wait(self, seconds: float) -> None:
         self.driver.sleep(seconds)
@@ -232,11 +271,14 @@ class ServoCheck:
                 slope[i] = offset[i] = math.nan
         return slope, offset, findings
 
+    def _half_width(self, stance: ReferencePose, degrees: float) -> float:
+        """The narrowest of the three joints' safe sweeps up to ``degrees``: a channel wired to another joint's
+        servo turns that one."""
+        return min(sweep_half_width(self.params, stance.leg_angles, j, math.radians(degrees)) for j in range(3))
+
     def sweep(self, index: int, stance: ReferencePose, read: Callable[[], np.ndarray]) -> JointSweep:
         """Sweep joint ``index`` symmetrically about ``stance`` (others held), reading every joint's angle."""
-        # the narrowest of the three joints' safe sweeps: a channel wired to another joint's servo turns that one
-        half = min(sweep_half_width(self.params, stance.leg_angles, j, math.radians(self.settings.sweep_deg))
-                   for j in range(3))
+        half = self._half_width(stance, self.settings.sweep_deg)
         offsets = np.linspace(-half, half, self.settings.points)
         hold = stance.joint_angles()
         rows = []
@@ -318,6 +360,55 @@ class ServoCheck:
         result.findings = _merge(result.findings)
         return result
 
+    def check_speeds(self, stance: ReferencePose,
+                     indices: Sequence[int] = tuple(range(len(JOINT_NAMES)))) -> ServoCheckResult:
+        """Each joint, the others held at ``stance``, stepped ``speed_steps`` times across ``speed_step_deg``
+        (alternately each way) while its feedback is recorded: the median 20-80 % rise inverted through the servo
+        model gives its speed as a fraction of the rated one (:attr:`ServoCheckResult.speeds`); below
+        ``min_speed_fraction`` it is a finding. Run it after :meth:`check_channels` passed (a channel on the wrong
+        servo would step that one). The joints end at ``stance``."""
+        s = self.settings
+        result = ServoCheckResult()
+        half = self._half_width(stance, s.speed_step_deg / 2.0)
+        rated = self.params.servo_no_load_speed
+        hold = stance.joint_angles()
+        self.bench.outputs(True)
+        for index in indices:
+            name = JOINT_NAMES[index]
+            pose = hold.copy()
+            pose[index] -= half
+            self.bench.move_to(pose)
+            self.bench.hold(pose, s.settle_s)
+            rises = []
+            for _ in range(s.speed_steps):
+                start = float(self._mean(self.bench.read_angles, powered=True)[index])
+                offset = start - pose[index]  # the joint's own small zero error, carried to the step's end
+                pose = hold.copy()
+                pose[index] += half if start < hold[index] else -half
+                times, angles = self.bench.step(pose, s.speed_record_s)
+                rises.append(rise_time(times, angles[:, index] if len(angles) else angles, start,
+                                       pose[index] + offset))
+                self.bench.current = pose
+            self.bench.move_to(hold)
+            timed = [r for r in rises if not math.isnan(r)]
+            rise = statistics.median(timed) if timed else math.nan
+            fraction = speed_fraction(rise, 2.0 * half, rated, s.time_constant)
+            result.speeds[name] = fraction
+            if not fraction >= s.min_speed_fraction:
+                healthy = model_rise_time(2.0 * half, rated, s.time_constant)
+                seen = ("its steps could not be timed: each was past 20 %% at the first reading (is the joint "
+                        "feedback at its rate?)" if math.isnan(rise) else
+                        "it did not turn 80 %% of a %.0f deg step within %.2f s" % (math.degrees(2 * half),
+                                                                                   s.speed_record_s)
+                        if math.isinf(rise) else
+                        "it turns at %.2f of its rated speed: 20-80 %% of a %.0f deg step in %.3f s (median of %d), "
+                        "a servo at its rated speed %.3f s" % (fraction, math.degrees(2 * half), rise, len(timed),
+                                                              healthy))
+                result.findings.append(Finding((name,), "slow", seen, "a worn gearbox, water in the servo or a "
+                                               "weak supply: check the motor pack's voltage and the servo's cable, "
+                                               "then replace the servo"))
+        return result
+
     def _sweeps(self, stance: ReferencePose, read: Callable[[], np.ndarray],
                 indices: Sequence[int]) -> ServoCheckResult:
         result = ServoCheckResult()
@@ -347,6 +438,68 @@ class ServoCheck:
                                     feedback_slope=float(slope[index]), feedback_offset=float(offset[index]),
                                     feedback_fitted=True, feedback_rms_rad=float(rms))
         return ServoCalibration(joints)
+
+
+def rise_time(times: np.ndarray, angles: np.ndarray, start: float, end: float, low: float = 0.2,
+              high: float = 0.8) -> float:
+    """The time (s) a joint's readings ``angles`` at ``times`` took from ``low`` to ``high`` of the way from
+    ``start`` to ``end`` (first crossings, interpolated between readings); inf if it never reached ``high``, NaN if
+    it was past ``low`` at the first reading (it cannot be timed)."""
+    span = end - start
+    if not (math.isfinite(span) and abs(span) > 0.0) or len(times) == 0:
+        return math.nan
+    progress = (np.asarray(angles, dtype=float) - start) / span
+    crossings = []
+    for level in (low, high):
+        above = np.flatnonzero(progress >= level)
+        if len(above) == 0:
+            return math.inf
+        k = int(above[0])
+        if k == 0:
+            return math.nan
+        p0, p1 = progress[k - 1], progress[k]
+        t0, t1 = float(times[k - 1]), float(times[k])
+        crossings.append(t0 + (t1 - t0) * (level - p0) / (p1 - p0) if p1 > p0 else t1)
+    return crossings[1] - crossings[0]
+
+
+def model_rise_time(span: float, speed: float, time_constant: float, low: float = 0.2, high: float = 0.8) -> float:
+    """The ``low``-``high`` rise time (s) of the servo model
+    (:func:`~quadruped_control.model.servo.rate_limited_lag_step`) with ``speed`` (rad/s) and ``time_constant`` (s)
+    after a step of ``span`` (rad): the times its error falls to (1 - low) and (1 - high) of ``span``."""
+    def reach(error: float) -> float:
+        # the exact solution from rate_limited_lag_step, solved for the time at which |e| = error
+        lo, hi = 0.0, span / speed + 50.0 * time_constant + 1.0
+        for _ in range(60):
+            mid = 0.5 * (lo + hi)
+            if abs(span - rate_limited_lag_step(0.0, span, speed, time_constant, mid)) > error:
+                lo = mid
+            else:
+                hi = mid
+        return 0.5 * (lo + hi)
+    return reach((1.0 - high) * span) - reach((1.0 - low) * span)
+
+
+def speed_fraction(rise: float, span: float, rated_speed: float, time_constant: float) -> float:
+    """The fraction of ``rated_speed`` at which the servo model has the measured 20-80 % ``rise`` (s) after a
+    step of ``span`` (rad): 0 for a joint that never finished (``rise`` inf), NaN when not timed; capped at 10 (a
+    rise shorter than the model's lag alone allows)."""
+    if math.isnan(rise):
+        return math.nan
+    if math.isinf(rise):
+        return 0.0
+    lo, hi = 1e-3, 10.0
+    if model_rise_time(span, hi * rated_speed, time_constant) >= rise:
+        return hi
+    if model_rise_time(span, lo * rated_speed, time_constant) <= rise:
+        return lo
+    for _ in range(50):  # the rise shortens as the speed grows
+        mid = math.sqrt(lo * hi)
+        if model_rise_time(span, mid * rated_speed, time_constant) > rise:
+            lo = mid
+        else:
+            hi = mid
+    return math.sqrt(lo * hi)
 
 
 def _merge(findings: List[Finding]) -> List[Finding]:

@@ -8,7 +8,8 @@ back); its distance outside the band is the sample's tracking error. A joint who
 ``window`` stays above ``bound`` is WARN after ``warn_after`` and ERROR after ``error_after``, by name, and stays
 WARN for ``report_hold`` after it falls back (a slowed servo lags only in the fast moves: its report must not
 flicker). The bound comes from healthy joints' tracking (docs/faults.md); a reversed, stalled or slowed servo
-exceeds it. A slowed servo shows only in moves faster than its speed that last longer than ``latency``.
+exceeds it. A slowed servo shows only in moves faster than its speed that last longer than ``latency``: the
+pre-dive check times each servo's speed instead (``ServoCheck.check_speeds`` in quadruped_control.bringup).
 """
 from __future__ import annotations
 

@@ -13,7 +13,8 @@ Publishes   servo_command (underwater_quadruped/ServoCommand), preflight/result 
 Parameters  ~simulated_operator (false: prompts on the terminal; true: holds the simulated robot's body in each
             guided pose through sim/stand_rpy_deg), ~report_dir (. : where preflight_<time>.md / .json go, beside
             the bags), ~imu_rate (200), ~joint_rate (100), ~min_rate_fraction (0.9: the least share of each rate
-            that passes), ~robot_yaml, ~calibration_yaml, ~settle (0.4 s), ~sweep_points (5: per joint),
+            that passes), ~robot_yaml, ~calibration_yaml, ~safety_yaml (the servo model's lag for the speed check),
+            ~settle (0.4 s), ~sweep_points (5: per joint), ~min_speed_fraction (0.7: of the rated speed),
             ~exit_when_done (false: the node stays up to keep the latched verdict; true: exits 0 if passed, else 1)
 """
 from __future__ import annotations
@@ -36,6 +37,7 @@ from quadruped_common.robot import JOINT_NAMES
 from quadruped_common.ros.node_startup import start_node
 from quadruped_control.bringup.preflight import PreflightReport, SensorReadings, run_preflight
 from quadruped_control.bringup.servo_check import Bench, ServoCheckSettings
+from quadruped_control.control.safety_config import load_safety_config
 from quadruped_control.model.params import load_robot_params
 from quadruped_drivers.calibration import ServoCalibration, load_servo_calibration
 from quadruped_drivers.servo_rig import COMMAND_PERIOD, ramp
@@ -54,6 +56,7 @@ class StackBench(Bench, SensorReadings):
         self.lock = threading.Lock()
         self.joints = np.full(len(JOINT_NAMES), math.nan)
         self.joint_seq = 0
+        self.recording: Optional[List] = None  # (stamp s, angles) of each joint_states while a step is recorded
         self.counts = {"imu": 0, "joints": 0}
         self.forces: List[np.ndarray] = []
         self.command_pub = rospy.Publisher("servo_command", ServoCommand, queue_size=1, tcp_nodelay=True)
@@ -70,6 +73,8 @@ class StackBench(Bench, SensorReadings):
             self.joints = values
             self.joint_seq += 1
             self.counts["joints"] += 1
+            if self.recording is not None:
+                self.recording.append((msg.header.stamp.to_sec(), values))
 
     def _on_imu(self, msg: Imu) -> None:
         a = msg.linear_acceleration
@@ -104,6 +109,19 @@ class StackBench(Bench, SensorReadings):
     def move_to(self, angles: np.ndarray) -> None:
         for pose in ramp(self.current, angles, self.speed):
             self.hold(pose, COMMAND_PERIOD)
+
+    def step(self, angles: np.ndarray, duration: float):
+        """Readings stamped at or after the command's publication (the feedback node stamps each at its reading)."""
+        sent = rospy.get_time()
+        with self.lock:
+            self.recording = []
+        try:
+            self.hold(angles, duration)
+        finally:
+            with self.lock:
+                rows, self.recording = self.recording, None
+        rows = [(t, q) for t, q in rows if t >= sent]
+        return (np.array([t for t, _ in rows]), np.array([q for _, q in rows]).reshape(len(rows), len(JOINT_NAMES)))
 
     def wait(self, seconds: float) -> None:
         rospy.sleep(seconds)
@@ -157,8 +175,12 @@ class PreflightNode:
         self.report_dir = os.path.expanduser(str(rospy.get_param("~report_dir", ".")))
         self.expected = {"imu": float(rospy.get_param("~imu_rate", 200.0)),
                          "joints": float(rospy.get_param("~joint_rate", 100.0))}
+        safety = load_safety_config(optional("~safety_yaml"))
         self.settings = ServoCheckSettings(settle_s=float(rospy.get_param("~settle", ServoCheckSettings.settle_s)),
-                                           points=int(rospy.get_param("~sweep_points", ServoCheckSettings.points)))
+                                           points=int(rospy.get_param("~sweep_points", ServoCheckSettings.points)),
+                                           min_speed_fraction=float(rospy.get_param(
+                                               "~min_speed_fraction", ServoCheckSettings.min_speed_fraction)),
+                                           time_constant=safety.tracking.time_constant)
         self.min_rate_fraction = float(rospy.get_param("~min_rate_fraction", 0.9))
         self.result_pub = rospy.Publisher("preflight/result", DiagnosticStatus, queue_size=1, latch=True)
         self.stand_pub = rospy.Publisher("sim/stand_rpy_deg", Vector3Stamped, queue_size=1, latch=True)

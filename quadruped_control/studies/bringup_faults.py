@@ -1,14 +1,15 @@
-"""Do calibration and the IMU check find a robot built wrong? Seeded faults on the simulated rig.
+"""Do calibration, the speed check and the IMU check find a robot built wrong? Seeded faults on the simulated rig.
 
     python -m quadruped_control.studies.bringup_faults [--cases 40] [--clean 20] [--seed 1] [--out out/bringup]
 
 Each case draws (from its seed) one fault of a random kind (:data:`KINDS`) on random joints with a random
 magnitude, builds the rig with it (:class:`~quadruped_drivers.servo_rig.SimulatedServoRig`, feedback noise
-of its own seed), runs the servo calibration against the reference poses and the IMU mount check on three
+of its own seed), runs the servo calibration against the reference poses, after a passed one the pre-dive
+check's speed check through the fitted maps, and the IMU mount check on three
 guided poses the operator holds only roughly (level within 1 deg, each tilt 20-40 deg about an axis up to 3 deg
 off). A servo or
 wiring fault is detected when the calibration names every joint it concerns; an IMU fault when the IMU check
-fails. A clean case (no fault) must pass both. Writes ``bringup_faults.md`` / ``.json`` (command, seeds,
+fails. A clean case (no fault) must pass all three. Writes ``bringup_faults.md`` / ``.json`` (command, seeds,
 code version, each case) into ``--out``.
 """
 from __future__ import annotations
@@ -23,7 +24,7 @@ import numpy as np
 
 from quadruped_common.robot import JOINT_NAMES
 from quadruped_common.so3 import exp_so3, rot_to_rpy, rpy_to_rot
-from quadruped_control.bringup.calibrate import run_on_rig
+from quadruped_control.bringup.calibrate import run_on_rig, speeds_on_rig
 from quadruped_control.bringup.imu_check import GUIDED_POSES, check_imu_mount, expected_specific_force
 from quadruped_control.bringup.servo_check import ServoCheckSettings
 from quadruped_control.model.params import load_robot_params
@@ -33,7 +34,7 @@ from quadruped_drivers.calibration import load_servo_calibration
 from quadruped_drivers.hardware_config import load_hardware_config
 from quadruped_drivers.hardware_faults import HardwareFaults
 
-KINDS = ("reversed", "horn_offset", "swapped_pwm", "swapped_feedback", "imu_rotated", "stuck_adc")
+KINDS = ("reversed", "horn_offset", "swapped_pwm", "swapped_feedback", "imu_rotated", "stuck_adc", "slow_servo")
 
 
 def draw_fault(rng: np.random.Generator, kind: str, zero_tolerance_deg: float) -> Tuple[HardwareFaults, Tuple[str, ...]]:
@@ -50,6 +51,8 @@ def draw_fault(rng: np.random.Generator, kind: str, zero_tolerance_deg: float) -
         return HardwareFaults(swapped_feedback=((a, b),)), (a, b)
     if kind == "stuck_adc":
         return HardwareFaults(stuck_feedback_v=((a, float(round(rng.uniform(0.0, 3.3), 3))),)), (a,)
+    if kind == "slow_servo":  # worn or wet: from a fifth of its speed to 0.6 (the check's limit is 0.7)
+        return HardwareFaults(servo_speed_scale=((a, float(round(rng.uniform(0.2, 0.6), 2))),)), (a,)
     if kind == "imu_rotated":  # any proper rotation at least 15 deg from the identity
         axis = rng.normal(size=3)
         angle = rng.uniform(math.radians(15.0), math.pi)
@@ -78,9 +81,12 @@ def run_case(seed: int, kind: Optional[str], settings: ServoCheckSettings = Serv
     hardware, calibration, params = load_hardware_config(), load_servo_calibration(), load_robot_params()
     rig = SimulatedServoRig(hardware, calibration, seed=seed, faults=faults)
     servo = run_on_rig(rig, hardware, calibration, params, settings)
+    if servo.passed:
+        speeds = speeds_on_rig(rig, hardware, servo.calibration, params, settings)
+        servo.findings, servo.speeds = speeds.findings, speeds.speeds
     imu = check_imu_mount(operator_readings(faults, rng))
     if kind is None:
-        detected = servo.passed and imu.passed  # "detected" here: both passed, no false alarm
+        detected = servo.passed and imu.passed  # "detected" here: all passed, no false alarm
     elif kind == "imu_rotated":
         detected = not imu.passed
     else:
@@ -89,6 +95,7 @@ def run_case(seed: int, kind: Optional[str], settings: ServoCheckSettings = Serv
         ("seed", seed), ("kind", kind or "none"), ("faults", faults.describe()), ("detected", bool(detected)),
         ("servo_findings", [str(f) for f in servo.findings]), ("imu_problems", imu.problems),
         ("imu_error_deg", None if math.isnan(imu.error_deg) else round(imu.error_deg, 2)),
+        ("speed_fraction", {name: round(value, 3) for name, value in servo.speeds.items()}),
     ])
 
 
@@ -125,7 +132,7 @@ def main(argv: Optional[Sequence[str]] = None) -> int:
     if args.cases < 0 or args.clean < 0:
         parser.error("--cases and --clean must be >= 0")
     rows = study(args.cases, args.clean, args.seed)
-    text = "# Calibration and IMU check against a robot built wrong\n\n" + table(rows)
+    text = "# Calibration, speed and IMU checks against a robot built wrong\n\n" + table(rows)
     missed = [r for r in rows if not r["detected"]]
     for r in missed:
         text += "\n- seed %d, %s %s: servo %s; imu %s" % (r["seed"], r["kind"], r["faults"], r["servo_findings"],

@@ -3,7 +3,7 @@
 
 ~expect_pass: the check's verdict (preflight/result) must be OK and arming must succeed; otherwise ERROR, the
 summary must name ~expect_failed (the failed check), a value must name ~expect_part (the joint or the IMU),
-and arming must be refused with the reason. The report files must exist.
+and arming must be refused with the reason, naming a joint part. The report files must exist.
 """
 import os
 import sys
@@ -40,6 +40,8 @@ class PreflightTest(unittest.TestCase):
             self.assertTrue(any(rospy.get_param("~expect_part") in v for v in values.values()), values)
             self.assertFalse(answer.success, answer.message)
             self.assertIn("pre-dive check", answer.message)
+            if rospy.get_param("~expect_part").startswith("leg"):
+                self.assertIn(rospy.get_param("~expect_part"), answer.message)
 
 
 if __name__ == "__main__":

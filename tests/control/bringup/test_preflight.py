@@ -1,4 +1,4 @@
-"""The pre-dive check on the simulated rig: four checks, skipped (never passed) after a failure, a report."""
+"""The pre-dive check on the simulated rig: five checks, skipped (never passed) after a failure, a report."""
 from __future__ import annotations
 
 import json
@@ -67,7 +67,9 @@ def statuses(report):
 def test_a_robot_built_right_passes_and_the_report_says_so():
     report = check()
     assert report.passed, report.markdown()
-    assert statuses(report) == {"sensors": "passed", "IMU mount": "passed", "channels": "passed", "strokes": "passed"}
+    assert statuses(report) == {"sensors": "passed", "IMU mount": "passed", "channels": "passed",
+                                "servo speed": "passed", "strokes": "passed"}
+    assert report.as_dict()["checks"][3]["figures"]["speed_fraction"]["leg4_hip"] > 0.9
     assert report.markdown().startswith("# Pre-dive check: passed")
     assert json.loads(json.dumps(report.as_dict()))["passed"] is True
 
@@ -82,13 +84,23 @@ def test_a_rotated_imu_fails_its_check_and_only_it():
 def test_a_swapped_channel_fails_the_channels_and_the_strokes_are_skipped():
     report = check(load_hardware_faults("{swapped_pwm: [[leg3_motor2, leg4_motor2]]}"))
     assert statuses(report)["channels"] == "FAILED" and statuses(report)["strokes"] == "skipped"
+    assert statuses(report)["servo speed"] == "skipped"
     assert "leg3_motor2" in report.items[2].detail and "leg4_motor2" in report.items[2].detail
+    assert report.summary().startswith("FAILED: channels (leg3_motor2, leg4_motor2)")
+
+
+def test_a_servo_at_half_speed_fails_the_speed_check_by_name_and_only_it():
+    report = check(load_hardware_faults("{servo_speed_scale: {leg4_motor1: 0.5}}"))
+    assert statuses(report) == {"sensors": "passed", "IMU mount": "passed", "channels": "passed",
+                                "servo speed": "FAILED", "strokes": "passed"}
+    assert report.summary() == "FAILED: servo speed (leg4_motor1)"
+    assert report.items[3].detail.startswith("leg4_motor1: it turns at 0.50 of its rated speed")
 
 
 def test_slow_sensors_fail_and_nothing_moves_after():
     report = check(rates={"imu": 200.0, "joints": 40.0})
     assert statuses(report) == {"sensors": "FAILED", "IMU mount": "passed", "channels": "skipped",
-                                "strokes": "skipped"}
+                                "servo speed": "skipped", "strokes": "skipped"}
     assert "joints 40 Hz (expected 100)" in report.items[0].detail
 
 

@@ -11,7 +11,8 @@ import pytest
 from quadruped_common.robot import JOINT_NAMES
 from quadruped_control.bringup import calibrate
 from quadruped_control.bringup.reference import reference_poses
-from quadruped_control.bringup.servo_check import DriverBench, ServoCheck, ServoCheckSettings
+from quadruped_control.bringup.servo_check import (DriverBench, ServoCheck, ServoCheckSettings, model_rise_time,
+                                                   rise_time, speed_fraction)
 from quadruped_control.model.params import load_robot_params
 from quadruped_drivers.servo_rig import PoseDriver, SimulatedServoRig
 from quadruped_drivers.calibration import load_servo_calibration
@@ -25,8 +26,10 @@ HW, CAL, PARAMS = load_hardware_config(), load_servo_calibration(), load_robot_p
 QUICK = ServoCheckSettings(points=3, settle_s=0.2, samples=2)
 
 
-def run(faults: HardwareFaults, seed: int = 0, indices=None, channels: bool = False, speed_deg: float = 570.0):
+def run(faults: HardwareFaults, seed: int = 0, indices=None, channels: bool = False, speed_deg: float = 570.0,
+        speeds: bool = False):
     # the channel check reads through the file's maps: its rig's servos are the file's (as after a calibration)
+    channels = channels or speeds
     scale, shift = (1.0, 0.0) if channels else (1.04, 3.0)
     rig = SimulatedServoRig(HW, CAL, seed=seed, faults=faults, slope_scale=scale, offset_shift_deg=shift,
                             speed=math.radians(speed_deg))
@@ -40,6 +43,9 @@ def run(faults: HardwareFaults, seed: int = 0, indices=None, channels: bool = Fa
     check = ServoCheck(bench, PARAMS, CAL, lambda pose: rig.place(pose.joint_angles()), QUICK, log=lambda s: None)
     stance = reference_poses(PARAMS)[0]
     all_joints = tuple(range(len(JOINT_NAMES)))
+    if speeds:  # after a passed channel check, as the pre-dive check runs it
+        assert check.check_channels(stance, indices or all_joints).passed
+        return check.check_speeds(stance, indices or all_joints), rig
     if channels:
         return check.check_channels(stance, indices or all_joints), rig
     return check.calibrate(reference_poses(PARAMS), indices), rig
@@ -130,3 +136,49 @@ def test_noise_alone_never_makes_a_finding():
         result, _ = run(HardwareFaults(), seed=seed + 10)
         assert result.passed, [str(f) for f in result.findings]
     assert np.isfinite(result.sweeps["leg1_hip"].angles).all()
+
+
+def test_a_servo_slower_than_its_rating_is_found_by_its_step_and_healthy_ones_are_not():
+    result, rig = run(load_hardware_faults("{servo_speed_scale: {leg2_motor1: 0.5, leg3_hip: 0.8}}"), speeds=True)
+    assert result.named() == ["leg2_motor1"] and result.findings[0].kind == "slow"  # 0.8 is above the 0.7 limit
+    assert "turns at 0.50 of its rated speed" in result.findings[0].seen
+    assert result.speeds["leg3_hip"] == pytest.approx(0.8, abs=0.05)
+    healthy = [v for k, v in result.speeds.items() if k not in ("leg2_motor1", "leg3_hip")]
+    assert min(healthy) > 0.9  # the rig's servos are pure rate limiters: a little faster than the lagged model
+    assert np.allclose(rig.angles, reference_poses(PARAMS)[0].joint_angles(), atol=math.radians(1.0))  # at stance
+
+
+def test_a_servo_that_never_finishes_its_step_is_a_finding():
+    result, _ = run(load_hardware_faults("{servo_speed_scale: {leg1_hip: 0.1}}"), indices=(2,), speeds=True)
+    assert result.named() == ["leg1_hip"] and "did not turn 80 % of a 60 deg step" in result.findings[0].seen
+    assert result.speeds["leg1_hip"] == 0.0
+
+
+def test_rise_time_interpolates_the_crossings_and_says_when_it_cannot_time():
+    times = np.arange(0.0, 0.2, 0.01)
+    ramp = np.clip((times - 0.02) / 0.1, 0.0, 1.0) * 2.0 + 1.0  # 1 -> 3 rad from 0.02 s to 0.12 s
+    assert rise_time(times, ramp, 1.0, 3.0) == pytest.approx(0.06)
+    assert rise_time(times, 4.0 - ramp, 3.0, 1.0) == pytest.approx(0.06)  # the other way
+    assert rise_time(times, np.minimum(ramp, 2.5), 1.0, 3.0) == math.inf  # stopped at 75 %
+    assert math.isnan(rise_time(times[5:], ramp[5:], 1.0, 3.0))  # already past 20 % at the first reading
+    assert math.isnan(rise_time(times, ramp, 1.0, 1.0)) and math.isnan(rise_time(times[:0], ramp[:0], 1.0, 3.0))
+
+
+@pytest.mark.parametrize("fraction", [0.1, 0.5, 0.7, 1.0, 2.0])
+def test_the_speed_fraction_inverts_the_servo_model(fraction):
+    span, rated, lag = math.radians(60.0), PARAMS.servo_no_load_speed, 0.03
+    rise = model_rise_time(span, fraction * rated, lag)
+    assert speed_fraction(rise, span, rated, lag) == pytest.approx(fraction, rel=1e-6)
+    # a pure rate limiter: 60 % of the span at the speed
+    assert model_rise_time(span, rated, 0.0) == pytest.approx(0.6 * span / rated, rel=1e-6)
+    assert speed_fraction(math.inf, span, rated, lag) == 0.0 and math.isnan(speed_fraction(math.nan, span, rated, lag))
+    assert speed_fraction(0.001, span, rated, lag) == 10.0  # faster than the lag alone allows: capped
+
+
+@pytest.mark.parametrize("bad", [{"min_speed_fraction": 0.0}, {"min_speed_fraction": float("nan")},
+                                 {"min_speed_fraction": 1.5}, {"speed_steps": 0}, {"speed_record_s": -1.0},
+                                 {"speed_step_deg": 400.0}, {"time_constant": float("inf")}])
+def test_speed_check_settings_out_of_range_are_refused_by_name(bad):
+    from quadruped_common.config import ParameterError
+    with pytest.raises(ParameterError, match=list(bad)[0]):
+        ServoCheckSettings(**bad)
