@@ -30,6 +30,7 @@ import numpy as np
 
 from quadruped_control.analysis.bag_report import (GAINS_TOPIC, BagReportError, attitude_rpy, gains_in_force,
                                                    gains_text, read_bags, split_trials, trial_metrics)
+from quadruped_control.control.attitude_degrees import wrap_degrees
 from quadruped_control.studies import StudyError
 from quadruped_control.studies.day_folder import DayRun, day_runs, missing_text, say_missing
 from quadruped_control.studies.paper_experiments import (PAPER_TABLE, agreement, case_label, comparison_rows,
@@ -55,8 +56,7 @@ def run_result(run: DayRun) -> Dict[str, Any]:
     metrics.pop("_series")
     t, rpy = attitude_rpy(data.imu_t, data.imu_q)
     first = rpy[min(int(np.searchsorted(t, trial.start)), len(t) - 1)]
-    psi = math.degrees(first[2]) - metrics["setpoint_rpy_deg"][2]
-    psi = (psi + 180.0) % 360.0 - 180.0
+    psi = wrap_degrees(math.degrees(first[2]) - metrics["setpoint_rpy_deg"][2])
     return {"run": run.name, "row": run.row, "repeat": run.repeat, "seconds": trial.end - trial.start,
             "metrics": metrics, "initial_rpy_deg": [math.degrees(first[0]), math.degrees(first[1]), psi],
             "gains": gains_in_force(data, trial.start, trial.end)["gains"]}
